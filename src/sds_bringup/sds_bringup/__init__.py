@@ -1,0 +1,1 @@
+"""Launcher, node host, command line and demo of the SDS graph."""

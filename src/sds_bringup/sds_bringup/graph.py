@@ -1,0 +1,113 @@
+"""Graph files: which nodes run, with which parameter files, in which processes."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+
+class GraphFileError(ValueError):
+    """A graph file or override that does not describe a valid graph."""
+
+
+@dataclass(frozen=True)
+class NodeEntry:
+    """One node of a graph: its name, class, parameters and the process that hosts it."""
+
+    name: str
+    plugin: str
+    params_files: tuple[Path, ...] = ()
+    parameters: dict[str, Any] = field(default_factory=dict)
+    remap: dict[str, str] = field(default_factory=dict)
+    process: str = ""
+    required: bool = False
+
+    def ros_args(self) -> list[str]:
+        """The node's --ros-args: parameter files, then single parameters, then remappings."""
+        args = ["--ros-args"]
+        for path in self.params_files:
+            args += ["--params-file", str(path)]
+        for key, value in self.parameters.items():
+            text = yaml.safe_dump(value, default_flow_style=True, width=10**6).strip()
+            text = text.removesuffix("\n...").strip()
+            args += ["-p", f"{key}:={text}"]
+        for source, target in self.remap.items():
+            args += ["-r", f"{source}:={target}"]
+        return args
+
+
+_NODE_KEYS = {"name", "plugin", "params", "parameters", "remap", "process", "required"}
+
+
+def load_graph(path: str | Path) -> list[NodeEntry]:
+    """Read a graph file; relative parameter-file paths are taken from the graph file's folder."""
+    path = Path(path)
+    try:
+        document = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as error:
+        raise GraphFileError(f"cannot read graph file {path}: {error}") from error
+    if not isinstance(document, dict) or not isinstance(document.get("nodes"), list):
+        raise GraphFileError(f"{path}: expected a mapping with a list under 'nodes'")
+    entries = [_node_entry(path, index, item) for index, item in enumerate(document["nodes"])]
+    names = [entry.name for entry in entries]
+    duplicates = sorted({name for name in names if names.count(name) > 1})
+    if duplicates:
+        raise GraphFileError(f"{path}: node names used twice: {', '.join(duplicates)}")
+    return entries
+
+
+def _node_entry(path: Path, index: int, item: Any) -> NodeEntry:
+    where = f"{path}: nodes[{index}]"
+    if not isinstance(item, dict):
+        raise GraphFileError(f"{where} must be a mapping")
+    unknown = set(item) - _NODE_KEYS
+    if unknown:
+        raise GraphFileError(
+            f"{where}: unknown keys {sorted(unknown)}; allowed {sorted(_NODE_KEYS)}"
+        )
+    for key in ("name", "plugin"):
+        if not isinstance(item.get(key), str) or not item[key]:
+            raise GraphFileError(f"{where}: '{key}' must be a non-empty string")
+    params = item.get("params", [])
+    params = [params] if isinstance(params, str) else params
+    files = tuple((path.parent / p).resolve() for p in params)
+    for file in files:
+        if not file.is_file():
+            raise GraphFileError(f"{where}: parameter file {file} does not exist")
+    for key in ("parameters", "remap"):
+        if not isinstance(item.get(key, {}), dict):
+            raise GraphFileError(f"{where}: '{key}' must be a mapping")
+    return NodeEntry(
+        name=item["name"],
+        plugin=item["plugin"],
+        params_files=files,
+        parameters=dict(item.get("parameters", {})),
+        remap={str(k): str(v) for k, v in item.get("remap", {}).items()},
+        process=str(item.get("process", item["name"])),
+        required=bool(item.get("required", False)),
+    )
+
+
+def apply_overrides(entries: list[NodeEntry], overrides: list[str]) -> list[NodeEntry]:
+    """Apply 'node.parameter=value' overrides (value in YAML syntax) to the named nodes."""
+    by_name = {entry.name: entry for entry in entries}
+    for override in overrides:
+        target, equals, value = override.partition("=")
+        node, dot, parameter = target.partition(".")
+        if not equals or not dot or not parameter:
+            raise GraphFileError(f"override {override!r} must look like node.parameter=value")
+        if node not in by_name:
+            raise GraphFileError(f"override {override!r}: no node {node!r} in the graph")
+        entry = by_name[node]
+        by_name[node] = replace(
+            entry, parameters={**entry.parameters, parameter: yaml.safe_load(value)}
+        )
+    return [by_name[entry.name] for entry in entries]
+
+
+def composed(entries: list[NodeEntry]) -> list[NodeEntry]:
+    """The same graph with every node hosted in one process."""
+    return [replace(entry, process="graph") for entry in entries]

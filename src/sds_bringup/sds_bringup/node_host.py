@@ -1,0 +1,86 @@
+"""Host one or more nodes in one process until a required node finishes or a signal arrives.
+
+A hosted node class takes (node_name, cli_args=...) like rclpy's Node. It may offer
+`finished` (threading.Event), `exit_code` (int) and `close()`; the host uses them if present.
+Run as `python -m sds_bringup.node_host SPEC_JSON`, where SPEC_JSON is a list of
+{"plugin": "module:Class", "name": ..., "ros_args": [...], "required": bool}.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import sys
+import threading
+from collections.abc import Callable, Sequence
+
+import rclpy
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+
+NodeFactory = Callable[..., Node]
+EXIT_STARTUP_ERROR = 3
+
+
+def load_plugin(plugin: str) -> NodeFactory:
+    """The node class named by 'package.module:Class'."""
+    module_name, _, class_name = plugin.partition(":")
+    if not class_name:
+        raise ValueError(f"node plugin {plugin!r} must look like 'package.module:Class'")
+    return getattr(importlib.import_module(module_name), class_name)
+
+
+def run_nodes(
+    entries: Sequence[tuple[NodeFactory, str, bool]]
+    | Sequence[tuple[NodeFactory, str, bool, list[str]]],
+    args: list[str] | None = None,
+) -> int:
+    """Spin (factory, name, required[, ros_args]) nodes; return the worst node exit code."""
+    rclpy.init(args=args)
+    executor = MultiThreadedExecutor()
+    nodes: list[Node] = []
+    required: list[Node] = []
+    exit_code = 0
+    try:
+        for factory, name, is_required, *ros_args in entries:
+            node = factory(name, cli_args=ros_args[0] if ros_args else None)
+            nodes.append(node)
+            executor.add_node(node)
+            if is_required:
+                required.append(node)
+        while rclpy.ok() and not any(_finished(node) for node in required):
+            executor.spin_once(timeout_sec=0.1)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except Exception as error:
+        print(f"node host: {type(error).__name__}: {error}", file=sys.stderr, flush=True)
+        exit_code = EXIT_STARTUP_ERROR
+    finally:
+        for node in nodes:
+            if hasattr(node, "close"):
+                node.close()
+            exit_code = max(exit_code, getattr(node, "exit_code", 0))
+        executor.shutdown(timeout_sec=1.0)
+        for node in nodes:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return exit_code
+
+
+def _finished(node: Node) -> bool:
+    event = getattr(node, "finished", None)
+    return isinstance(event, threading.Event) and event.is_set()
+
+
+def main() -> None:
+    """Entry point of the graph processes started by the launcher."""
+    specs = json.loads(sys.argv[1])
+    entries = [
+        (load_plugin(spec["plugin"]), spec["name"], spec["required"], spec["ros_args"])
+        for spec in specs
+    ]
+    raise SystemExit(run_nodes(entries, args=[sys.argv[0]]))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,242 @@
+"""ROS 2 node publishing the frames of a video file, live camera or image folder."""
+
+from __future__ import annotations
+
+import queue
+import threading
+import time
+from pathlib import Path
+
+import yaml
+from rclpy.duration import Duration
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.time import Time
+from sensor_msgs.msg import Image
+from std_msgs.msg import Header
+
+from sds_camera.frame_source import (
+    CHANNELS,
+    Frame,
+    FrameSourceError,
+    Region,
+    open_source,
+    select,
+)
+from sds_camera.image_msg import image_to_msg
+from sds_msgs.msg import CameraModel
+
+PACINGS = ("realtime", "flood")
+STAMPS = ("clock", "media")
+EXIT_SOURCE_ERROR = 2
+
+
+class _EndOfStream:
+    """Marker put in the frame queue after the last frame; carries the error if any."""
+
+    def __init__(self, error: FrameSourceError | None = None) -> None:
+        self.error = error
+
+
+class FrameSourceNode(Node):
+    """Publish frames as sensor_msgs/Image, paced in real time or as fast as consumers ack."""
+
+    def __init__(self, node_name: str = "frame_source", **node_kwargs) -> None:
+        super().__init__(node_name, **node_kwargs)
+        self.finished = threading.Event()
+        self.exit_code = 0
+        self.published = 0
+        self._declare_parameters()
+        self._stop = threading.Event()
+        self._queue: queue.Queue[Frame | _EndOfStream] = queue.Queue(maxsize=3)
+        self._acks: dict[int, int] = {}
+        self._ack_condition = threading.Condition()
+        try:
+            p = self._read_parameters()
+            self._source = open_source(p["source"], fps=p["fps"])
+            self._region = self._region_from(p["roi"])
+        except (FrameSourceError, OSError, ValueError) as error:
+            self._fail(str(error))
+            return
+        reliable = QoSProfile(
+            depth=max(5, p["max_in_flight"] + 1),
+            reliability=ReliabilityPolicy.RELIABLE,
+            history=HistoryPolicy.KEEP_LAST,
+        )
+        latched = QoSProfile(
+            depth=1,
+            reliability=ReliabilityPolicy.RELIABLE,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL,
+        )
+        self._image_pub = self.create_publisher(Image, "image", reliable)
+        self._model_pub = self.create_publisher(CameraModel, "camera_model", latched)
+        self.create_subscription(Header, "frame_ack", self._on_ack, reliable)
+        self._publish_camera_model(p)
+        self._decode_thread = threading.Thread(target=self._read_frames, name="decode", daemon=True)
+        self._publish_thread = threading.Thread(
+            target=self._publish_frames, name="publish", daemon=True
+        )
+        self._decode_thread.start()
+        self._publish_thread.start()
+
+    def _declare_parameters(self) -> None:
+        self.declare_parameter("source", "")
+        self.declare_parameter("fps", 0.0)
+        self.declare_parameter("roi", [0, 0, 0, 0])
+        self.declare_parameter("channel", "bgr")
+        self.declare_parameter("pacing", "realtime")
+        self.declare_parameter("rate", 1.0)
+        self.declare_parameter("stamp", "clock")
+        self.declare_parameter("frame_id", "camera_optical")
+        self.declare_parameter("camera_model", "")
+        self.declare_parameter("wait_for_subscribers", 1)
+        self.declare_parameter("ack_consumers", 1)
+        self.declare_parameter("max_in_flight", 2)
+
+    def _read_parameters(self) -> dict:
+        names = ["source", "fps", "roi", "channel", "pacing", "rate", "stamp", "frame_id",
+                 "camera_model", "wait_for_subscribers", "ack_consumers", "max_in_flight"]
+        p = {name: self.get_parameter(name).value for name in names}
+        for name, allowed in (("channel", CHANNELS), ("pacing", PACINGS), ("stamp", STAMPS)):
+            if p[name] not in allowed:
+                raise ValueError(f"parameter {name}={p[name]!r} is not one of {allowed}")
+        if p["rate"] <= 0 or p["max_in_flight"] < 1:
+            raise ValueError("parameters rate and max_in_flight must be positive")
+        if not p["source"]:
+            raise ValueError("parameter source is empty: name a video file, folder or camera")
+        self._p = p
+        return p
+
+    def _region_from(self, roi: list[int]) -> Region:
+        width, height = self._source.width, self._source.height
+        if len(roi) != 4:
+            raise FrameSourceError(f"roi must be [x, y, width, height], got {list(roi)}")
+        region = Region.full(width, height) if roi[2] == 0 else Region(*map(int, roi))
+        region.check_inside(width, height)
+        return region
+
+    def _publish_camera_model(self, p: dict) -> None:
+        msg = CameraModel()
+        msg.header.frame_id = p["frame_id"]
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.full_width, msg.full_height = self._source.width, self._source.height
+        if p["camera_model"]:
+            path = Path(p["camera_model"])
+            msg.model_path = str(path)
+            msg.model_yaml = path.read_text()
+            msg.model_type = str(yaml.safe_load(msg.model_yaml).get("model", ""))
+        msg.roi.x_offset, msg.roi.y_offset = self._region.x, self._region.y
+        msg.roi.width, msg.roi.height = self._region.width, self._region.height
+        msg.channel = p["channel"]
+        self._model_pub.publish(msg)
+
+    def _fail(self, reason: str) -> None:
+        self.get_logger().error(reason)
+        self.exit_code = EXIT_SOURCE_ERROR
+        self.finished.set()
+
+    def _read_frames(self) -> None:
+        """Decode thread: select region and channel, hand frames to the publish thread."""
+        end = _EndOfStream()
+        try:
+            for frame in self._source.frames():
+                image = select(frame.image, self._region, self._p["channel"])
+                if not self._put(Frame(frame.index, frame.time_ns, image)):
+                    return
+        except FrameSourceError as error:
+            end = _EndOfStream(error)
+        finally:
+            self._source.close()
+        self._put(end)
+
+    def _put(self, item: Frame | _EndOfStream) -> bool:
+        while not self._stop.is_set():
+            try:
+                self._queue.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def _wait_for_subscribers(self) -> bool:
+        wanted = self._p["wait_for_subscribers"]
+        last_log = 0.0
+        while self._image_pub.get_subscription_count() < wanted and not self._stop.is_set():
+            if time.monotonic() - last_log > 5.0:
+                topic = self._image_pub.topic_name
+                self.get_logger().info(f"waiting for {wanted} subscriber(s) on {topic}")
+                last_log = time.monotonic()
+            time.sleep(0.02)
+        return not self._stop.is_set()
+
+    def _on_ack(self, msg: Header) -> None:
+        stamp_ns = Time.from_msg(msg.stamp).nanoseconds
+        with self._ack_condition:
+            if stamp_ns in self._acks:
+                self._acks[stamp_ns] += 1
+                if self._acks[stamp_ns] >= self._p["ack_consumers"]:
+                    del self._acks[stamp_ns]
+                self._ack_condition.notify_all()
+
+    def _wait_for_credit(self, limit: int) -> None:
+        """Block until at most `limit` published frames await their consumers' acks."""
+        with self._ack_condition:
+            self._ack_condition.wait_for(
+                lambda: len(self._acks) <= limit or self._stop.is_set()
+            )
+
+    def _publish_frames(self) -> None:
+        """Publish thread: pace, stamp and publish frames until the stream ends."""
+        p = self._p
+        flow_control = p["pacing"] == "flood" and p["ack_consumers"] > 0
+        if not self._source.is_live and not self._wait_for_subscribers():
+            return
+        origin_ns = self.get_clock().now().nanoseconds if p["stamp"] == "clock" else 0
+        start = time.monotonic()
+        while not self._stop.is_set():
+            try:
+                item = self._queue.get(timeout=0.1)
+            except queue.Empty:
+                continue
+            if isinstance(item, _EndOfStream):
+                self._finish(item.error, flow_control)
+                return
+            if p["pacing"] == "realtime" and not self._source.is_live:
+                delay = start + item.time_ns * 1e-9 / p["rate"] - time.monotonic()
+                if delay > 0:
+                    time.sleep(delay)
+            stamp_ns = origin_ns + item.time_ns
+            if flow_control:
+                self._wait_for_credit(p["max_in_flight"] - 1)
+                with self._ack_condition:
+                    self._acks[stamp_ns] = 0
+            stamp = Time(nanoseconds=stamp_ns).to_msg()
+            self._image_pub.publish(image_to_msg(item.image, stamp, p["frame_id"]))
+            self.published += 1
+
+    def _finish(self, error: FrameSourceError | None, flow_control: bool) -> None:
+        if flow_control:
+            self._wait_for_credit(0)
+        self._image_pub.wait_for_all_acked(Duration(seconds=5))
+        if error is not None:
+            self._fail(f"{error}; the {self.published} frames published before stay valid")
+            return
+        self.get_logger().info(f"end of {self._p['source']}: published {self.published} frames")
+        self.finished.set()
+
+    def close(self) -> None:
+        """Stop the decode and publish threads and wait for them."""
+        self._stop.set()
+        with self._ack_condition:
+            self._ack_condition.notify_all()
+        for name in ("_decode_thread", "_publish_thread"):
+            thread = getattr(self, name, None)
+            if thread is not None:
+                thread.join(timeout=2.0)
+
+
+def main(args: list[str] | None = None) -> None:
+    """Run the node alone in this process."""
+    from sds_bringup.node_host import run_nodes
+
+    raise SystemExit(run_nodes([(FrameSourceNode, "frame_source", True)], args))

@@ -1,0 +1,25 @@
+from setuptools import find_packages, setup
+
+package_name = "sds_camera"
+
+setup(
+    name=package_name,
+    version="0.1.0",
+    packages=find_packages(exclude=["test"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
+        ("share/" + package_name, ["package.xml"]),
+    ],
+    install_requires=["setuptools"],
+    zip_safe=True,
+    maintainer="SDS developers",
+    maintainer_email="sds@example.org",
+    description="Frame sources (video file, live camera, image folder) publishing images.",
+    license="MIT",
+    entry_points={
+        "console_scripts": [
+            "frame_source = sds_camera.frame_source_node:main",
+            "frame_monitor = sds_camera.frame_monitor_node:main",
+        ],
+    },
+)
