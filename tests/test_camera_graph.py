@@ -1,0 +1,142 @@
+"""Real node processes over Fast DDS: a video enters the graph frame by frame, and the graph stops
+cleanly. The frame source runs under `sds graph` exactly as a user starts it."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import time
+
+import numpy as np
+import pytest
+from conftest import NTSC, ntsc_time_ns, random_frames, write_lossless_clip
+from rclpy.time import Time
+from ros_helpers import LATCHED, GraphProcess, Probe, pid_alive
+from sds_camera.image_msg import msg_to_image
+from sensor_msgs.msg import Image
+from std_msgs.msg import Header
+
+from sds_msgs.msg import CameraModel
+
+pytestmark = pytest.mark.ros
+
+ROI = (40, 30, 200, 150)  # x, y, width, height
+FRAMES = random_frames(30, 240, 320, seed=11)
+
+
+@pytest.fixture(scope="module")
+def clip(tmp_path_factory):
+    return write_lossless_clip(tmp_path_factory.mktemp("graph") / "ntsc.mp4", FRAMES, NTSC)
+
+
+@pytest.fixture
+def probe():
+    probe = Probe("test_probe")
+    yield probe
+    probe.close()
+
+
+def _roi_red(index: int) -> np.ndarray:
+    x, y, w, h = ROI
+    return FRAMES[index, y : y + h, x : x + w, 2]
+
+
+def _stamp_ns(msg) -> int:
+    return Time.from_msg(msg.header.stamp).nanoseconds
+
+
+def test_every_frame_arrives_in_order_with_its_times_and_pixels(clip, probe):
+    images = probe.collect(Image, "/camera/image")
+    models = probe.collect(CameraModel, "/camera/camera_model", LATCHED)
+    graph = GraphProcess(
+        "camera.yaml", "--set", f"camera.source={clip}", "--set", f"camera.roi={list(ROI)}",
+        "--set", "camera.channel=red", "--set", "camera.stamp=media", "--set", "camera.rate=4.0",
+    )
+    assert graph.wait(timeout=60) == 0, graph.output()
+    assert len(images) == len(FRAMES), graph.output()
+    for index, msg in enumerate(images):
+        assert msg.encoding == "mono8" and msg.header.frame_id == "camera_optical"
+        assert abs(_stamp_ns(msg) - ntsc_time_ns(index)) <= 1
+        np.testing.assert_array_equal(msg_to_image(msg), _roi_red(index))
+    (model,) = models
+    assert (model.roi.x_offset, model.roi.y_offset, model.roi.width, model.roi.height) == ROI
+    assert (model.full_width, model.full_height, model.channel) == (320, 240, "red")
+    assert "published 30 frames" in graph.output()
+
+
+def test_flood_pacing_waits_for_acks_and_loses_nothing(clip, probe):
+    ack_pub = probe.node.create_publisher(Header, "/camera/frame_ack", 10)
+    published_ns: list[int] = []
+    acked_ns: list[int] = []
+    images: list[Image] = []
+
+    def ack_slowly(msg: Image, info) -> None:
+        images.append(msg)
+        published_ns.append(info["source_timestamp"])
+        time.sleep(0.02)  # a consumer slower than the decoder
+        acked_ns.append(time.time_ns())
+        ack_pub.publish(Header(stamp=msg.header.stamp, frame_id="test"))
+
+    probe.node.create_subscription(Image, "/camera/image", ack_slowly, 10)
+    graph = GraphProcess("camera.yaml", "--set", f"camera.source={clip}",
+                         "--set", "camera.pacing=flood", "--set", "camera.max_in_flight=1")
+    assert graph.wait(timeout=60) == 0, graph.output()
+    assert len(images) == len(FRAMES)
+    # With one frame in flight, each frame leaves the source only after the previous ack.
+    assert all(published_ns[i + 1] > acked_ns[i] for i in range(len(FRAMES) - 1))
+    first = _stamp_ns(images[0])
+    for index, msg in enumerate(images):
+        assert _stamp_ns(msg) - first == ntsc_time_ns(index)
+        np.testing.assert_array_equal(msg_to_image(msg), FRAMES[index])
+
+
+def test_composed_graph_runs_camera_and_monitor_in_one_process(clip, tmp_path):
+    summary = tmp_path / "summary.json"
+    graph = GraphProcess("camera_monitor.yaml", "--compose", "--set", f"camera.source={clip}",
+                         "--set", "camera.pacing=flood", "--set", f"monitor.summary_path={summary}")
+    assert graph.wait(timeout=60) == 0, graph.output()
+    assert len(graph.child_pids()) == 1
+    result = json.loads(summary.read_text())
+    assert result["frames"] == len(FRAMES) and result["out_of_order"] == 0
+    assert result["shape"] == [240, 320, 3]
+
+
+def test_truncated_video_ends_the_stream_with_an_error_and_valid_frames(clip, probe, tmp_path):
+    whole = write_lossless_clip(tmp_path / "whole.mkv", FRAMES, NTSC)
+    cut = tmp_path / "cut.mkv"
+    shutil.copy(whole, cut)
+    os.truncate(cut, int(cut.stat().st_size * 0.5))
+    images = probe.collect(Image, "/camera/image")
+    graph = GraphProcess("camera.yaml", "--set", f"camera.source={cut}", "--set", "camera.rate=4.0")
+    assert graph.wait(timeout=60) == 2, graph.output()
+    assert "truncated or corrupt" in graph.output()
+    assert 0 < len(images) < len(FRAMES)
+    for index, msg in enumerate(images):
+        np.testing.assert_array_equal(msg_to_image(msg), FRAMES[index])
+
+
+def test_missing_video_is_a_clear_error_not_a_crash():
+    graph = GraphProcess("camera.yaml", "--set", "camera.source=/nonexistent/drop.mp4")
+    assert graph.wait(timeout=60) == 2
+    assert "video file /nonexistent/drop.mp4 does not exist" in graph.output()
+    assert "Traceback" not in graph.output()
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT, signal.SIGKILL])
+def test_signal_to_the_launcher_leaves_no_node_process(clip, sig):
+    graph = GraphProcess("camera_monitor.yaml", "--set", f"camera.source={clip}",
+                         "--set", "camera.wait_for_subscribers=5")
+    graph.wait_for_line("waiting for 5 subscriber(s)", timeout=30)
+    pids = graph.child_pids()
+    assert len(pids) == 2 and all(pid_alive(pid) for pid in pids)
+    graph.popen.send_signal(sig)
+    code = graph.wait(timeout=30)
+    deadline = time.monotonic() + 10
+    while any(pid_alive(pid) for pid in pids) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not any(pid_alive(pid) for pid in pids), graph.output()
+    if sig != signal.SIGKILL:
+        assert code == 0, graph.output()
+        assert graph.output().count("exited with code 0") == 2, graph.output()

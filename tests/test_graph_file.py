@@ -1,0 +1,77 @@
+"""Graph files: loading, overrides, errors, and --ros-args that rclpy really accepts."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import rclpy
+from rclpy.node import Node
+from sds_bringup.graph import GraphFileError, apply_overrides, composed, load_graph
+from sds_bringup.launcher import group_processes
+from sds_bringup.node_host import load_plugin
+
+
+def test_shipped_graph_loads_with_existing_parameter_files_and_plugins(repo):
+    for graph_file in sorted((repo / "config" / "graphs").glob("*.yaml")):
+        entries = load_graph(graph_file)
+        assert entries, graph_file
+        for entry in entries:
+            assert all(path.is_file() for path in entry.params_files)
+            assert issubclass(load_plugin(entry.plugin), Node)
+
+
+def test_ros_args_reach_the_node_as_parameters_and_remaps(tmp_path: Path):
+    params = tmp_path / "params.yaml"
+    params.write_text("/**:\n  ros__parameters:\n    rate: 2.5\n    channel: red\n")
+    graph = tmp_path / "graph.yaml"
+    graph.write_text(
+        "nodes:\n  - name: cam\n    plugin: rclpy.node:Node\n    params: params.yaml\n"
+        "    parameters: {channel: green, roi: [1, 2, 3, 4]}\n    remap: {image: /x/image}\n"
+    )
+    (entry,) = apply_overrides(load_graph(graph), ["cam.source=/data/a b.mp4", "cam.rate=0.5"])
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        node = Node(entry.name, context=context, cli_args=entry.ros_args(),
+                    automatically_declare_parameters_from_overrides=True)
+        values = {p: node.get_parameter(p).value for p in ("rate", "channel", "roi", "source")}
+        assert values == {"rate": 0.5, "channel": "green", "roi": [1, 2, 3, 4],
+                          "source": "/data/a b.mp4"}
+        assert node.resolve_topic_name("image") == "/x/image"
+        node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
+
+
+def test_processes_group_nodes_and_compose_puts_all_in_one(repo):
+    entries = load_graph(repo / "config" / "graphs" / "camera_monitor.yaml")
+    assert [p.name for p in group_processes(entries)] == ["camera", "monitor"]
+    (single,) = group_processes(composed(entries))
+    assert [e.name for e in single.entries] == ["camera", "monitor"]
+    assert single.required
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("nodes: 3", "list under 'nodes'"),
+        ("nodes:\n  - {name: a}", "'plugin'"),
+        ("nodes:\n  - {name: a, plugin: m:C, colour: red}", "unknown keys"),
+        ("nodes:\n  - {name: a, plugin: m:C, params: nope.yaml}", "does not exist"),
+        ("nodes:\n  - {name: a, plugin: m:C}\n  - {name: a, plugin: m:D}", "used twice"),
+        ("nodes: [", "cannot read"),
+    ],
+)
+def test_bad_graph_files_are_named_in_the_error(tmp_path, text, message):
+    graph = tmp_path / "bad.yaml"
+    graph.write_text(text)
+    with pytest.raises(GraphFileError, match=message):
+        load_graph(graph)
+
+
+def test_bad_overrides_are_refused(repo):
+    entries = load_graph(repo / "config" / "graphs" / "camera_monitor.yaml")
+    for override in ("camera.rate", "nobody.rate=1", "camera=1"):
+        with pytest.raises(GraphFileError):
+            apply_overrides(entries, [override])
