@@ -15,7 +15,7 @@ import threading
 from collections.abc import Callable, Sequence
 
 import rclpy
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
 NodeFactory = Callable[..., Node]
@@ -37,7 +37,7 @@ def run_nodes(
 ) -> int:
     """Spin (factory, name, required[, ros_args]) nodes; return the worst node exit code."""
     rclpy.init(args=args)
-    executor = MultiThreadedExecutor()
+    executor = SingleThreadedExecutor()
     nodes: list[Node] = []
     required: list[Node] = []
     exit_code = 0
