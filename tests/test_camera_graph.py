@@ -109,11 +109,14 @@ def test_truncated_video_ends_the_stream_with_an_error_and_valid_frames(clip, pr
     shutil.copy(whole, cut)
     os.truncate(cut, int(cut.stat().st_size * 0.5))
     images = probe.collect(Image, "/camera/image")
-    graph = GraphProcess("camera.yaml", "--set", f"camera.source={cut}", "--set", "camera.rate=4.0")
+    graph = GraphProcess("camera.yaml", "--set", f"camera.source={cut}", "--set", "camera.rate=4.0",
+                         "--set", "camera.stamp=media")
     assert graph.wait(timeout=60) == 2, graph.output()
     assert "truncated or corrupt" in graph.output()
-    assert 0 < len(images) < len(FRAMES)
-    for index, msg in enumerate(images):
+    indices = [round(_stamp_ns(msg) * NTSC / 10**9) for msg in images]
+    assert 0 < len(indices) < len(FRAMES)
+    assert indices == list(range(len(indices))), graph.output()
+    for index, msg in zip(indices, images, strict=True):
         np.testing.assert_array_equal(msg_to_image(msg), FRAMES[index])
 
 
@@ -140,3 +143,13 @@ def test_signal_to_the_launcher_leaves_no_node_process(clip, sig):
     if sig != signal.SIGKILL:
         assert code == 0, graph.output()
         assert graph.output().count("exited with code 0") == 2, graph.output()
+
+
+def test_stopping_while_waiting_for_acknowledgements_is_clean(clip):
+    graph = GraphProcess("camera_monitor.yaml", "--set", f"camera.source={clip}",
+                         "--set", "camera.pacing=flood", "--set", "monitor.ack=false",
+                         "--set", "monitor.report_period_s=0.2")
+    graph.wait_for_line("[monitor] [INFO]", timeout=30)  # frames flow; the source is now blocked
+    graph.popen.send_signal(signal.SIGINT)
+    assert graph.wait(timeout=30) == 0, graph.output()
+    assert "Traceback" not in graph.output()

@@ -11,6 +11,7 @@ import yaml
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.subscription import RCLError
 from rclpy.time import Time
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
@@ -70,7 +71,9 @@ class FrameSourceNode(Node):
         )
         self._image_pub = self.create_publisher(Image, "image", reliable)
         self._model_pub = self.create_publisher(CameraModel, "camera_model", latched)
-        self.create_subscription(Header, "frame_ack", self._on_ack, reliable)
+        self._ack_topic = self.create_subscription(
+            Header, "frame_ack", self._on_ack, reliable
+        ).topic_name
         self._publish_camera_model(p)
         self._decode_thread = threading.Thread(target=self._read_frames, name="decode", daemon=True)
         self._publish_thread = threading.Thread(
@@ -181,9 +184,13 @@ class FrameSourceNode(Node):
     def _wait_for_credit(self, limit: int) -> None:
         """Block until at most `limit` published frames await their consumers' acks."""
         with self._ack_condition:
-            self._ack_condition.wait_for(
-                lambda: len(self._acks) <= limit or self._stop.is_set()
-            )
+            while not self._ack_condition.wait_for(
+                lambda: len(self._acks) <= limit or self._stop.is_set(), timeout=5.0
+            ):
+                self.get_logger().warning(
+                    f"flood pacing: {len(self._acks)} frame(s) still await acknowledgement by "
+                    f"{self._p['ack_consumers']} consumer(s) on {self._ack_topic}"
+                )
 
     def _publish_frames(self) -> None:
         """Publish thread: pace, stamp and publish frames until the stream ends."""
@@ -211,12 +218,27 @@ class FrameSourceNode(Node):
                 with self._ack_condition:
                     self._acks[stamp_ns] = 0
             stamp = Time(nanoseconds=stamp_ns).to_msg()
-            self._image_pub.publish(image_to_msg(item.image, stamp, p["frame_id"]))
+            if not self._publish(image_to_msg(item.image, stamp, p["frame_id"])):
+                return
             self.published += 1
+
+    def _publish(self, msg: Image) -> bool:
+        """Publish unless the node is stopping; False once the graph shuts down."""
+        if self._stop.is_set():
+            return False
+        try:
+            self._image_pub.publish(msg)
+        except RCLError:
+            if self.context.ok():
+                raise
+            return False
+        return True
 
     def _finish(self, error: FrameSourceError | None, flow_control: bool) -> None:
         if flow_control:
             self._wait_for_credit(0)
+        if self._stop.is_set():
+            return
         self._image_pub.wait_for_all_acked(Duration(seconds=5))
         if error is not None:
             self._fail(f"{error}; the {self.published} frames published before stay valid")
