@@ -54,7 +54,7 @@ class Probe:
         self._thread.join(timeout=2.0)
 
 
-class GraphProcess:
+class SdsGraphRun:
     """`sds graph ...` as a child process, its output collected line by line."""
 
     def __init__(self, graph: str, *args: str) -> None:

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from conftest import NTSC, ntsc_time_ns, random_frames, write_lossless_clip
 from rclpy.time import Time
-from ros_helpers import LATCHED, GraphProcess, Probe, pid_alive
+from ros_helpers import LATCHED, Probe, SdsGraphRun, pid_alive
 from sds_camera.image_msg import msg_to_image
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
@@ -50,7 +50,7 @@ def _stamp_ns(msg) -> int:
 def test_every_frame_arrives_in_order_with_its_times_and_pixels(clip, probe):
     images = probe.collect(Image, "/camera/image")
     models = probe.collect(CameraModel, "/camera/camera_model", LATCHED)
-    graph = GraphProcess(
+    graph = SdsGraphRun(
         "camera.yaml", "--set", f"camera.source={clip}", "--set", f"camera.roi={list(ROI)}",
         "--set", "camera.channel=red", "--set", "camera.stamp=media", "--set", "camera.rate=4.0",
     )
@@ -80,7 +80,7 @@ def test_flood_pacing_waits_for_acks_and_loses_nothing(clip, probe):
         ack_pub.publish(Header(stamp=msg.header.stamp, frame_id="test"))
 
     probe.node.create_subscription(Image, "/camera/image", ack_slowly, 10)
-    graph = GraphProcess("camera.yaml", "--set", f"camera.source={clip}",
+    graph = SdsGraphRun("camera.yaml", "--set", f"camera.source={clip}",
                          "--set", "camera.pacing=flood", "--set", "camera.max_in_flight=1")
     assert graph.wait(timeout=60) == 0, graph.output()
     assert len(images) == len(FRAMES)
@@ -94,7 +94,7 @@ def test_flood_pacing_waits_for_acks_and_loses_nothing(clip, probe):
 
 def test_composed_graph_runs_camera_and_monitor_in_one_process(clip, tmp_path):
     summary = tmp_path / "summary.json"
-    graph = GraphProcess("camera_monitor.yaml", "--compose", "--set", f"camera.source={clip}",
+    graph = SdsGraphRun("camera_monitor.yaml", "--compose", "--set", f"camera.source={clip}",
                          "--set", "camera.pacing=flood", "--set", f"monitor.summary_path={summary}")
     assert graph.wait(timeout=60) == 0, graph.output()
     assert len(graph.child_pids()) == 1
@@ -109,7 +109,7 @@ def test_truncated_video_ends_the_stream_with_an_error_and_valid_frames(clip, pr
     shutil.copy(whole, cut)
     os.truncate(cut, int(cut.stat().st_size * 0.5))
     images = probe.collect(Image, "/camera/image")
-    graph = GraphProcess("camera.yaml", "--set", f"camera.source={cut}", "--set", "camera.rate=4.0",
+    graph = SdsGraphRun("camera.yaml", "--set", f"camera.source={cut}", "--set", "camera.rate=4.0",
                          "--set", "camera.stamp=media")
     assert graph.wait(timeout=60) == 2, graph.output()
     assert "truncated or corrupt" in graph.output()
@@ -121,7 +121,7 @@ def test_truncated_video_ends_the_stream_with_an_error_and_valid_frames(clip, pr
 
 
 def test_missing_video_is_a_clear_error_not_a_crash():
-    graph = GraphProcess("camera.yaml", "--set", "camera.source=/nonexistent/drop.mp4")
+    graph = SdsGraphRun("camera.yaml", "--set", "camera.source=/nonexistent/drop.mp4")
     assert graph.wait(timeout=60) == 2
     assert "video file /nonexistent/drop.mp4 does not exist" in graph.output()
     assert "Traceback" not in graph.output()
@@ -129,7 +129,7 @@ def test_missing_video_is_a_clear_error_not_a_crash():
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT, signal.SIGKILL])
 def test_signal_to_the_launcher_leaves_no_node_process(clip, sig):
-    graph = GraphProcess("camera_monitor.yaml", "--set", f"camera.source={clip}",
+    graph = SdsGraphRun("camera_monitor.yaml", "--set", f"camera.source={clip}",
                          "--set", "camera.wait_for_subscribers=5")
     graph.wait_for_line("waiting for 5 subscriber(s)", timeout=30)
     pids = graph.child_pids()
@@ -146,7 +146,7 @@ def test_signal_to_the_launcher_leaves_no_node_process(clip, sig):
 
 
 def test_stopping_while_waiting_for_acknowledgements_is_clean(clip):
-    graph = GraphProcess("camera_monitor.yaml", "--set", f"camera.source={clip}",
+    graph = SdsGraphRun("camera_monitor.yaml", "--set", f"camera.source={clip}",
                          "--set", "camera.pacing=flood", "--set", "monitor.ack=false",
                          "--set", "monitor.report_period_s=0.2")
     graph.wait_for_line("[monitor] [INFO]", timeout=30)  # frames flow; the source is now blocked
