@@ -8,6 +8,7 @@ from pathlib import Path
 
 from sds_bringup.graph import GraphFileError, apply_overrides, composed, load_graph
 from sds_bringup.launcher import Launcher
+from sds_bringup.paths import CONFIG
 from sds_bringup.ros_env import graph_environment, pick_domain_id
 
 
@@ -55,6 +56,91 @@ def _run_demo(args: argparse.Namespace) -> int:
     return run_demo(args.out, args.seconds)
 
 
+def _add_calibrate(commands: argparse._SubParsersAction) -> None:
+    parser = commands.add_parser("calibrate", help="calibrate the camera (and, later, the lasers)")
+    targets = parser.add_subparsers(title="targets", required=True, metavar="TARGET")
+    camera = targets.add_parser(
+        "camera", help="intrinsic calibration from checkerboard images",
+        description="Find the checkerboard's inner corners in every image (sub-pixel), fit the "
+                    "model, and write the camera file and a report (JSON, text, residual plot).",
+    )
+    camera.add_argument("--model", choices=["pinhole", "scaramuzza"], required=True)
+    camera.add_argument("--images", nargs="+", type=Path, required=True,
+                        help="image files (all the same size)")
+    camera.add_argument("--board", required=True, metavar="COLSxROWS",
+                        help="inner corners per row x per column, e.g. 9x6")
+    camera.add_argument("--square", type=float, required=True, metavar="MM",
+                        help="checkerboard square size [mm]")
+    camera.add_argument("--out", type=Path, default=Path("camera.yaml"),
+                        help="camera file to write; the report goes beside it")
+    camera.set_defaults(run=_run_calibrate_camera)
+
+
+def _run_calibrate_camera(args: argparse.Namespace) -> int:
+    from sds_recon.calibration.board import Checkerboard
+    from sds_recon.calibration.camera_calibration import calibrate_camera
+    from sds_recon.calibration.report import report_content, report_text, write_report
+    from sds_recon.camera import save_camera
+
+    try:
+        board = Checkerboard.parse(args.board, args.square)
+        run = calibrate_camera(sorted(args.images), board, args.model)
+    except ValueError as error:
+        print(f"sds calibrate camera: {error}", file=sys.stderr)
+        return 2
+    camera_path = save_camera(run.calibration.camera, args.out, comment=(
+        f"Calibrated by `sds calibrate camera --model {args.model}` from "
+        f"{len(run.calibration.views)} images of a {args.board} board, {args.square:g} mm squares: "
+        f"RMS reprojection error {run.calibration.rms_px:.3f} px."))
+    paths = write_report(run, camera_path.parent, camera_path.stem)
+    print(report_text(report_content(run)))
+    print(f"wrote {camera_path}, {paths['json']}, {paths['text']}, {paths['plot']}")
+    return 0
+
+
+def _add_resolution(commands: argparse._SubParsersAction) -> None:
+    parser = commands.add_parser(
+        "resolution", help="ideal vertical resolution [mm/px] against laser radius (seed Fig. 7)",
+        description="Camera looking straight down at a flat surface: how many mm of surface "
+                    "height one pixel of spot motion means, for each radial spot position.",
+    )
+    parser.add_argument("--camera", type=Path,
+                        default=CONFIG / "cameras" / "gopro_hero5_session.yaml")
+    parser.add_argument("--height-mm", type=float, default=170.0,
+                        help="camera above the flat surface [mm] (default 170)")
+    parser.add_argument("--beam-tilt-deg", type=float, default=0.0,
+                        help="beam tilt from the vertical, outwards [deg] (default 0)")
+    parser.add_argument("--radii-mm", type=float, nargs=3, default=[0.0, 60.0, 1.0],
+                        metavar=("START", "STOP", "STEP"), help="radii of the table [mm]")
+    parser.add_argument("--rings-mm", type=float, nargs="*", default=[],
+                        help="radii of the diode rings, drawn dashed")
+    parser.add_argument("--out", type=Path, default=Path("resolution"),
+                        help="directory for resolution.csv and resolution.png")
+    parser.set_defaults(run=_run_resolution)
+
+
+def _run_resolution(args: argparse.Namespace) -> int:
+    import numpy as np
+    from sds_recon.camera import CameraModelError, load_camera
+    from sds_recon.resolution import plot_resolution, table_text, vertical_resolution
+
+    try:
+        camera = load_camera(args.camera)
+    except CameraModelError as error:
+        print(f"sds resolution: {error}", file=sys.stderr)
+        return 2
+    start, stop, step = args.radii_mm
+    radii = np.arange(start, stop + step / 2, step)
+    table = vertical_resolution(camera, radii, args.height_mm, np.radians(args.beam_tilt_deg))
+    args.out.mkdir(parents=True, exist_ok=True)
+    text = table_text(table)
+    (args.out / "resolution.csv").write_text(text + "\n")
+    plot_resolution(table, args.out / "resolution.png", args.rings_mm)
+    print(text)
+    print(f"wrote {args.out / 'resolution.csv'} and {args.out / 'resolution.png'}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of `sds` with every subcommand."""
     parser = argparse.ArgumentParser(
@@ -64,6 +150,8 @@ def build_parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(title="commands", required=True, metavar="COMMAND")
     _add_graph(commands)
     _add_demo(commands)
+    _add_calibrate(commands)
+    _add_resolution(commands)
     return parser
 
 

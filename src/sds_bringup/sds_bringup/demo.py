@@ -13,9 +13,9 @@ from tqdm import tqdm
 
 from sds_bringup.graph import apply_overrides, load_graph
 from sds_bringup.launcher import Launcher
+from sds_bringup.paths import CONFIG
 from sds_bringup.ros_env import graph_environment, pick_domain_id
 
-CONFIG = Path(__file__).resolve().parents[3] / "config"
 DEMO_GRAPH = CONFIG / "graphs" / "camera_monitor.yaml"
 FPS = Fraction(30000, 1001)
 WIDTH, HEIGHT = 1280, 720

@@ -1,0 +1,1 @@
+"""SDS reconstruction: camera models, calibration and geometry (pure numpy/scipy/OpenCV)."""

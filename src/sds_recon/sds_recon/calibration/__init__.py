@@ -1,0 +1,1 @@
+"""Intrinsic calibration: checkerboard detection, pinhole and Scaramuzza fits, reports."""

@@ -1,0 +1,51 @@
+"""Rigid transforms between world, rig and camera frames (seed Eq. 1)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from numpy.typing import ArrayLike
+
+
+@dataclass(frozen=True)
+class RigidTransform:
+    """P_C = R P_W + t (seed Eq. 1); rotation 3×3, translation in mm."""
+
+    rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
+    translation_mm: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    def __post_init__(self) -> None:
+        rotation = np.asarray(self.rotation, dtype=float).reshape(3, 3)
+        translation = np.asarray(self.translation_mm, dtype=float).reshape(3)
+        orthonormal = np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-9)
+        if not orthonormal or np.linalg.det(rotation) < 0:
+            raise ValueError("rotation must be a proper orthonormal 3×3 matrix")
+        object.__setattr__(self, "rotation", rotation)
+        object.__setattr__(self, "translation_mm", translation)
+
+    @classmethod
+    def from_rotation_vector(cls, rotation_vector: ArrayLike,
+                             translation_mm: ArrayLike) -> RigidTransform:
+        """Transform from an axis-angle vector [rad] (OpenCV's Rodrigues convention)."""
+        rotation, _ = cv2.Rodrigues(np.asarray(rotation_vector, dtype=float).reshape(3, 1))
+        return cls(rotation, np.asarray(translation_mm, dtype=float))
+
+    def rotation_vector(self) -> np.ndarray:
+        """The rotation as an axis-angle vector [rad]."""
+        vector, _ = cv2.Rodrigues(self.rotation)
+        return vector.reshape(3)
+
+    def apply(self, points: ArrayLike) -> np.ndarray:
+        """Map N×3 points from the source frame to the target frame [mm]."""
+        return np.asarray(points, dtype=float) @ self.rotation.T + self.translation_mm
+
+    def inverse(self) -> RigidTransform:
+        """The transform from the target frame back to the source frame."""
+        return RigidTransform(self.rotation.T, -self.rotation.T @ self.translation_mm)
+
+    def compose(self, first: RigidTransform) -> RigidTransform:
+        """The transform that applies `first`, then this one."""
+        return RigidTransform(self.rotation @ first.rotation,
+                              self.rotation @ first.translation_mm + self.translation_mm)
