@@ -11,6 +11,7 @@ import numpy as np
 SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 30, 0.1)
 """cornerSubPix stop rule of OpenCV's own calibration regression test."""
 SUBPIX_HALF_WINDOW_PX = 5
+"""Largest cornerSubPix half window: 11×11 px, as in OpenCV's calibration regression test."""
 
 
 @dataclass(frozen=True)
@@ -55,25 +56,44 @@ class BoardView:
 def detect_corners(image: np.ndarray, board: Checkerboard) -> np.ndarray | None:
     """Inner corners (N×2, x = column, y = row) refined to sub-pixel, or None if not all found.
 
-    OpenCV's classic detector first (the one its regression numbers use), the sector-based
-    detector when that fails (stronger on fisheye images); cornerSubPix refines both.
+    OpenCV's classic detector first (the one its regression numbers use), refined by
+    cornerSubPix; the sector-based detector when that fails (stronger on fisheye images),
+    whose corners are already sub-pixel.
     """
     gray = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
     found, corners = cv2.findChessboardCorners(
         gray, board.pattern_size, flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
-    if not found:
-        found, corners = cv2.findChessboardCornersSB(
-            gray, board.pattern_size, flags=cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY)
-    if not found:
-        return None
-    return refine_corners(gray, corners.reshape(-1, 2))
+    if found:
+        corners = corners.reshape(-1, 2)
+        return refine_corners(gray, corners, subpix_half_windows(corners, board))
+    found, corners = cv2.findChessboardCornersSB(
+        gray, board.pattern_size, flags=cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY)
+    return corners.reshape(-1, 2).astype(float) if found else None
 
 
-def refine_corners(gray: np.ndarray, corners: np.ndarray) -> np.ndarray:
-    """cornerSubPix with OpenCV's regression-test window (11×11 px) and stop rule."""
-    refined = corners.astype(np.float32).reshape(-1, 1, 2)
-    half = SUBPIX_HALF_WINDOW_PX
-    cv2.cornerSubPix(gray, refined, (half, half), (-1, -1), SUBPIX_CRITERIA)
+def subpix_half_windows(corners: np.ndarray, board: Checkerboard) -> np.ndarray:
+    """Per corner: the largest cornerSubPix half window (2–5 px) under 40 % of the distance to
+    its nearest grid neighbour, so that the window never reaches the next corner."""
+    grid = corners.reshape(board.rows, board.columns, 2)
+    nearest = np.full(grid.shape[:2], np.inf)
+    for axis in (0, 1):
+        step = np.linalg.norm(np.diff(grid, axis=axis), axis=2)
+        before = [slice(None)] * 2
+        after = [slice(None)] * 2
+        before[axis], after[axis] = slice(1, None), slice(None, -1)
+        nearest[tuple(before)] = np.minimum(nearest[tuple(before)], step)
+        nearest[tuple(after)] = np.minimum(nearest[tuple(after)], step)
+    return np.clip(np.floor(0.4 * nearest.ravel()), 2, SUBPIX_HALF_WINDOW_PX).astype(int)
+
+
+def refine_corners(gray: np.ndarray, corners: np.ndarray, half_windows: np.ndarray) -> np.ndarray:
+    """cornerSubPix with OpenCV's regression-test stop rule, one half window per corner [px]."""
+    refined = corners.astype(np.float32).reshape(-1, 1, 2).copy()
+    for half in np.unique(half_windows):
+        chosen = half_windows == half
+        group = refined[chosen].copy()
+        cv2.cornerSubPix(gray, group, (int(half), int(half)), (-1, -1), SUBPIX_CRITERIA)
+        refined[chosen] = group
     return refined.reshape(-1, 2).astype(float)
 
 

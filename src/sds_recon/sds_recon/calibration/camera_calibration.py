@@ -8,7 +8,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from sds_recon.calibration.board import BoardView, Checkerboard, detect_views, refine_corners
+from sds_recon.calibration.board import (
+    BoardView,
+    Checkerboard,
+    detect_views,
+    refine_corners,
+    subpix_half_windows,
+)
 from sds_recon.calibration.intrinsics import Calibration, calibrate_pinhole, calibrate_scaramuzza
 
 OUTLIER_MIN_PX = 3.0
@@ -46,7 +52,7 @@ def _outliers(residuals: np.ndarray, median_px: float) -> np.ndarray:
     return np.flatnonzero(distance > max(OUTLIER_MIN_PX, OUTLIER_MEDIAN_FACTOR * median_px))
 
 
-def correct_outliers(calibration: Calibration, images: dict[str, Path]
+def correct_outliers(calibration: Calibration, images: dict[str, Path], board: Checkerboard
                      ) -> tuple[list[BoardView], list[CornerCorrection]]:
     """Re-detect outlying corners from their reprojected position; drop those that stay off."""
     median = float(np.median(np.concatenate(
@@ -60,7 +66,8 @@ def correct_outliers(calibration: Calibration, images: dict[str, Path]
             continue
         gray = cv2.imread(str(images[view.name]), cv2.IMREAD_GRAYSCALE)
         predicted = calibration.camera.project(pose.apply(view.object_points[bad]))
-        redetected = refine_corners(gray, predicted)
+        redetected = refine_corners(gray, predicted,
+                                    subpix_half_windows(view.image_points, board)[bad])
         close = np.linalg.norm(redetected - predicted, axis=1) <= REDETECTED_MAX_PX
         image_points = view.image_points.copy()
         image_points[bad[close]] = redetected[close]
@@ -81,7 +88,7 @@ def calibrate_camera(paths: list[Path], board: Checkerboard, model: str) -> Cali
         raise ValueError(f"model must be one of {sorted(FITS)}, got {model!r}")
     views, rejected, (width, height) = detect_views(paths, board)
     calibration = FITS[model](views, width, height)
-    views, corrections = correct_outliers(calibration, {p.name: p for p in paths})
+    views, corrections = correct_outliers(calibration, {p.name: p for p in paths}, board)
     if corrections:
         calibration = FITS[model](views, width, height)
     return CalibrationRun(model, board, calibration, rejected, corrections)

@@ -175,24 +175,32 @@ def _initial_scaramuzza(views: list[BoardView], centre: np.ndarray,
     return polynomial, poses
 
 
+INTRINSIC_COUNT = 4 + SCARAMUZZA_DEGREE
+"""x0, y0, c, e (= m), a0, a2 … a_degree."""
+
+
 def _scaramuzza_from_vector(vector: np.ndarray, width_px: int, height_px: int,
                             radius_scale: float) -> ScaramuzzaCamera:
-    x0, y0, c, e, m, b0, *b = vector[:9]
+    x0, y0, c, e, b0, *b = vector[:INTRINSIC_COUNT]
     powers = np.arange(2, SCARAMUZZA_DEGREE + 1)
     polynomial = (b0, 0.0, *(np.asarray(b) / radius_scale ** (powers - 1)))
-    return ScaramuzzaCamera(width_px, height_px, polynomial, x0, y0, c, e, m)
+    return ScaramuzzaCamera(width_px, height_px, polynomial, x0, y0, c, e, e)
 
 
 def calibrate_scaramuzza(views: list[BoardView], width_px: int, height_px: int) -> Calibration:
     """Own Scaramuzza fit: linear initialisation, then least squares on every intrinsic
-    (centre, stretch c e m, a0 a2 a3 a4) and every board pose, on pixel reprojection error."""
+    (centre, stretch, a0 a2 a3 a4) and every board pose, on pixel reprojection error.
+
+    The stretch is fitted symmetric (e = m): its rotational part equals a roll of every board
+    pose, so c, e, m together are not observable (see ScaramuzzaCamera.with_symmetric_stretch).
+    """
     if len(views) < 3:
         raise ValueError(f"need at least 3 board views, got {len(views)}")
     radius_scale = float(np.hypot(width_px, height_px) / 2)
     centre = np.array([(width_px - 1) / 2, (height_px - 1) / 2])
     polynomial, poses = _initial_scaramuzza(views, centre, radius_scale)
     powers = np.arange(2, SCARAMUZZA_DEGREE + 1)
-    intrinsics = np.concatenate([centre, [1.0, 0.0, 0.0, polynomial[0]],
+    intrinsics = np.concatenate([centre, [1.0, 0.0, polynomial[0]],
                                  polynomial[2:] * radius_scale ** (powers - 1)])
     extrinsics = np.concatenate([np.append(p.rotation_vector(), p.translation_mm) for p in poses])
     sizes = [len(v.image_points) for v in views]
@@ -200,7 +208,7 @@ def calibrate_scaramuzza(views: list[BoardView], width_px: int, height_px: int) 
 
     def unpack(vector: np.ndarray) -> tuple[ScaramuzzaCamera, list[RigidTransform]]:
         camera = _scaramuzza_from_vector(vector, width_px, height_px, radius_scale)
-        blocks = vector[9:].reshape(-1, 6)
+        blocks = vector[INTRINSIC_COUNT:].reshape(-1, 6)
         return camera, [RigidTransform.from_rotation_vector(b[:3], b[3:]) for b in blocks]
 
     def residuals(vector: np.ndarray) -> np.ndarray:
@@ -210,11 +218,12 @@ def calibrate_scaramuzza(views: list[BoardView], width_px: int, height_px: int) 
         difference = (camera.project(points) - observed).ravel()
         return np.nan_to_num(difference, nan=FAILED_PROJECTION_PX)
 
-    sparsity = lil_matrix((2 * sum(sizes), 9 + 6 * len(views)), dtype=int)
-    sparsity[:, :9] = 1
+    sparsity = lil_matrix((2 * sum(sizes), INTRINSIC_COUNT + 6 * len(views)), dtype=int)
+    sparsity[:, :INTRINSIC_COUNT] = 1
     start = 0
     for index, size in enumerate(sizes):
-        sparsity[2 * start: 2 * (start + size), 9 + 6 * index: 15 + 6 * index] = 1
+        first = INTRINSIC_COUNT + 6 * index
+        sparsity[2 * start: 2 * (start + size), first: first + 6] = 1
         start += size
     solution = least_squares(residuals, np.concatenate([intrinsics, extrinsics]),
                              jac_sparsity=sparsity, x_scale="jac", method="trf",

@@ -84,7 +84,7 @@ class PinholeCamera(CameraModel):
         return np.stack([xd, yd], axis=1)
 
     def undistort(self, distorted: np.ndarray) -> np.ndarray:
-        """Invert Eqs. 3–4 by Newton's method; NaN where it does not converge to a regular root."""
+        """Invert Eqs. 3–4 by Newton's method; NaN where no root lies on the rising branch."""
         target = distorted
         point = distorted.copy()
         for _ in range(UNDISTORT_MAX_ITERATIONS):
@@ -95,11 +95,20 @@ class PinholeCamera(CameraModel):
             det = j11 * j22 - j12 * j21
             point = point - np.stack([(j22 * residual[:, 0] - j12 * residual[:, 1]) / det,
                                       (j11 * residual[:, 1] - j21 * residual[:, 0]) / det], axis=1)
-        j11, j12, j21, j22 = self._jacobian(point)
         residual = np.max(np.abs(self.distort(point) - target), axis=1)
-        bad = ~(residual <= UNDISTORT_TOLERANCE) | ~(j11 * j22 - j12 * j21 > 0)
-        point[bad] = np.nan
+        point[~(residual <= UNDISTORT_TOLERANCE) | ~self._on_rising_branch(point)] = np.nan
         return point
+
+    def _on_rising_branch(self, point: np.ndarray) -> np.ndarray:
+        """True where the radial distortion r (1 + k1 r² + ...) is positive and still rising.
+
+        Past the fold of a strong barrel distortion, Eq. 3 maps far points back into the image
+        (mirrored); such roots are not the ray that made the pixel.
+        """
+        r2 = np.sum(point * point, axis=1)
+        radial = 1 + r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3))
+        slope = self.k1 + r2 * (2 * self.k2 + 3 * self.k3 * r2)
+        return (radial > 0) & (radial + 2 * r2 * slope > 0)
 
     def _jacobian(self, point: np.ndarray) -> tuple[np.ndarray, ...]:
         """Partial derivatives of Eqs. 3–4 with respect to (x'_n, y'_n)."""

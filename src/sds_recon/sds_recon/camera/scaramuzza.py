@@ -77,6 +77,24 @@ class ScaramuzzaCamera(CameraModel):
         """True when the model is one-to-one over the whole image (and a margin of 5 %)."""
         return len(self._radius_table) == TABLE_SAMPLES
 
+    def with_symmetric_stretch(self) -> tuple[ScaramuzzaCamera, float]:
+        """The same image formation with e = m, and the roll [rad] it moves into the extrinsics.
+
+        Q = S R(roll) (polar decomposition): rotating every ray about the optical axis by the
+        roll and stretching by S forms the same image, so only S is an intrinsic property; c, e
+        and m of two calibrations compare only in this form. S is rescaled to S[1,1] = 1, which
+        rescales the polynomial: a_i' = a_i s^(1 - i).
+        """
+        u, sigma, vt = np.linalg.svd(self.stretch)
+        symmetric, rotation = u @ np.diag(sigma) @ u.T, u @ vt
+        scale = symmetric[1, 1]
+        powers = np.arange(len(self.polynomial))
+        camera = ScaramuzzaCamera(self.width_px, self.height_px,
+                                  tuple(np.asarray(self.polynomial) * scale ** (1.0 - powers)),
+                                  self.x0_px, self.y0_px, symmetric[0, 0] / scale,
+                                  symmetric[0, 1] / scale, symmetric[1, 0] / scale)
+        return camera, float(np.arctan2(rotation[1, 0], rotation[0, 0]))
+
     def unstretch(self, pixels: np.ndarray) -> np.ndarray:
         """Distorted pixels → undistorted offsets (x' − x0, y' − y0) (Eq. 7 inverted)."""
         offsets = pixels - np.array([self.x0_px, self.y0_px])
@@ -98,7 +116,7 @@ class ScaramuzzaCamera(CameraModel):
         angle = np.arctan2(lateral, points[:, 2])
         radius = self._radius_at_angle(angle)
         with np.errstate(divide="ignore", invalid="ignore"):
-            scale = np.where(lateral > 0, radius / lateral, 0.0)
+            scale = np.where(lateral > 0, radius / lateral, radius)  # on the axis: r' = 0 or NaN
         offsets = points[:, :2] * scale[:, None]
         return offsets @ self.stretch.T + np.array([self.x0_px, self.y0_px])
 
