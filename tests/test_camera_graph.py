@@ -11,10 +11,12 @@ import time
 
 import numpy as np
 import pytest
+import yaml
 from conftest import NTSC, ntsc_time_ns, random_frames, write_lossless_clip
 from rclpy.time import Time
 from ros_helpers import LATCHED, Probe, SdsGraphRun, pid_alive
 from sds_camera.image_msg import msg_to_image
+from sds_recon.camera import PinholeCamera, camera_from_dict, save_camera
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 
@@ -47,12 +49,15 @@ def _stamp_ns(msg) -> int:
     return Time.from_msg(msg.header.stamp).nanoseconds
 
 
-def test_every_frame_arrives_in_order_with_its_times_and_pixels(clip, probe):
+def test_every_frame_arrives_in_order_with_its_times_and_pixels(clip, probe, tmp_path):
+    camera = PinholeCamera(320, 240, 300.0, 301.0, 159.5, 119.5, k1=-0.1)
+    camera_file = save_camera(camera, tmp_path / "camera.yaml")
     images = probe.collect(Image, "/camera/image")
     models = probe.collect(CameraModel, "/camera/camera_model", LATCHED)
     graph = SdsGraphRun(
         "camera.yaml", "--set", f"camera.source={clip}", "--set", f"camera.roi={list(ROI)}",
         "--set", "camera.channel=red", "--set", "camera.stamp=media", "--set", "camera.rate=4.0",
+        "--set", f"camera.camera_model={camera_file}",
     )
     assert graph.wait(timeout=60) == 0, graph.output()
     assert len(images) == len(FRAMES), graph.output()
@@ -63,6 +68,8 @@ def test_every_frame_arrives_in_order_with_its_times_and_pixels(clip, probe):
     (model,) = models
     assert (model.roi.x_offset, model.roi.y_offset, model.roi.width, model.roi.height) == ROI
     assert (model.full_width, model.full_height, model.channel) == (320, 240, "red")
+    assert model.model_type == "pinhole" and model.model_path == str(camera_file.resolve())
+    assert camera_from_dict(yaml.safe_load(model.model_yaml)) == camera
     assert "published 30 frames" in graph.output()
 
 
@@ -124,6 +131,15 @@ def test_missing_video_is_a_clear_error_not_a_crash():
     graph = SdsGraphRun("camera.yaml", "--set", "camera.source=/nonexistent/drop.mp4")
     assert graph.wait(timeout=60) == 2
     assert "video file /nonexistent/drop.mp4 does not exist" in graph.output()
+    assert "Traceback" not in graph.output()
+
+
+def test_camera_model_for_another_frame_size_is_refused(clip, repo):
+    gopro = repo / "config" / "cameras" / "gopro_hero5_session.yaml"
+    graph = SdsGraphRun("camera.yaml", "--set", f"camera.source={clip}",
+                        "--set", f"camera.camera_model={gopro}")
+    assert graph.wait(timeout=60) == 2
+    assert "is for 3840x2160 px frames, the source gives 320x240" in graph.output()
     assert "Traceback" not in graph.output()
 
 

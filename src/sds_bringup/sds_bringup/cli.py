@@ -98,6 +98,60 @@ def _run_calibrate_camera(args: argparse.Namespace) -> int:
     return 0
 
 
+IMPORTERS = {"ocamcalib": "read_ocamcalib_results", "matlab": "read_matlab_fisheye",
+             "camera-info": "read_camera_info"}
+
+
+def _add_camera(commands: argparse._SubParsersAction) -> None:
+    parser = commands.add_parser("camera", help="convert camera calibrations to and from SDS files")
+    actions = parser.add_subparsers(title="actions", required=True, metavar="ACTION")
+    importing = actions.add_parser(
+        "import", help="write an SDS camera file from another tool's calibration",
+        description="ocamcalib: OCamCalib's calib_results.txt; matlab: fisheyeIntrinsics "
+                    "properties in YAML/JSON; camera-info: a ROS camera_info YAML (plumb_bob).")
+    importing.add_argument("format", choices=sorted(IMPORTERS))
+    importing.add_argument("source", type=Path)
+    importing.add_argument("--out", type=Path, required=True, help="SDS camera file to write")
+    importing.set_defaults(run=_run_camera_import)
+    exporting = actions.add_parser(
+        "camera-info", help="write a ROS camera_info YAML from a pinhole SDS camera file")
+    exporting.add_argument("camera", type=Path)
+    exporting.add_argument("--out", type=Path, required=True)
+    exporting.add_argument("--name", default="sds_camera", help="camera_name in the file")
+    exporting.set_defaults(run=_run_camera_info)
+
+
+def _run_camera_import(args: argparse.Namespace) -> int:
+    from sds_recon.camera import CameraModelError, importers, save_camera
+
+    try:
+        camera = getattr(importers, IMPORTERS[args.format])(args.source)
+    except CameraModelError as error:
+        print(f"sds camera import: {error}", file=sys.stderr)
+        return 2
+    save_camera(camera, args.out, comment=f"Imported from {args.format} file {args.source}.")
+    print(f"wrote {args.out}: {camera}")
+    return 0
+
+
+def _run_camera_info(args: argparse.Namespace) -> int:
+    from sds_recon.camera import CameraModelError, PinholeCamera, load_camera
+    from sds_recon.camera.importers import write_camera_info
+
+    try:
+        camera = load_camera(args.camera)
+    except CameraModelError as error:
+        print(f"sds camera camera-info: {error}", file=sys.stderr)
+        return 2
+    if not isinstance(camera, PinholeCamera):
+        print(f"sds camera camera-info: {args.camera} is a {camera.model_name} model; "
+              "camera_info has no such model (keep the SDS file)", file=sys.stderr)
+        return 2
+    write_camera_info(camera, args.out, args.name)
+    print(f"wrote {args.out}")
+    return 0
+
+
 def _add_resolution(commands: argparse._SubParsersAction) -> None:
     parser = commands.add_parser(
         "resolution", help="ideal vertical resolution [mm/px] against laser radius (seed Fig. 7)",
@@ -151,6 +205,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_graph(commands)
     _add_demo(commands)
     _add_calibrate(commands)
+    _add_camera(commands)
     _add_resolution(commands)
     return parser
 

@@ -7,12 +7,13 @@ import threading
 import time
 from pathlib import Path
 
-import yaml
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.subscription import RCLError
 from rclpy.time import Time
+from sds_recon.camera import CameraModel as CameraModelBase
+from sds_recon.camera import load_camera
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 
@@ -56,6 +57,7 @@ class FrameSourceNode(Node):
             p = self._read_parameters()
             self._source = open_source(p["source"], fps=p["fps"])
             self._region = self._region_from(p["roi"])
+            self._camera = self._camera_from(p["camera_model"])
         except (FrameSourceError, OSError, ValueError) as error:
             self._fail(str(error))
             return
@@ -118,16 +120,27 @@ class FrameSourceNode(Node):
         region.check_inside(width, height)
         return region
 
+    def _camera_from(self, path: str) -> CameraModelBase | None:
+        """The camera file's model (None without one); it must match the source's frame size."""
+        if not path:
+            return None
+        camera = load_camera(path)
+        size = (self._source.width, self._source.height)
+        if (camera.width_px, camera.height_px) != size:
+            raise ValueError(f"camera model {path} is for {camera.width_px}x{camera.height_px} px "
+                             f"frames, the source gives {size[0]}x{size[1]}")
+        return camera
+
     def _publish_camera_model(self, p: dict) -> None:
         msg = CameraModel()
         msg.header.frame_id = p["frame_id"]
         msg.header.stamp = self.get_clock().now().to_msg()
         msg.full_width, msg.full_height = self._source.width, self._source.height
-        if p["camera_model"]:
+        if self._camera is not None:
             path = Path(p["camera_model"])
-            msg.model_path = str(path)
+            msg.model_path = str(path.resolve())
             msg.model_yaml = path.read_text()
-            msg.model_type = str(yaml.safe_load(msg.model_yaml).get("model", ""))
+            msg.model_type = self._camera.model_name
         msg.roi.x_offset, msg.roi.y_offset = self._region.x, self._region.y
         msg.roi.width, msg.roi.height = self._region.width, self._region.height
         msg.channel = p["channel"]

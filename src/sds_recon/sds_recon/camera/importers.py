@@ -30,7 +30,7 @@ def ocamcalib_camera(ss: ArrayLike, centre_row: float, centre_col: float, c: flo
     """
     coefficients = np.asarray(ss, dtype=float)
     powers = np.arange(len(coefficients))
-    polynomial = -coefficients * float(c) ** (1 - powers)
+    polynomial = 0.0 - coefficients * float(c) ** (1 - powers)  # 0.0 - keeps a1 = +0.0
     return ScaramuzzaCamera(int(width_px), int(height_px), tuple(polynomial),
                             float(centre_col) - pixel_origin, float(centre_row) - pixel_origin,
                             c=1.0 / c, e=e / c, m=d / c)
@@ -76,6 +76,21 @@ def matlab_fisheye_camera(mapping_coefficients: ArrayLike, image_size: ArrayLike
         raise CameraModelError(f"StretchMatrix must be [c d; e 1], got {stretch.tolist()}")
     return ScaramuzzaCamera(cols, rows, (a0, 0.0, a2, a3, a4), cx, cy,
                             c=stretch[0, 0], e=stretch[0, 1], m=stretch[1, 0])
+
+
+def read_matlab_fisheye(path: str | Path) -> ScaramuzzaCamera:
+    """Read MATLAB fisheyeIntrinsics properties saved as YAML or JSON (the property names:
+    MappingCoefficients, ImageSize, DistortionCenter and optionally StretchMatrix)."""
+    path = Path(path)
+    try:
+        content = yaml.safe_load(path.read_text())
+        return matlab_fisheye_camera(content["MappingCoefficients"], content["ImageSize"],
+                                     content["DistortionCenter"],
+                                     content.get("StretchMatrix", ((1.0, 0.0), (0.0, 1.0))))
+    except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError) as error:
+        if isinstance(error, CameraModelError):
+            raise
+        raise CameraModelError(f"{path} is not a fisheyeIntrinsics file: {error!r}") from error
 
 
 def _matrix(content: dict[str, Any], key: str, shape: tuple[int, int]) -> np.ndarray:

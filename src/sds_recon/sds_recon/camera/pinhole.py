@@ -14,6 +14,7 @@ from sds_recon.camera.model import CameraModel, CameraModelError, as_points
 UNDISTORT_TOLERANCE = 1e-12
 """Newton undistortion stops when the distorted point is matched to this (normalised units)."""
 UNDISTORT_MAX_ITERATIONS = 30
+UNDISTORT_MAX_HALVINGS = 10
 
 
 @dataclass(frozen=True)
@@ -66,7 +67,8 @@ class PinholeCamera(CameraModel):
     def camera_matrix(self) -> np.ndarray:
         """K of Eq. 2 (OpenCV/ROS layout): [[α, −α cot θ, x0], [0, β / sin θ, y0], [0, 0, 1]]."""
         theta = self.skew_angle_rad
-        return np.array([[self.alpha_px, -self.alpha_px / math.tan(theta), self.x0_px],
+        skew = 0.0 if theta == math.pi / 2 else -self.alpha_px / math.tan(theta)
+        return np.array([[self.alpha_px, skew, self.x0_px],
                          [0.0, self.beta_px / math.sin(theta), self.y0_px],
                          [0.0, 0.0, 1.0]])
 
@@ -84,19 +86,36 @@ class PinholeCamera(CameraModel):
         return np.stack([xd, yd], axis=1)
 
     def undistort(self, distorted: np.ndarray) -> np.ndarray:
-        """Invert Eqs. 3–4 by Newton's method; NaN where no root lies on the rising branch."""
-        target = distorted
+        """Invert Eqs. 3–4 by damped Newton; NaN where no root lies on the rising branch.
+
+        Each step is halved until it lowers the residual, so points near a strong barrel
+        distortion's fold do not overshoot; converged points leave the iteration.
+        """
         point = distorted.copy()
+        active = np.flatnonzero(np.isfinite(distorted).all(axis=1))
+        residual = self.distort(point[active]) - distorted[active]
         for _ in range(UNDISTORT_MAX_ITERATIONS):
-            residual = self.distort(point) - target
-            if np.all(~(np.abs(residual) > UNDISTORT_TOLERANCE)):
+            error = np.max(np.abs(residual), axis=1)
+            moving = error > UNDISTORT_TOLERANCE
+            active, residual, error = active[moving], residual[moving], error[moving]
+            if active.size == 0:
                 break
-            j11, j12, j21, j22 = self._jacobian(point)
+            j11, j12, j21, j22 = self._jacobian(point[active])
             det = j11 * j22 - j12 * j21
-            point = point - np.stack([(j22 * residual[:, 0] - j12 * residual[:, 1]) / det,
-                                      (j11 * residual[:, 1] - j21 * residual[:, 0]) / det], axis=1)
-        residual = np.max(np.abs(self.distort(point) - target), axis=1)
-        point[~(residual <= UNDISTORT_TOLERANCE) | ~self._on_rising_branch(point)] = np.nan
+            step = np.stack([(j22 * residual[:, 0] - j12 * residual[:, 1]) / det,
+                             (j11 * residual[:, 1] - j21 * residual[:, 0]) / det], axis=1)
+            for _ in range(UNDISTORT_MAX_HALVINGS):
+                trial = point[active] - step
+                trial_residual = self.distort(trial) - distorted[active]
+                worse = ~(np.max(np.abs(trial_residual), axis=1) < error)
+                if not worse.any():
+                    break
+                step[worse] *= 0.5
+            point[active] = trial
+            # A point no step improves has stalled (beyond the fold): it leaves, unconverged.
+            active, residual = active[~worse], trial_residual[~worse]
+        final = np.max(np.abs(self.distort(point) - distorted), axis=1)
+        point[~(final <= UNDISTORT_TOLERANCE) | ~self._on_rising_branch(point)] = np.nan
         return point
 
     def _on_rising_branch(self, point: np.ndarray) -> np.ndarray:
