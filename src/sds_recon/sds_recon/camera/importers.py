@@ -9,7 +9,7 @@ import numpy as np
 import yaml
 from numpy.typing import ArrayLike
 
-from sds_recon.camera.model import CameraModelError
+from sds_recon.camera.model import CameraModelError, read_yaml
 from sds_recon.camera.pinhole import PinholeCamera
 from sds_recon.camera.scaramuzza import ScaramuzzaCamera
 from sds_recon.geometry import RigidTransform
@@ -81,15 +81,14 @@ def matlab_fisheye_camera(mapping_coefficients: ArrayLike, image_size: ArrayLike
 def read_matlab_fisheye(path: str | Path) -> ScaramuzzaCamera:
     """Read MATLAB fisheyeIntrinsics properties saved as YAML or JSON (the property names:
     MappingCoefficients, ImageSize, DistortionCenter and optionally StretchMatrix)."""
-    path = Path(path)
+    content = read_yaml(path)
     try:
-        content = yaml.safe_load(path.read_text())
         return matlab_fisheye_camera(content["MappingCoefficients"], content["ImageSize"],
                                      content["DistortionCenter"],
                                      content.get("StretchMatrix", ((1.0, 0.0), (0.0, 1.0))))
-    except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError) as error:
-        if isinstance(error, CameraModelError):
-            raise
+    except CameraModelError:
+        raise
+    except (KeyError, TypeError, ValueError) as error:
         raise CameraModelError(f"{path} is not a fisheyeIntrinsics file: {error!r}") from error
 
 
@@ -109,20 +108,15 @@ def camera_info_to_pinhole(content: dict[str, Any]) -> PinholeCamera:
         d = np.asarray(content["distortion_coefficients"]["data"], dtype=float)
         return PinholeCamera.from_opencv(k, d, int(content["image_width"]),
                                          int(content["image_height"]))
+    except CameraModelError:
+        raise
     except (KeyError, TypeError, ValueError) as error:
-        if isinstance(error, CameraModelError):
-            raise
         raise CameraModelError(f"not a camera_info YAML: {error!r}") from error
 
 
 def read_camera_info(path: str | Path) -> PinholeCamera:
     """Read a ROS camera_info YAML file (plumb_bob)."""
-    path = Path(path)
-    try:
-        content = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as error:
-        raise CameraModelError(f"cannot read {path}: {error}") from error
-    return camera_info_to_pinhole(content)
+    return camera_info_to_pinhole(read_yaml(path))
 
 
 def pinhole_to_camera_info(camera: PinholeCamera, camera_name: str = "sds_camera"

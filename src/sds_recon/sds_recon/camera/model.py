@@ -100,19 +100,23 @@ def camera_from_dict(content: dict[str, Any]) -> CameraModel:
         raise CameraModelError(f"image_size must be positive, got {width}×{height}")
     try:
         return classes[name].from_parameters(dict(parameters), width, height, origin)
+    except CameraModelError:
+        raise
     except (KeyError, TypeError, ValueError) as error:
-        if isinstance(error, CameraModelError):
-            raise
         raise CameraModelError(f"bad {name} parameters: {error!r}") from error
+
+
+def read_yaml(path: str | Path) -> Any:
+    """The content of a YAML (or JSON) file; CameraModelError if it cannot be read or parsed."""
+    try:
+        return yaml.safe_load(Path(path).read_text())
+    except (OSError, yaml.YAMLError) as error:
+        raise CameraModelError(f"cannot read {path}: {error}") from error
 
 
 def load_camera(path: str | Path) -> CameraModel:
     """Read a camera file (config/cameras/*.yaml)."""
-    path = Path(path)
-    try:
-        content = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as error:
-        raise CameraModelError(f"cannot read camera file {path}: {error}") from error
+    content = read_yaml(path)
     try:
         return camera_from_dict(content)
     except CameraModelError as error:
