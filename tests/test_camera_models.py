@@ -279,3 +279,14 @@ def test_symmetric_stretch_forms_the_same_image_with_a_roll() -> None:
     rays = camera.pixel_to_ray(camera.image_grid(64))
     pixels = camera.project(rays)
     assert np.max(np.abs(symmetric.project(rolled.apply(rays)) - pixels)) < 1e-6
+
+
+@pytest.mark.parametrize("camera", [random_pinhole(np.random.default_rng(8)), gopro()],
+                         ids=["pinhole", "scaramuzza"])
+def test_scaled_camera_sees_the_same_rays_at_scaled_pixels(camera) -> None:
+    small = camera.scaled(0.25)
+    assert (small.width_px, small.height_px) == (round(camera.width_px / 4),
+                                                 round(camera.height_px / 4))
+    pixels = camera.image_grid(37)
+    rays = camera.pixel_to_ray(pixels)
+    assert np.max(np.abs(small.project(rays) - ((pixels + 0.5) * 0.25 - 0.5))) < 1e-9

@@ -39,6 +39,10 @@ class CameraModel(ABC):
         """N×2 pixels → N×3 unit rays in the camera frame; NaN where the model is not valid."""
 
     @abstractmethod
+    def scaled(self, factor: float) -> CameraModel:
+        """The same camera with its image resampled by `factor` (0.25: a 4K sensor at 960×540)."""
+
+    @abstractmethod
     def parameters(self) -> dict[str, Any]:
         """The model's parameters as plain YAML-ready values (pixel origin 0)."""
 
@@ -59,6 +63,16 @@ class CameraModel(ABC):
         ys = np.unique(np.append(np.arange(0.0, self.height_px - 1, step_px), self.height_px - 1))
         grid = np.stack(np.meshgrid(xs, ys), axis=-1)
         return grid.reshape(-1, 2)
+
+
+def scaled_pixel(value_px: float, factor: float) -> float:
+    """A pixel coordinate after resampling by `factor` (pixel centres at integers)."""
+    return (value_px + 0.5) * factor - 0.5
+
+
+def scaled_size(size_px: int, factor: float) -> int:
+    """An image dimension after resampling by `factor`."""
+    return max(1, round(size_px * factor))
 
 
 def as_points(values: ArrayLike, columns: int) -> np.ndarray:

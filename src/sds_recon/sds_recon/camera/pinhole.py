@@ -3,13 +3,19 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from sds_recon.camera.model import CameraModel, CameraModelError, as_points
+from sds_recon.camera.model import (
+    CameraModel,
+    CameraModelError,
+    as_points,
+    scaled_pixel,
+    scaled_size,
+)
 
 UNDISTORT_TOLERANCE = 1e-12
 """Newton undistortion stops when the distorted point is matched to this (normalised units)."""
@@ -157,6 +163,14 @@ class PinholeCamera(CameraModel):
         normalised = self.undistort(distorted)
         rays = np.column_stack([normalised, np.ones(len(normalised))])
         return rays / np.linalg.norm(rays, axis=1, keepdims=True)
+
+    def scaled(self, factor: float) -> PinholeCamera:
+        """Focal lengths and centre scale with the image; the distortion does not change."""
+        return replace(self, width_px=scaled_size(self.width_px, factor),
+                       height_px=scaled_size(self.height_px, factor),
+                       alpha_px=self.alpha_px * factor, beta_px=self.beta_px * factor,
+                       x0_px=scaled_pixel(self.x0_px, factor),
+                       y0_px=scaled_pixel(self.y0_px, factor))
 
     def parameters(self) -> dict[str, Any]:
         """Eq. 2 intrinsics [px] and θ [deg]; Eqs. 3–4 distortion."""

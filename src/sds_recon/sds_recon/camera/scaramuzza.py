@@ -9,7 +9,13 @@ import numpy as np
 from numpy.polynomial import polynomial
 from numpy.typing import ArrayLike
 
-from sds_recon.camera.model import CameraModel, CameraModelError, as_points
+from sds_recon.camera.model import (
+    CameraModel,
+    CameraModelError,
+    as_points,
+    scaled_pixel,
+    scaled_size,
+)
 
 PROJECTION_TOLERANCE_PX = 1e-10
 """Newton's root solve of the projection stops when the radius moves less than this [px]."""
@@ -136,6 +142,15 @@ class ScaramuzzaCamera(CameraModel):
         outside = ~((angle >= self._angle_table[0]) & (angle <= self._angle_table[-1]))
         radius[outside] = np.nan
         return radius
+
+    def scaled(self, factor: float) -> ScaramuzzaCamera:
+        """Offsets scale with the image, so a_i' = a_i factor^(1 - i); the stretch is unchanged."""
+        powers = np.arange(len(self.polynomial))
+        return ScaramuzzaCamera(scaled_size(self.width_px, factor),
+                                scaled_size(self.height_px, factor),
+                                tuple(np.asarray(self.polynomial) * factor ** (1.0 - powers)),
+                                scaled_pixel(self.x0_px, factor), scaled_pixel(self.y0_px, factor),
+                                self.c, self.e, self.m)
 
     def parameters(self) -> dict[str, Any]:
         """Eq. 6 polynomial (ascending, a1 included) and Eq. 7 centre [px] and stretch."""

@@ -1,0 +1,204 @@
+"""The rig description: camera and its pose, laser diodes, line laser, container and fluid."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+from scipy.spatial.transform import Rotation
+
+from sds_recon.camera.model import CameraModel, CameraModelError, load_camera, read_yaml
+from sds_recon.geometry import RigidTransform
+
+WORLD_FRAME = ("origin on the container axis at the flat liquid surface (fill level), Z up "
+               "against gravity, mm")
+
+
+class RigError(ValueError):
+    """A rig file that does not describe a usable rig; the message names the bad field."""
+
+
+@dataclass(frozen=True)
+class LaserDiode:
+    """One laser diode: emitter position [mm, world], unit beam direction (to the liquid)."""
+
+    laser_id: int
+    ring: int
+    emitter_mm: np.ndarray
+    direction: np.ndarray
+
+    def point_at(self, distance_mm: ArrayLike) -> np.ndarray:
+        """Points on the beam `distance_mm` from the emitter (N×3, mm)."""
+        return self.emitter_mm + np.asarray(distance_mm, dtype=float)[..., None] * self.direction
+
+
+@dataclass(frozen=True)
+class LineLaser:
+    """The line laser: emitter position [mm, world] and the unit normal of its light plane."""
+
+    emitter_mm: np.ndarray
+    normal: np.ndarray
+
+
+@dataclass(frozen=True)
+class Container:
+    """Cylindrical container: inner radius, liquid fill height and wall height [mm]."""
+
+    radius_mm: float
+    fill_height_mm: float
+    height_mm: float
+
+
+@dataclass(frozen=True)
+class Fluid:
+    """Liquid properties used by the sloshing theory."""
+
+    density_kg_m3: float
+    surface_tension_n_m: float
+
+
+@dataclass(frozen=True)
+class Rig:
+    """Everything geometric about one rig, in the world frame (WORLD_FRAME)."""
+
+    camera: CameraModel
+    world_to_camera: RigidTransform
+    diodes: tuple[LaserDiode, ...]
+    line_laser: LineLaser | None
+    container: Container
+    fluid: Fluid
+    gravity_m_s2: float
+    camera_file: Path
+
+    @property
+    def camera_position_mm(self) -> np.ndarray:
+        """Camera centre in the world frame [mm]."""
+        return self.world_to_camera.inverse().translation_mm
+
+    def project(self, points_mm: ArrayLike) -> np.ndarray:
+        """World points (N×3 mm) → image pixels (N×2); NaN where the camera does not see them."""
+        return self.camera.project(self.world_to_camera.apply(points_mm))
+
+    def pixel_rays(self, pixels: ArrayLike) -> np.ndarray:
+        """Unit rays (N×3) in the world frame from the camera centre through the pixels."""
+        return self.camera.pixel_to_ray(pixels) @ self.world_to_camera.rotation
+
+    def diode(self, laser_id: int) -> LaserDiode:
+        """The diode with this id."""
+        for diode in self.diodes:
+            if diode.laser_id == laser_id:
+                return diode
+        raise KeyError(f"no laser diode with id {laser_id}")
+
+
+def _vector(content: dict, key: str, where: str, unit: bool = False) -> np.ndarray:
+    try:
+        vector = np.asarray(content[key], dtype=float).reshape(3)
+    except KeyError as error:
+        raise RigError(f"{where}.{key} is missing") from error
+    except (TypeError, ValueError) as error:
+        raise RigError(f"{where}.{key} must be three numbers, got {content[key]!r}") from error
+    if not np.isfinite(vector).all():
+        raise RigError(f"{where}.{key} must be finite, got {vector.tolist()}")
+    if unit:
+        norm = np.linalg.norm(vector)
+        if norm < 1e-9:
+            raise RigError(f"{where}.{key} must not be zero")
+        vector = vector / norm
+    return vector
+
+
+def _number(content: dict, key: str, where: str, positive: bool = True) -> float:
+    try:
+        value = float(content[key])
+    except KeyError as error:
+        raise RigError(f"{where}.{key} is missing") from error
+    except (TypeError, ValueError) as error:
+        raise RigError(f"{where}.{key} must be a number, got {content[key]!r}") from error
+    if positive and not value > 0:
+        raise RigError(f"{where}.{key} must be positive, got {value}")
+    return value
+
+
+def _section(content: dict, key: str) -> dict:
+    section = content.get(key)
+    if not isinstance(section, dict):
+        raise RigError(f"{key} is missing or not a mapping")
+    return section
+
+
+def camera_pose(position_mm: ArrayLike, orientation_xyz_deg: ArrayLike) -> RigidTransform:
+    """World → camera transform (Eq. 1) from the camera centre and its orientation.
+
+    `orientation_xyz_deg`: the camera-to-world rotation as extrinsic x-y-z angles [deg];
+    [180, 0, 0] looks straight down with image x along world X and image y along world −Y.
+    """
+    camera_to_world = Rotation.from_euler("xyz", np.asarray(orientation_xyz_deg, dtype=float),
+                                          degrees=True).as_matrix()
+    rotation = camera_to_world.T
+    return RigidTransform(rotation, -rotation @ np.asarray(position_mm, dtype=float))
+
+
+def rig_from_dict(content: Any, base: Path) -> Rig:
+    """Build a rig from a rig file's mapping; relative paths are taken from `base`."""
+    if not isinstance(content, dict):
+        raise RigError("a rig file must be a YAML mapping")
+    camera_section = _section(content, "camera")
+    if "model" not in camera_section:
+        raise RigError("camera.model is missing (a camera file, config/cameras/*.yaml)")
+    camera_file = (base / str(camera_section["model"])).resolve()
+    try:
+        camera = load_camera(camera_file)
+    except CameraModelError as error:
+        raise RigError(f"camera.model: {error}") from error
+    pose = camera_pose(_vector(camera_section, "position_mm", "camera"),
+                       _vector(camera_section, "orientation_xyz_deg", "camera"))
+    diodes = []
+    entries = content.get("diodes", [])
+    if not isinstance(entries, list):
+        raise RigError("diodes must be a list")
+    for index, entry in enumerate(entries):
+        where = f"diodes[{index}]"
+        if not isinstance(entry, dict) or "id" not in entry:
+            raise RigError(f"{where} must be a mapping with an id")
+        diodes.append(LaserDiode(int(entry["id"]), int(entry.get("ring", 0)),
+                                 _vector(entry, "emitter_mm", where),
+                                 _vector(entry, "direction", where, unit=True)))
+    ids = [d.laser_id for d in diodes]
+    if len(set(ids)) != len(ids):
+        raise RigError(f"diode ids must be unique, got {ids}")
+    line = content.get("line_laser")
+    line_laser = None
+    if line is not None:
+        if not isinstance(line, dict):
+            raise RigError("line_laser must be a mapping")
+        line_laser = LineLaser(_vector(line, "emitter_mm", "line_laser"),
+                               _vector(line, "normal", "line_laser", unit=True))
+    container = _section(content, "container")
+    fluid = _section(content, "fluid")
+    return Rig(
+        camera=camera, world_to_camera=pose, diodes=tuple(diodes), line_laser=line_laser,
+        container=Container(_number(container, "radius_mm", "container"),
+                            _number(container, "fill_height_mm", "container"),
+                            _number(container, "height_mm", "container")),
+        fluid=Fluid(_number(fluid, "density_kg_m3", "fluid"),
+                    _number(fluid, "surface_tension_n_m", "fluid", positive=False)),
+        gravity_m_s2=_number(content, "gravity_m_s2", "rig", positive=False),
+        camera_file=camera_file,
+    )
+
+
+def load_rig(path: str | Path) -> Rig:
+    """Read and validate a rig file (config/rigs/*.yaml)."""
+    path = Path(path)
+    try:
+        content = read_yaml(path)
+    except CameraModelError as error:
+        raise RigError(str(error)) from error
+    try:
+        return rig_from_dict(content, path.parent)
+    except RigError as error:
+        raise RigError(f"{path}: {error}") from error

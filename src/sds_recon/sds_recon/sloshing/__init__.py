@@ -1,0 +1,1 @@
+"""Sloshing: the container's modal theory and (later) the analysis of measured series."""
