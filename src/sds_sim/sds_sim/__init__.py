@@ -1,0 +1,1 @@
+"""Synthetic SDS rig: surfaces, laser optics, rendered frames, Arduino streams, ground truth."""

@@ -1,0 +1,329 @@
+"""Frames as the rig's camera records them, with the exact truth of what was drawn."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from sds_recon.geometry import RigidTransform
+
+from sds_sim.optics import line_laser_rays, ray_surface_points, wall_reflections
+from sds_sim.scenario import Scenario
+
+PSF_SIGMA_PX = 0.5
+"""Lens and sensor blur added to every spot and line width [px at full resolution]."""
+NOISE_BANK_MARGIN_PX = 64
+SATURATION_BLEED = 0.6
+"""Share of the red excess above 255 spilling into green and blue (saturated spots look white)."""
+
+
+@dataclass(frozen=True)
+class FrameTruth:
+    """What one frame shows, exactly: per diode (N rows) and per image row for the line."""
+
+    index: int
+    time_s: float
+    spot_px: np.ndarray           # N×2 spot centres at the frame time (mid-exposure)
+    spot_exposure_px: np.ndarray  # N×2 intensity centroid over the exposure (motion blur)
+    spot_mm: np.ndarray           # N×3 world points where the beams meet the liquid
+    visible: np.ndarray           # N, False while occluded or off the liquid
+    reflection_px: np.ndarray     # N×2 wall reflections (NaN: none drawn)
+    line_rows: np.ndarray         # image rows the line crosses
+    line_x_px: np.ndarray         # line centre per row at the frame time
+    line_mm: np.ndarray           # M×3 world points of the line at the frame time
+    led_on: bool
+    vibration_rad: np.ndarray     # camera roll-off about its x, y axes
+
+
+class FrameRenderer:
+    """Draws scenario frames: background once, then per frame only the lasers' regions."""
+
+    def __init__(self, scenario: Scenario) -> None:
+        self.scenario = scenario
+        self.camera = scenario.rig.camera.scaled(scenario.scale)
+        self.width, self.height = self.camera.width_px, self.camera.height_px
+        self.rng = np.random.default_rng(scenario.seed)
+        rig = scenario.rig
+        self.emitters = np.array([d.emitter_mm for d in rig.diodes])
+        self.directions = np.array([d.direction for d in rig.diodes])
+        self.line_directions = (line_laser_rays(rig.line_laser, rig.container.radius_mm,
+                                                scenario.optics.line_rays)
+                                if rig.line_laser is not None else np.zeros((0, 3)))
+        self.background = self._background()
+        self.occluded = self._occlusions()
+        sigma = scenario.sensor.read_noise
+        margin = NOISE_BANK_MARGIN_PX
+        bank = self.rng.normal(0.0, sigma, (self.height + margin, self.width + margin, 3))
+        bank = bank.astype(np.float32)
+        self._noise_up = np.clip(bank, 0, 255).astype(np.uint8)
+        self._noise_down = np.clip(-bank, 0, 255).astype(np.uint8)
+
+    def pose_at(self, time_s: float) -> tuple[RigidTransform, np.ndarray]:
+        """World → camera at a time, with the launch vibration; and the vibration angles [rad]."""
+        d = self.scenario.disturbances
+        angles = np.zeros(2)
+        if d.vibration_start_s is not None and time_s >= d.vibration_start_s:
+            tau = time_s - d.vibration_start_s
+            envelope = np.radians(d.vibration_amplitude_deg) * np.exp(-tau / d.vibration_decay_s)
+            phase = 2 * np.pi * d.vibration_frequency_hz * tau
+            angles = envelope * np.array([np.sin(phase), 0.6 * np.sin(1.3 * phase)])
+        base = self.scenario.rig.world_to_camera
+        if not angles.any():
+            return base, angles
+        shake = RigidTransform.from_rotation_vector([angles[0], angles[1], 0.0], np.zeros(3))
+        return shake.compose(base), angles
+
+    def _background(self) -> np.ndarray:
+        """Static scene: dim textured surroundings, black liquid, the container's rim."""
+        level = self.scenario.sensor.background
+        texture = self.rng.normal(0.0, 1.0, (self.height // 8 + 1, self.width // 8 + 1))
+        texture = cv2.resize(texture.astype(np.float32), (self.width, self.height),
+                             interpolation=cv2.INTER_CUBIC)
+        image = level * (1.0 + 0.15 * texture)
+        rig = self.scenario.rig
+        angle = np.linspace(0, 2 * np.pi, 721)
+        radius = rig.container.radius_mm
+        rim = radius * np.column_stack([np.cos(angle), np.sin(angle), np.zeros_like(angle)])
+        rim_px = self.camera.project(rig.world_to_camera.apply(rim))
+        mask = np.zeros((self.height, self.width), np.uint8)
+        if np.isfinite(rim_px).all():
+            polygon = np.round(rim_px * 16).astype(np.int32)
+            cv2.fillPoly(mask, [polygon], 1, lineType=cv2.LINE_AA, shift=4)
+            image[mask > 0] *= 0.45
+            thickness = max(1, round(3 * self.scale))
+            cv2.polylines(image, [polygon], True, 1.8 * level, thickness=thickness,
+                          lineType=cv2.LINE_AA, shift=4)
+        gray = np.clip(np.round(image), 0, 255).astype(np.uint8)
+        return np.dstack([gray, gray, gray])
+
+    @property
+    def scale(self) -> float:
+        """Image scale relative to the camera file's sensor."""
+        return self.scenario.scale
+
+    def _occlusions(self) -> np.ndarray:
+        """frames × diodes: True where a diode's spot is hidden (seeded, reproducible)."""
+        s = self.scenario
+        hidden = np.zeros((s.frame_count, len(s.rig.diodes)), dtype=bool)
+        rate = s.disturbances.occlusion_rate_per_s
+        if rate <= 0:
+            return hidden
+        shortest, longest = s.disturbances.occlusion_frames
+        for diode in range(hidden.shape[1]):
+            count = self.rng.poisson(rate * s.duration_s)
+            for start in self.rng.integers(0, s.frame_count, count):
+                hidden[start: start + self.rng.integers(shortest, longest + 1), diode] = True
+        return hidden
+
+    def _spots(self, surface, pose: RigidTransform, time_s: float):
+        points = ray_surface_points(surface, self.emitters, self.directions, time_s)
+        return points, self.camera.project(pose.apply(points))
+
+    def _footprint(self, points: np.ndarray, pose: RigidTransform, size_mm: float) -> np.ndarray:
+        """Image covariance (N×2×2 px²) of a round footprint of `size_mm` (4σ) on the liquid."""
+        sigma_mm = size_mm / 4.0
+        centre = self.camera.project(pose.apply(points))
+        jx = self.camera.project(pose.apply(points + np.array([sigma_mm, 0, 0]))) - centre
+        jy = self.camera.project(pose.apply(points + np.array([0, sigma_mm, 0]))) - centre
+        jacobian = np.stack([jx, jy], axis=2)
+        psf = (PSF_SIGMA_PX * self.scale) ** 2 * np.eye(2)
+        return jacobian @ np.transpose(jacobian, (0, 2, 1)) + psf
+
+    def render(self, index: int) -> tuple[np.ndarray, FrameTruth]:
+        """Frame `index` (BGR uint8) and its truth."""
+        s = self.scenario
+        time_s = index / s.fps
+        optics = s.optics
+        samples = time_s + optics.exposure_s * ((np.arange(optics.blur_samples) + 0.5)
+                                                / optics.blur_samples - 0.5)
+        surface = s.surface_at(time_s)
+        pose, vibration = self.pose_at(time_s)
+        spot_mm, spot_px = self._spots(surface, pose, time_s)
+        visible = np.isfinite(spot_px).all(axis=1) & ~self.occluded[index]
+        red = _Layer(self.height, self.width)
+        exposure_px = np.zeros_like(spot_px)
+        covariance = self._footprint(spot_mm, pose, optics.spot_diameter_mm)
+        reflection_px = np.full_like(spot_px, np.nan)
+        line_rows, line_x = np.zeros(0, int), np.zeros(0)
+        line_mm = np.zeros((0, 3))
+        for t in samples:
+            surface_t = s.surface_at(t)
+            pose_t, _ = self.pose_at(t)
+            points, pixels = self._spots(surface_t, pose_t, t)
+            exposure_px += pixels / len(samples)
+            for i in np.flatnonzero(visible & np.isfinite(pixels).all(axis=1)):
+                red.gaussian(pixels[i], covariance[i], optics.spot_peak / len(samples))
+            if s.disturbances.reflection_strength > 0:
+                wall = wall_reflections(surface_t, points, self.directions, t,
+                                        s.rig.container.height_mm - s.rig.container.fill_height_mm)
+                wall_px = self.camera.project(pose_t.apply(wall))
+                for i in np.flatnonzero(visible & np.isfinite(wall_px).all(axis=1)):
+                    red.gaussian(wall_px[i], covariance[i] * 2.0, optics.spot_peak *
+                                 s.disturbances.reflection_strength / len(samples))
+                    reflection_px[i] = wall_px[i]
+            if len(self.line_directions):
+                rows, x_px, width = self._line(surface_t, pose_t, t)
+                red.line(rows, x_px, width, optics.line_peak / len(samples))
+        if len(self.line_directions):
+            line_rows, line_x, _ = self._line(surface, pose, time_s)
+            line_mm = self._line_points(surface, time_s)
+        if optics.speckle > 0:
+            red.speckle(self.rng, optics.speckle)
+        led = s.events.led_on_s <= time_s < s.events.led_off_s
+        frame = self._compose(red, vibration, led)
+        truth = FrameTruth(index, time_s, spot_px, exposure_px, spot_mm, visible, reflection_px,
+                           line_rows, line_x, line_mm, led, vibration)
+        return frame, truth
+
+    def _line_points(self, surface, time_s: float) -> np.ndarray:
+        line = self.scenario.rig.line_laser
+        origins = np.repeat(line.emitter_mm[None, :], len(self.line_directions), axis=0)
+        return ray_surface_points(surface, origins, self.line_directions, time_s)
+
+    def _line(self, surface, pose: RigidTransform, time_s: float):
+        """Rows the line crosses, its centre per row [px], and its Gaussian width σ [px]."""
+        points = self._line_points(surface, time_s)
+        pixels = self.camera.project(pose.apply(points))
+        pixels = pixels[np.isfinite(pixels).all(axis=1)]
+        if len(pixels) < 2:
+            return np.zeros(0, int), np.zeros(0), 1.0
+        order = np.argsort(pixels[:, 1])
+        ys, xs = pixels[order, 1], pixels[order, 0]
+        rows = np.arange(int(np.ceil(ys[0])), int(np.floor(ys[-1])) + 1)
+        rows = rows[(rows >= 0) & (rows < self.height)]
+        centre = points[np.isfinite(points).all(axis=1)][len(pixels) // 2]
+        across = self.camera.project(pose.apply(np.array([centre, centre + np.array([1.0, 0, 0])])))
+        px_per_mm = float(np.linalg.norm(across[1] - across[0]))
+        width = np.hypot(self.scenario.optics.line_width_mm / 4 * px_per_mm,
+                         PSF_SIGMA_PX * self.scale)
+        return rows, np.interp(rows, ys, xs), width
+
+    def _compose(self, red: _Layer, vibration: np.ndarray, led: bool) -> np.ndarray:
+        frame = self.background.copy()
+        if vibration.any():
+            shift = self._vibration_shift(vibration)
+            frame = cv2.warpAffine(frame, np.array([[1, 0, shift[0]], [0, 1, shift[1]]]),
+                                   (self.width, self.height), borderMode=cv2.BORDER_REFLECT)
+        for (y0, y1, x0, x1), values in red.windows():
+            if self.scenario.sensor.shot_noise:
+                values = values + np.sqrt(np.maximum(values, 0)) * \
+                    self.rng.standard_normal(values.shape).astype(np.float32)
+            region = frame[y0:y1, x0:x1].astype(np.float32)
+            region[..., 2] += values
+            excess = np.maximum(region[..., 2] - 255.0, 0.0) * SATURATION_BLEED
+            region[..., 0] += excess
+            region[..., 1] += excess
+            frame[y0:y1, x0:x1] = np.clip(np.round(region), 0, 255).astype(np.uint8)
+        if led:
+            centre = np.array(self.scenario.events.led_position_px) * self.scale
+            cv2.circle(frame, tuple(int(v) for v in centre), max(2, round(8 * self.scale)),
+                       (255, 255, 255), -1, lineType=cv2.LINE_AA)
+        if self.scenario.sensor.read_noise > 0:
+            dy, dx = self.rng.integers(0, NOISE_BANK_MARGIN_PX, 2)
+            window = (slice(dy, dy + self.height), slice(dx, dx + self.width))
+            cv2.add(frame, self._noise_up[window], dst=frame)
+            cv2.subtract(frame, self._noise_down[window], dst=frame)
+        return frame
+
+    def _vibration_shift(self, vibration: np.ndarray) -> np.ndarray:
+        """Image shift [px] of the scene's centre under the vibration (moves the background)."""
+        still = self.scenario.rig.world_to_camera
+        shaken = RigidTransform.from_rotation_vector([*vibration, 0.0], np.zeros(3)).compose(still)
+        point = np.array([[0.0, 0.0, 0.0]])
+        moved = self.camera.project(shaken.apply(point)) - self.camera.project(still.apply(point))
+        return moved[0]
+
+
+class _Layer:
+    """Sparse float32 light layer: small windows, merged per frame, added to the background."""
+
+    def __init__(self, height: int, width: int) -> None:
+        self.height, self.width = height, width
+        self._windows: list[tuple[tuple[int, int, int, int], np.ndarray]] = []
+
+    def _window(self, x0: float, x1: float, y0: float, y1: float):
+        bounds = (max(0, int(np.floor(y0))), min(self.height, int(np.ceil(y1)) + 1),
+                  max(0, int(np.floor(x0))), min(self.width, int(np.ceil(x1)) + 1))
+        return bounds if bounds[0] < bounds[1] and bounds[2] < bounds[3] else None
+
+    def gaussian(self, centre: np.ndarray, covariance: np.ndarray, peak: float) -> None:
+        """Add an anisotropic Gaussian (covariance in px²) of height `peak`."""
+        reach = 4.5 * np.sqrt(np.max(np.linalg.eigvalsh(covariance)))
+        bounds = self._window(centre[0] - reach, centre[0] + reach, centre[1] - reach,
+                              centre[1] + reach)
+        if bounds is None:
+            return
+        y0, y1, x0, x1 = bounds
+        ys, xs = np.mgrid[y0:y1, x0:x1]
+        d = np.stack([xs - centre[0], ys - centre[1]], axis=-1)
+        inverse = np.linalg.inv(covariance)
+        exponent = np.einsum("...i,ij,...j->...", d, inverse, d)
+        self._windows.append((bounds, (peak * np.exp(-0.5 * exponent)).astype(np.float32)))
+
+    def line(self, rows: np.ndarray, x_px: np.ndarray, sigma_px: float, peak: float) -> None:
+        """Add a line: per row a Gaussian profile across columns centred at x_px."""
+        if len(rows) == 0:
+            return
+        reach = 4.5 * sigma_px
+        bounds = self._window(x_px.min() - reach, x_px.max() + reach, rows[0], rows[-1])
+        if bounds is None:
+            return
+        y0, y1, x0, x1 = bounds
+        inside = (rows >= y0) & (rows < y1)
+        columns = np.arange(x0, x1)
+        profile = np.zeros((y1 - y0, x1 - x0), np.float32)
+        d = columns[None, :] - x_px[inside][:, None]
+        profile[rows[inside] - y0] = peak * np.exp(-0.5 * (d / sigma_px) ** 2)
+        self._windows.append((bounds, profile))
+
+    def speckle(self, rng: np.random.Generator, strength: float) -> None:
+        """Multiply every window by a grainy (≈1 px) positive speckle pattern."""
+        for index, (bounds, values) in enumerate(self._windows):
+            grain = cv2.GaussianBlur(rng.standard_normal(values.shape).astype(np.float32),
+                                     (0, 0), 0.7)
+            grain /= max(float(grain.std()), 1e-6)
+            self._windows[index] = (bounds, values * np.clip(1 + strength * grain, 0, None))
+
+    def windows(self):
+        """Each window's bounds (y0, y1, x0, x1) and values, overlapping windows merged."""
+        merged: dict[tuple[int, int, int, int], np.ndarray] = {}
+        for bounds, values in self._windows:
+            merged[bounds] = merged[bounds] + values if bounds in merged else values
+        boxes = list(merged.items())
+        if not boxes:
+            return []
+        y0 = min(b[0] for b, _ in boxes)
+        y1 = max(b[1] for b, _ in boxes)
+        x0 = min(b[2] for b, _ in boxes)
+        x1 = max(b[3] for b, _ in boxes)
+        area = sum((b[1] - b[0]) * (b[3] - b[2]) for b, _ in boxes)
+        if area * 4 > (y1 - y0) * (x1 - x0):   # dense: one canvas
+            canvas = np.zeros((y1 - y0, x1 - x0), np.float32)
+            for (a0, a1, b0, b1), values in boxes:
+                canvas[a0 - y0:a1 - y0, b0 - x0:b1 - x0] += values
+            return [((y0, y1, x0, x1), canvas)]
+        return _disjoint(boxes)
+
+
+def _disjoint(boxes):
+    """Merge overlapping windows so each pixel is written once."""
+    boxes = sorted(boxes, key=lambda item: item[0][0])
+    result = []
+    while boxes:
+        (y0, y1, x0, x1), values = boxes.pop(0)
+        merged = True
+        while merged:
+            merged = False
+            for index, ((a0, a1, b0, b1), other) in enumerate(boxes):
+                if a0 < y1 and y0 < a1 and b0 < x1 and x0 < b1:
+                    n0, n1, m0, m1 = min(y0, a0), max(y1, a1), min(x0, b0), max(x1, b1)
+                    canvas = np.zeros((n1 - n0, m1 - m0), np.float32)
+                    canvas[y0 - n0:y1 - n0, x0 - m0:x1 - m0] += values
+                    canvas[a0 - n0:a1 - n0, b0 - m0:b1 - m0] += other
+                    (y0, y1, x0, x1), values = (n0, n1, m0, m1), canvas
+                    boxes.pop(index)
+                    merged = True
+                    break
+        result.append(((y0, y1, x0, x1), values))
+    return result

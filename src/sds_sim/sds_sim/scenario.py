@@ -1,0 +1,215 @@
+"""Simulation scenarios (config/scenarios/*.yaml): what the liquid does, and how it is seen."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from sds_recon.rig import Rig, load_rig
+from sds_recon.sloshing.theory import ModeShape, mode_root, natural_frequency_hz
+
+from sds_sim.surface import ModeMotion, Surface
+
+
+class ScenarioError(ValueError):
+    """A scenario file that cannot be simulated; the message names the bad field."""
+
+
+@dataclass(frozen=True)
+class ModeSpec:
+    """One excited mode: order 1 lateral, 0 axisymmetric; frequency from theory unless given."""
+
+    order: int
+    index: int
+    amplitude_mm: float
+    damping_ratio: float
+    azimuth_deg: float = 0.0
+    phase_deg: float = 0.0
+    frequency_hz: float | None = None
+
+
+@dataclass(frozen=True)
+class Optics:
+    """How the lasers look: spot and line size on the liquid, brightness, speckle, exposure."""
+
+    spot_diameter_mm: float = 1.5
+    spot_peak: float = 420.0          # peak red level of a spot; above 255 it saturates
+    line_width_mm: float = 0.8
+    line_peak: float = 230.0
+    speckle: float = 0.25             # relative speckle modulation (0: none)
+    exposure_s: float = 1 / 60
+    blur_samples: int = 5             # sub-exposure samples for motion blur
+    line_rays: int = 600
+
+
+@dataclass(frozen=True)
+class Sensor:
+    """Camera sensor effects: read noise (grey levels), shot noise, background level."""
+
+    read_noise: float = 2.0
+    shot_noise: bool = True
+    background: float = 18.0
+
+
+@dataclass(frozen=True)
+class Disturbances:
+    """What makes real footage hard: wall reflections, occlusions, vibration."""
+
+    reflection_strength: float = 0.0         # relative to a spot; 0: no wall reflections
+    occlusion_rate_per_s: float = 0.0        # short dropouts of single spots
+    occlusion_frames: tuple[int, int] = (2, 5)
+    vibration_start_s: float | None = None   # catapult launch: the camera rings
+    vibration_amplitude_deg: float = 0.05
+    vibration_frequency_hz: float = 24.0
+    vibration_decay_s: float = 0.25
+
+
+@dataclass(frozen=True)
+class Events:
+    """Timeline [s]: trigger, LED sync blink, microgravity (gravity 0 from `release_s`)."""
+
+    trigger_s: float = 0.2
+    led_on_s: float = 0.3
+    led_off_s: float = 0.5
+    led_position_px: tuple[float, float] = (220.0, 220.0)   # in full-resolution pixels
+    release_s: float | None = None                            # drop: free fall from here
+    catapult_s: float | None = None                           # launch pulse start (catapult)
+
+
+@dataclass(frozen=True)
+class ArduinoSpec:
+    """The Arduino's sensors: rates, noise, clock offset and drift, the lateral kick."""
+
+    imu_rate_hz: float = 200.0
+    tof_rate_hz: float = 33.0
+    accel_noise_mg: float = 8.0
+    tof_noise_mm: float = 0.8
+    tof_height_mm: float = 165.0     # sensor above the flat surface
+    clock_offset_s: float = 1.234
+    clock_drift_ppm: float = 40.0
+    kick_peak_m_s2: float = 4.0
+    kick_duration_s: float = 0.06
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A reproducible simulated run."""
+
+    name: str
+    rig: Rig
+    rig_file: Path
+    seed: int = 0
+    duration_s: float = 5.0
+    fps: float = 30.0
+    scale: float = 1.0                 # image scale (1: the camera file's size)
+    gravity_m_s2: float | None = None  # None: the rig's gravity
+    kick_s: float = 0.5                # lateral kick: modes start here
+    modes: tuple[ModeSpec, ...] = ()
+    tilt_deg: tuple[float, float] = (0.0, 0.0)
+    tilt_series_deg: tuple[float, ...] = ()     # tilt table: one static tilt per segment
+    tilt_series_axis: str = "x"
+    offset_mm: float = 0.0
+    meniscus_height_mm: float = 0.8
+    optics: Optics = field(default_factory=Optics)
+    sensor: Sensor = field(default_factory=Sensor)
+    disturbances: Disturbances = field(default_factory=Disturbances)
+    events: Events = field(default_factory=Events)
+    arduino: ArduinoSpec = field(default_factory=ArduinoSpec)
+
+    @property
+    def frame_count(self) -> int:
+        """Frames in the run."""
+        return round(self.duration_s * self.fps)
+
+    @property
+    def gravity(self) -> float:
+        """Gravity of the liquid while it sloshes [m/s²]."""
+        return self.rig.gravity_m_s2 if self.gravity_m_s2 is None else self.gravity_m_s2
+
+    def mode_motions(self) -> tuple[ModeMotion, ...]:
+        """Each excited mode with its frequency: given, or the 1 g theory with surface tension."""
+        container, fluid = self.rig.container, self.rig.fluid
+        motions = []
+        for spec in self.modes:
+            frequency = spec.frequency_hz
+            if frequency is None:
+                frequency = natural_frequency_hz(mode_root(spec.order, spec.index),
+                                                 container.radius_mm, container.fill_height_mm,
+                                                 self.gravity, fluid.surface_tension_n_m,
+                                                 fluid.density_kg_m3)
+            shape = ModeShape(spec.order, spec.index, np.radians(spec.azimuth_deg))
+            motions.append(ModeMotion(shape, spec.amplitude_mm, frequency, spec.damping_ratio,
+                                      np.radians(spec.phase_deg), self.kick_s))
+        return tuple(motions)
+
+    def tilt_at(self, time_s: float) -> tuple[float, float]:
+        """Tilt table angles (x, y) [rad] at a time: fixed, or the series' current step."""
+        if not self.tilt_series_deg:
+            return float(np.radians(self.tilt_deg[0])), float(np.radians(self.tilt_deg[1]))
+        step = self.duration_s / len(self.tilt_series_deg)
+        index = min(int(time_s / step), len(self.tilt_series_deg) - 1)
+        angle = float(np.radians(self.tilt_series_deg[index]))
+        return (angle, 0.0) if self.tilt_series_axis == "x" else (0.0, angle)
+
+    def surface_at(self, time_s: float) -> Surface:
+        """The surface model in force at `time_s`."""
+        tilt_x, tilt_y = self.tilt_at(time_s)
+        fluid, gravity = self.rig.fluid, max(self.gravity, 1e-6)
+        capillary = 1e3 * np.sqrt(fluid.surface_tension_n_m / (fluid.density_kg_m3 * gravity))
+        return Surface(self.rig.container.radius_mm, self.mode_motions(), tilt_x, tilt_y,
+                       self.offset_mm, self.meniscus_height_mm,
+                       float(np.clip(capillary, 0.5, self.rig.container.radius_mm / 4)))
+
+
+def _build(cls: type, content: Any, where: str) -> Any:
+    if content is None:
+        return cls()
+    if not isinstance(content, dict):
+        raise ScenarioError(f"{where} must be a mapping")
+    names = {f.name for f in fields(cls)}
+    unknown = set(content) - names
+    if unknown:
+        raise ScenarioError(f"{where}: unknown keys {sorted(unknown)} (known: {sorted(names)})")
+    values = {k: tuple(v) if isinstance(v, list) else v for k, v in content.items()}
+    try:
+        return cls(**values)
+    except TypeError as error:
+        raise ScenarioError(f"{where}: {error}") from error
+
+
+def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> Scenario:
+    """Read a scenario file; `overrides` replace top-level keys (e.g. duration_s, scale)."""
+    path = Path(path)
+    try:
+        content = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as error:
+        raise ScenarioError(f"cannot read scenario {path}: {error}") from error
+    if not isinstance(content, dict):
+        raise ScenarioError(f"{path}: a scenario must be a mapping")
+    content.update(overrides or {})
+    if "rig" not in content:
+        raise ScenarioError(f"{path}: rig is missing (a rig file, config/rigs/*.yaml)")
+    rig_file = (path.parent / str(content.pop("rig"))).resolve()
+    sections = {"optics": Optics, "sensor": Sensor, "disturbances": Disturbances,
+                "events": Events, "arduino": ArduinoSpec}
+    parts = {key: _build(cls, content.pop(key, None), key) for key, cls in sections.items()}
+    modes = content.pop("modes", []) or []
+    if not isinstance(modes, list):
+        raise ScenarioError(f"{path}: modes must be a list")
+    parts["modes"] = tuple(_build(ModeSpec, m, f"modes[{i}]") for i, m in enumerate(modes))
+    for key in ("tilt_deg", "tilt_series_deg"):
+        if key in content:
+            content[key] = tuple(float(v) for v in content[key])
+    known = {f.name for f in fields(Scenario)} - {"rig", "rig_file"}
+    unknown = set(content) - known
+    if unknown:
+        raise ScenarioError(f"{path}: unknown keys {sorted(unknown)}")
+    scenario = Scenario(rig=load_rig(rig_file), rig_file=rig_file, **content, **parts)
+    if scenario.duration_s <= 0 or scenario.fps <= 0 or not 0 < scenario.scale <= 1:
+        raise ScenarioError(f"{path}: duration_s and fps must be > 0 and scale in (0, 1]")
+    if scenario.tilt_series_axis not in ("x", "y"):
+        raise ScenarioError(f"{path}: tilt_series_axis must be x or y")
+    return scenario

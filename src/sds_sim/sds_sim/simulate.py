@@ -1,0 +1,175 @@
+"""`sds simulate`: render a scenario to video, Arduino streams and ground truth files.
+
+Output folder (format version 1; units: px, mm, s; pixels x = column, y = row, the centre of
+the top-left pixel at (0, 0); world frame of the rig file):
+- video.mp4 (H.264, or lossless), or frames/NNNNNN.png: what the camera records.
+- arduino/serial.txt: the serial line as the bridge reads it; arduino/SDS_LOG.TXT: the SD card
+  (the same records; protocol in sds_arduino.protocol).
+- truth/run.json: the resolved scenario (modes with frequency, damping, amplitude), camera and
+  rig files, image size, fps, frame count, Arduino clock offset and drift, this list.
+- truth/spots.csv: per frame and diode: x_px, y_px (mid-exposure), x_exposure_px,
+  y_exposure_px (centroid over the exposure), X_mm, Y_mm, Z_mm, visible, reflection x/y.
+- truth/frames.csv: per frame: time, LED, tilt, every modal coordinate [mm], vibration [rad].
+- truth/line.npz: line_x_px (frames × image rows, NaN off the line), line_mm (frames × rays × 3).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+from sds_arduino.protocol import format_record
+from sds_camera.video_writer import VideoWriter
+from tqdm import tqdm
+
+from sds_sim.arduino import arduino_records
+from sds_sim.render import FrameRenderer, FrameTruth
+from sds_sim.scenario import Scenario
+
+FORMAT_VERSION = 1
+CODECS = ("h264", "lossless", "png")
+
+
+@dataclass(frozen=True)
+class SimulationOutput:
+    """Paths of everything a simulation wrote."""
+
+    directory: Path
+    video: Path
+    serial: Path
+    sd_log: Path
+    run: Path
+    spots: Path
+    frames: Path
+    line: Path
+
+
+class _FrameSink:
+    """Video file or PNG sequence."""
+
+    def __init__(self, directory: Path, codec: str, width: int, height: int, fps: float) -> None:
+        self.codec = codec
+        if codec == "png":
+            self.path = directory / "frames"
+            self.path.mkdir(parents=True, exist_ok=True)
+            self._writer = None
+        else:
+            self.path = directory / "video.mp4"
+            self._writer = VideoWriter(self.path, width, height, fps, codec=codec)
+        self._count = 0
+
+    def write(self, frame: np.ndarray) -> None:
+        if self._writer is None:
+            cv2.imwrite(str(self.path / f"{self._count:06d}.png"), frame)
+        else:
+            self._writer.write(frame)
+        self._count += 1
+
+    def close(self) -> None:
+        if self._writer is not None:
+            self._writer.close()
+
+
+def simulate(scenario: Scenario, directory: Path, codec: str = "h264",
+             progress: bool = True) -> SimulationOutput:
+    """Render every frame, write the streams and the truth; return where they are."""
+    if codec not in CODECS:
+        raise ValueError(f"codec must be one of {CODECS}, got {codec!r}")
+    directory = Path(directory)
+    (directory / "truth").mkdir(parents=True, exist_ok=True)
+    (directory / "arduino").mkdir(parents=True, exist_ok=True)
+    renderer = FrameRenderer(scenario)
+    sink = _FrameSink(directory, codec, renderer.width, renderer.height, scenario.fps)
+    truths: list[FrameTruth] = []
+    try:
+        for index in tqdm(range(scenario.frame_count), desc="rendering", unit="frame",
+                          disable=not progress):
+            frame, truth = renderer.render(index)
+            sink.write(frame)
+            truths.append(truth)
+    finally:
+        sink.close()
+    arduino, truth = directory / "arduino", directory / "truth"
+    output = SimulationOutput(directory, sink.path, arduino / "serial.txt", arduino / "SDS_LOG.TXT",
+                              truth / "run.json", truth / "spots.csv", truth / "frames.csv",
+                              truth / "line.npz")
+    lines = "".join(format_record(r) for r in arduino_records(scenario))
+    output.serial.write_text(lines, newline="")
+    output.sd_log.write_text(lines, newline="")
+    _write_spots(scenario, truths, output.spots)
+    _write_frames(scenario, truths, output.frames)
+    _write_line(renderer, truths, output.line)
+    output.run.write_text(json.dumps(_run_description(scenario, renderer, output), indent=2) + "\n")
+    return output
+
+
+def _write_spots(scenario: Scenario, truths: list[FrameTruth], path: Path) -> None:
+    with path.open("w", newline="") as file:
+        writer = csv.writer(file)
+        writer.writerow(["frame", "time_s", "laser_id", "ring", "x_px", "y_px", "x_exposure_px",
+                         "y_exposure_px", "X_mm", "Y_mm", "Z_mm", "visible", "reflection_x_px",
+                         "reflection_y_px"])
+        for truth in truths:
+            for i, diode in enumerate(scenario.rig.diodes):
+                writer.writerow([truth.index, f"{truth.time_s:.6f}", diode.laser_id, diode.ring,
+                                 *(f"{v:.6f}" for v in (*truth.spot_px[i],
+                                                        *truth.spot_exposure_px[i],
+                                                        *truth.spot_mm[i])),
+                                 int(truth.visible[i]),
+                                 *(f"{v:.6f}" for v in truth.reflection_px[i])])
+
+
+def _write_frames(scenario: Scenario, truths: list[FrameTruth], path: Path) -> None:
+    modes = scenario.mode_motions()
+    with path.open("w", newline="") as file:
+        writer = csv.writer(file)
+        writer.writerow(["frame", "time_s", "led_on", "tilt_x_deg", "tilt_y_deg",
+                         *(f"q_m{m.shape.order}n{m.shape.index}_mm" for m in modes),
+                         "vibration_x_rad", "vibration_y_rad"])
+        for truth in truths:
+            tilt = np.degrees(scenario.tilt_at(truth.time_s))
+            writer.writerow([truth.index, f"{truth.time_s:.6f}", int(truth.led_on),
+                             *(f"{v:.6f}" for v in tilt),
+                             *(f"{float(m.coordinate(truth.time_s)):.9f}" for m in modes),
+                             *(f"{v:.9f}" for v in truth.vibration_rad)])
+
+
+def _write_line(renderer: FrameRenderer, truths: list[FrameTruth], path: Path) -> None:
+    line_x = np.full((len(truths), renderer.height), np.nan, np.float64)
+    rays = max((len(t.line_mm) for t in truths), default=0)
+    line_mm = np.full((len(truths), rays, 3), np.nan)
+    for truth in truths:
+        line_x[truth.index, truth.line_rows] = truth.line_x_px
+        line_mm[truth.index, : len(truth.line_mm)] = truth.line_mm
+    np.savez_compressed(path, line_x_px=line_x, line_mm=line_mm)
+
+
+def _run_description(scenario: Scenario, renderer: FrameRenderer,
+                     output: SimulationOutput) -> dict:
+    modes = [{"order": m.shape.order, "index": m.shape.index, "xi": m.shape.xi,
+              "frequency_hz": m.frequency_hz, "damped_frequency_hz": m.damped_frequency_hz,
+              "damping_ratio": m.damping_ratio, "amplitude_mm": m.amplitude_mm,
+              "azimuth_deg": float(np.degrees(m.shape.azimuth_rad)),
+              "phase_deg": float(np.degrees(m.phase_rad)), "start_s": m.start_s}
+             for m in scenario.mode_motions()]
+    return {
+        "format_version": FORMAT_VERSION,
+        "scenario": scenario.name, "seed": scenario.seed,
+        "rig_file": str(scenario.rig_file), "camera_file": str(scenario.rig.camera_file),
+        "image_scale": scenario.scale, "image_size": [renderer.width, renderer.height],
+        "fps": scenario.fps, "frame_count": scenario.frame_count,
+        "duration_s": scenario.duration_s, "gravity_m_s2": scenario.gravity,
+        "kick_s": scenario.kick_s, "modes": modes,
+        "events": asdict(scenario.events), "optics": asdict(scenario.optics),
+        "sensor": asdict(scenario.sensor), "disturbances": asdict(scenario.disturbances),
+        "arduino": asdict(scenario.arduino),
+        "conventions": {"pixels": "x = column, y = row, centre of the top-left pixel at (0, 0), "
+                                  "full frame at image_size",
+                        "world": "rig file's world frame, mm", "time": "s from the first frame"},
+        "files": {key: str(getattr(output, key).relative_to(output.directory))
+                  for key in ("video", "serial", "sd_log", "run", "spots", "frames", "line")},
+    }
