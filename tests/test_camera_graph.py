@@ -7,7 +7,10 @@ import json
 import os
 import shutil
 import signal
+import subprocess
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -169,3 +172,13 @@ def test_stopping_while_waiting_for_acknowledgements_is_clean(clip):
     graph.popen.send_signal(signal.SIGINT)
     assert graph.wait(timeout=30) == 0, graph.output()
     assert "Traceback" not in graph.output()
+
+
+def test_demo_streams_a_simulated_drop_through_the_graph(tmp_path, repo):
+    result = subprocess.run([str(Path(sys.executable).with_name("sds")), "demo", "--seconds", "1",
+                             "--out", str(tmp_path)], capture_output=True, text=True, timeout=300,
+                            check=False)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "30 frames written, 30 in the file" in result.stdout
+    assert "every frame arrived in order" in result.stdout
+    assert (tmp_path / "simulation" / "truth" / "spots.csv").is_file()

@@ -43,10 +43,11 @@ def _run_graph(args: argparse.Namespace) -> int:
 def _add_demo(commands: argparse._SubParsersAction) -> None:
     parser = commands.add_parser(
         "demo", help="run the graph on built-in data and print a summary",
-        description="Make a short clip, stream it through the graph, and report what arrived.",
+        description="Simulate a ground test (config/scenarios/ground_kick.yaml), stream it "
+                    "through the graph, and report what arrived.",
     )
     parser.add_argument("--out", type=Path, default=Path("demo_output"))
-    parser.add_argument("--seconds", type=float, default=5.0, help="clip length [s]")
+    parser.add_argument("--seconds", type=float, default=5.0, help="simulated duration [s]")
     parser.set_defaults(run=_run_demo)
 
 

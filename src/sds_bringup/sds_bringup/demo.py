@@ -1,15 +1,13 @@
-"""`sds demo`: a short synthetic clip streamed through the graph, with a summary."""
+"""`sds demo`: a simulated ground test streamed through the graph, with a summary."""
 
 from __future__ import annotations
 
 import json
-from fractions import Fraction
 from pathlib import Path
 
-import numpy as np
 from sds_camera.frame_source import VideoFileSource
-from sds_camera.video_writer import VideoWriter
-from tqdm import tqdm
+from sds_sim.scenario import load_scenario
+from sds_sim.simulate import simulate
 
 from sds_bringup.graph import apply_overrides, load_graph
 from sds_bringup.launcher import Launcher
@@ -17,45 +15,24 @@ from sds_bringup.paths import CONFIG
 from sds_bringup.ros_env import graph_environment, pick_domain_id
 
 DEMO_GRAPH = CONFIG / "graphs" / "camera_monitor.yaml"
-FPS = Fraction(30000, 1001)
-WIDTH, HEIGHT = 1280, 720
-ROI = [280, 0, 720, 720]
-
-
-def write_demo_clip(path: Path, seconds: float) -> int:
-    """Write a clip of red laser-like spots circling on a dim background; return its frames."""
-    count = int(seconds * FPS)
-    rows, cols = np.mgrid[0:HEIGHT, 0:WIDTH].astype(np.float32)
-    angles = np.linspace(0, 2 * np.pi, 20, endpoint=False)
-    with VideoWriter(path, WIDTH, HEIGHT, FPS) as writer:
-        for index in tqdm(range(count), desc="writing demo clip", unit="frame"):
-            t = index / float(FPS)
-            frame = np.full((HEIGHT, WIDTH, 3), 12, np.uint8)
-            red = np.zeros((HEIGHT, WIDTH), np.float32)
-            radius = 250 + 15 * np.sin(2 * np.pi * 2.78 * t + angles)
-            centres = zip(640 + radius * np.cos(angles), 360 + radius * np.sin(angles), strict=True)
-            for x, y in centres:
-                x0, y0 = int(x) - 8, int(y) - 8
-                window = np.s_[y0 : y0 + 17, x0 : x0 + 17]
-                red[window] += 240 * np.exp(
-                    -((cols[window] - x) ** 2 + (rows[window] - y) ** 2) / (2 * 2.5**2)
-                )
-            frame[:, :, 2] = np.clip(frame[:, :, 2] + red, 0, 255).astype(np.uint8)
-            writer.write(frame)
-    return count
+DEMO_SCENARIO = CONFIG / "scenarios" / "ground_kick.yaml"
+DEMO_SCALE = 0.5   # 1920x1080: the whole demo in well under a minute on 2 cores
 
 
 def run_demo(out: Path, seconds: float) -> int:
-    """Write the clip, run camera -> monitor as separate processes, print the summary."""
-    out.mkdir(parents=True, exist_ok=True)
-    clip = (out / "demo_clip.mp4").resolve()
-    written = write_demo_clip(clip, seconds)
+    """Simulate a ground test, run camera -> monitor as separate processes, print the summary."""
+    scenario = load_scenario(DEMO_SCENARIO, {"duration_s": seconds, "scale": DEMO_SCALE})
+    print(f"simulating '{scenario.name}' ({seconds:g} s at {DEMO_SCALE:g} x 3840x2160)")
+    simulation = simulate(scenario, out / "simulation")
+    clip = simulation.video.resolve()
+    written = scenario.frame_count
     decodable = VideoFileSource(clip).announced_frames
+    region = scenario.rig.container_region_px(scenario.rig.camera.scaled(DEMO_SCALE))
     summary_path = (out / "monitor_summary.json").resolve()
     summary_path.unlink(missing_ok=True)
     entries = apply_overrides(load_graph(DEMO_GRAPH), [
         f"camera.source={clip}",
-        f"camera.roi={ROI}",
+        f"camera.roi={list(region)}",
         "camera.channel=red",
         f"monitor.summary_path={summary_path}",
     ])
@@ -67,10 +44,14 @@ def run_demo(out: Path, seconds: float) -> int:
         return code or 1
     summary = json.loads(summary_path.read_text())
     print(f"\nSDS demo summary ({out}/)")
+    print(f"  simulation:       {simulation.directory}/ (video, arduino/, truth/)")
+    modes = ", ".join(f"{m.frequency_hz:.2f} Hz (zeta {m.damping_ratio:g})"
+                      for m in scenario.mode_motions())
+    print(f"  truth:            modes at {modes}")
     print(f"  clip:             {clip.name}, {written} frames written, {decodable} in the file")
     shape = "x".join(map(str, summary["shape"]))
     print(f"  received:         {summary['frames']} frames, {shape} {summary['encoding']}")
-    print(f"  receive rate:     {summary['receive_fps']:.2f} fps (video at {float(FPS):.2f})")
+    print(f"  receive rate:     {summary['receive_fps']:.2f} fps (video at {scenario.fps:g})")
     print(f"  latency:          median {summary['latency_ms_median']:.1f} ms, "
           f"p95 {summary['latency_ms_p95']:.1f} ms")
     print(f"  out of order:     {summary['out_of_order']}")
