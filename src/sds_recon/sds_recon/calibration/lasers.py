@@ -1,0 +1,130 @@
+"""Laser beams and the line laser's plane from images of known surfaces (seed Sec. 3.3.1)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from sds_recon.rig import Rig
+
+HUBER_MM = 0.2
+"""Residual beyond which the plane fit down-weights a line point (robust to stray pixels)."""
+
+
+@dataclass(frozen=True)
+class KnownSurface:
+    """A flat liquid surface of known pose: Z = offset − X tan γx − Y tan γy (world, mm)."""
+
+    offset_mm: float = 0.0
+    tilt_x_rad: float = 0.0
+    tilt_y_rad: float = 0.0
+
+    def intersect(self, origin: np.ndarray, rays: np.ndarray) -> np.ndarray:
+        """Where rays from `origin` meet this surface (N×3 mm); NaN for rays that miss it."""
+        normal = np.array([np.tan(self.tilt_x_rad), np.tan(self.tilt_y_rad), 1.0])
+        facing = rays @ normal
+        with np.errstate(divide="ignore", invalid="ignore"):
+            distance = (self.offset_mm - origin @ normal) / facing
+        distance[~(distance > 0)] = np.nan
+        return origin + distance[:, None] * rays
+
+
+@dataclass(frozen=True)
+class BeamFit:
+    """One calibrated beam: direction, emitter, RMS distance of its points, direction σ [rad]."""
+
+    laser_id: int
+    emitter_mm: np.ndarray
+    direction: np.ndarray
+    rms_mm: float
+    direction_sigma_rad: float
+    point_count: int
+
+
+@dataclass(frozen=True)
+class PlaneFitResult:
+    """The line laser's fitted plane: unit normal, a point on it, RMS distance of its points."""
+
+    normal: np.ndarray
+    point_mm: np.ndarray
+    rms_mm: float
+    point_count: int
+
+
+def surface_points(rig: Rig, pixels: ArrayLike, surface: KnownSurface) -> np.ndarray:
+    """Camera rays through the pixels, ended on the known surface (N×3 mm)."""
+    rays = rig.pixel_rays(np.atleast_2d(np.asarray(pixels, dtype=float)))
+    return surface.intersect(rig.camera_position_mm, rays)
+
+
+def fit_beam(laser_id: int, points_mm: np.ndarray, emitter_mm: np.ndarray,
+             fit_emitter: bool = False) -> BeamFit:
+    """Beam through the points: from the known emitter, or a free line (emitter moved onto it).
+
+    With the emitter known, the direction is the principal axis of the moments of P − l about
+    l, so points far along the beam weigh most; its σ follows from the perpendicular scatter.
+    """
+    points = points_mm[np.isfinite(points_mm).all(axis=1)]
+    if len(points) < 2:
+        raise ValueError(f"beam {laser_id}: needs 2 or more points on known surfaces, "
+                         f"got {len(points)}")
+    origin = points.mean(axis=0) if fit_emitter else emitter_mm
+    offsets = points - origin
+    direction = np.linalg.eigh(offsets.T @ offsets)[1][:, -1]
+    if direction[2] > 0:
+        direction = -direction     # beams point down, towards the liquid
+    along = offsets @ direction
+    perpendicular = offsets - along[:, None] * direction
+    distances = np.linalg.norm(perpendicular, axis=1)
+    spread = along - along.mean() if fit_emitter else along
+    dof = max(len(points) - (4 if fit_emitter else 2), 1)
+    sigma_perp = np.sqrt(np.sum(distances**2) / dof)
+    emitter = origin + ((emitter_mm - origin) @ direction) * direction if fit_emitter else origin
+    return BeamFit(laser_id, emitter, direction, float(np.sqrt(np.mean(distances**2))),
+                   float(sigma_perp / np.sqrt(np.sum(spread**2))), len(points))
+
+
+def calibrate_beams(rig: Rig, laser_ids: ArrayLike, pixels: ArrayLike,
+                    surfaces: list[KnownSurface], fit_emitter: bool = False) -> list[BeamFit]:
+    """Every beam from its spots on known surfaces (one surface per observation), jointly."""
+    ids = np.asarray(laser_ids, dtype=int)
+    pixels = np.atleast_2d(np.asarray(pixels, dtype=float))
+    points = np.full((len(ids), 3), np.nan)
+    for surface in set(surfaces):
+        chosen = np.array([s == surface for s in surfaces])
+        points[chosen] = surface_points(rig, pixels[chosen], surface)
+    return [fit_beam(d.laser_id, points[ids == d.laser_id], d.emitter_mm, fit_emitter)
+            for d in rig.diodes if np.any(ids == d.laser_id)]
+
+
+def fit_plane_robust(points_mm: np.ndarray, iterations: int = 20) -> PlaneFitResult:
+    """Plane through 3-D points by iteratively reweighted total least squares (Huber weights)."""
+    points = points_mm[np.isfinite(points_mm).all(axis=1)]
+    if len(points) < 3:
+        raise ValueError(f"a plane needs 3 or more points, got {len(points)}")
+    weights = np.ones(len(points))
+    for _ in range(iterations):
+        centre = np.average(points, axis=0, weights=weights)
+        offsets = points - centre
+        normal = np.linalg.eigh((offsets * weights[:, None]).T @ offsets)[1][:, 0]
+        residual = np.abs(offsets @ normal)
+        weights = np.where(residual <= HUBER_MM, 1.0, HUBER_MM / np.maximum(residual, 1e-12))
+    distances = (points - centre) @ normal
+    return PlaneFitResult(normal, centre, float(np.sqrt(np.mean(distances**2))), len(points))
+
+
+def calibrate_line_plane(rig: Rig, pixels: ArrayLike, surfaces: list[KnownSurface]
+                         ) -> PlaneFitResult:
+    """The line laser's plane from its pixels on known surfaces (one surface per pixel)."""
+    pixels = np.atleast_2d(np.asarray(pixels, dtype=float))
+    points = np.full((len(pixels), 3), np.nan)
+    for surface in set(surfaces):
+        chosen = np.array([s == surface for s in surfaces])
+        points[chosen] = surface_points(rig, pixels[chosen], surface)
+    result = fit_plane_robust(points)
+    if rig.line_laser is not None and result.normal @ rig.line_laser.normal < 0:
+        result = PlaneFitResult(-result.normal, result.point_mm, result.rms_mm,
+                                result.point_count)
+    return result

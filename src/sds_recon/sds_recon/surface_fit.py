@@ -1,0 +1,102 @@
+"""Fits to measured surface points: the plane of seed Eq. 12, the modes, the meniscus."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from sds_recon.sloshing.theory import ModeShape
+
+DEFAULT_MODES = ((1, 1), (1, 2), (0, 1))
+"""Lateral modes ξ = 1.8412, 5.3314 and the first axisymmetric mode ξ = 3.8317."""
+
+
+@dataclass(frozen=True)
+class PlaneFit:
+    """g = p00 + p10 X + p01 Y (Eq. 12) and the columns of the seed's Table 3.
+
+    Tilts follow the seed's g = h0 − x tan γ: γx = −atan(p10), γy = −atan(p01).
+    """
+
+    p00_mm: float
+    p10: float
+    p01: float
+    r_squared: float
+    rmse_mm: float
+    sse_mm2: float
+    point_count: int
+
+    @property
+    def tilt_x_rad(self) -> float:
+        """Tilt about the Y axis that makes the surface fall along +X [rad]."""
+        return float(-np.arctan(self.p10))
+
+    @property
+    def tilt_y_rad(self) -> float:
+        """Tilt that makes the surface fall along +Y [rad]."""
+        return float(-np.arctan(self.p01))
+
+
+@dataclass(frozen=True)
+class ModalFit:
+    """Least-squares amplitudes [mm] of the mean level and each mode's cos/sin components."""
+
+    names: tuple[str, ...]
+    amplitudes_mm: np.ndarray
+    rmse_mm: float
+    point_count: int
+
+
+def _finite(points: ArrayLike) -> np.ndarray:
+    points = np.atleast_2d(np.asarray(points, dtype=float))
+    return points[np.isfinite(points).all(axis=1)]
+
+
+def fit_plane(points_mm: ArrayLike) -> PlaneFit:
+    """Least-squares plane through the finite points (N×3 mm); needs three or more."""
+    points = _finite(points_mm)
+    if len(points) < 3:
+        raise ValueError(f"a plane needs 3 or more points, got {len(points)}")
+    design = np.column_stack([np.ones(len(points)), points[:, 0], points[:, 1]])
+    coefficients, *_ = np.linalg.lstsq(design, points[:, 2], rcond=None)
+    residual = points[:, 2] - design @ coefficients
+    sse = float(residual @ residual)
+    sst = float(np.sum((points[:, 2] - points[:, 2].mean()) ** 2))
+    r_squared = 1.0 - sse / sst if sst > 0 else float("nan")
+    return PlaneFit(float(coefficients[0]), float(coefficients[1]), float(coefficients[2]),
+                    r_squared, float(np.sqrt(sse / len(points))), sse, len(points))
+
+
+def fit_modes(points_mm: ArrayLike, radius_mm: float,
+              modes: tuple[tuple[int, int], ...] = DEFAULT_MODES) -> ModalFit:
+    """Mean level plus J_m(ξ r/R)/J_m(ξ) · (cos mθ, sin mθ) per mode (cos alone for m = 0)."""
+    points = _finite(points_mm)
+    columns, names = [np.ones(len(points))], ["mean"]
+    for order, index in modes:
+        for label, azimuth in (("cos", 0.0), ("sin", np.pi / 2)):
+            if order == 0 and label == "sin":
+                continue
+            shape = ModeShape(order, index, azimuth / max(order, 1))
+            columns.append(shape.height(points[:, 0], points[:, 1], radius_mm))
+            names.append(f"m{order}n{index}_{label}" if order else f"m0n{index}")
+    design = np.column_stack(columns)
+    if len(points) < design.shape[1]:
+        raise ValueError(f"{design.shape[1]} modal terms need as many points, got {len(points)}")
+    amplitudes, *_ = np.linalg.lstsq(design, points[:, 2], rcond=None)
+    residual = points[:, 2] - design @ amplitudes
+    return ModalFit(tuple(names), amplitudes, float(np.sqrt(np.mean(residual**2))), len(points))
+
+
+def radial_profile(points_mm: ArrayLike, radius_mm: float, bins: int = 22
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Mean height per radial bin (the meniscus seen by the line laser): centres, mean, count."""
+    points = _finite(points_mm)
+    edges = np.linspace(0.0, radius_mm, bins + 1)
+    index = np.clip(np.digitize(np.hypot(points[:, 0], points[:, 1]), edges) - 1, 0, bins - 1)
+    count = np.bincount(index, minlength=bins)
+    total = np.bincount(index, weights=points[:, 2], minlength=bins)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = total / count
+    return (edges[:-1] + edges[1:]) / 2, mean, count
