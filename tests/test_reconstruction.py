@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -185,3 +188,46 @@ def test_radial_profile_shows_the_meniscus(rig: Rig) -> None:
     expected = 1.5 * np.exp(-(55.0 - centres) / 2.0)
     assert mean[:8] == pytest.approx(expected[:8], abs=1e-3)
     assert mean[-1] > 0.3
+
+
+def test_sds_calibrate_lasers_writes_a_calibrated_rig(rig: Rig, repo: Path,
+                                                      tmp_path: Path) -> None:
+    truth = tilted_beams(rig, 1.0, seed=8)
+    rng = np.random.default_rng(9)
+    spot_rows, surface_rows = [], []
+    line = rig.line_laser
+    rays = line_laser_rays(line, 55.0, 150)
+    line_x = np.full((15, rig.camera.height_px), np.nan)
+    for frame, surface in enumerate(tilt_table(truth)):
+        _, pixels = observe(truth, surface)
+        pixels = pixels + rng.normal(0, 0.05, pixels.shape)
+        spot_rows += [f"{frame},{d.laser_id},{x},{y}" for d, (x, y) in
+                      zip(truth.diodes, pixels, strict=True)]
+        surface_rows.append(f"{frame},{np.degrees(surface.tilt_x_rad)},"
+                            f"{np.degrees(surface.tilt_y_rad)}")
+        hits = ray_surface_points(surface, np.repeat(line.emitter_mm[None], 150, 0), rays, 0.0)
+        line_px = truth.project(hits)
+        rows = np.arange(int(np.nanmin(line_px[:, 1])) + 1, int(np.nanmax(line_px[:, 1])))
+        order = np.argsort(line_px[:, 1])
+        line_x[frame, rows] = np.interp(rows, line_px[order, 1], line_px[order, 0])
+    (tmp_path / "spots.csv").write_text("frame,laser_id,x_px,y_px\n" + "\n".join(spot_rows))
+    (tmp_path / "surfaces.csv").write_text("frame,tilt_x_deg,tilt_y_deg\n" +
+                                           "\n".join(surface_rows))
+    np.savez(tmp_path / "line.npz", line_x_px=line_x)
+    result = subprocess.run(
+        [str(Path(sys.executable).with_name("sds")), "calibrate", "lasers", "--rig",
+         str(repo / "config" / "rigs" / "stelium.yaml"), "--spots", str(tmp_path / "spots.csv"),
+         "--surfaces", str(tmp_path / "surfaces.csv"), "--line", str(tmp_path / "line.npz"),
+         "--out", str(tmp_path / "out" / "rig.yaml")],
+        capture_output=True, text=True, timeout=120, check=False)
+    assert result.returncode == 0, result.stderr
+    calibrated = load_rig(tmp_path / "out" / "rig.yaml")
+    for diode in calibrated.diodes:
+        cosine = diode.direction @ truth.diode(diode.laser_id).direction
+        error = np.degrees(np.arccos(np.clip(cosine, -1, 1)))
+        assert error < 0.1, diode.laser_id
+    cosine = np.clip(calibrated.line_laser.normal @ line.normal, -1, 1)
+    assert np.degrees(np.arccos(cosine)) < 0.05
+    report = json.loads((tmp_path / "out" / "rig.report.json").read_text())
+    assert len(report["beams"]) == 20 and report["surfaces"] == 15
+    assert "lean deg" in result.stdout

@@ -75,6 +75,44 @@ def _add_calibrate(commands: argparse._SubParsersAction) -> None:
     camera.add_argument("--out", type=Path, default=Path("camera.yaml"),
                         help="camera file to write; the report goes beside it")
     camera.set_defaults(run=_run_calibrate_camera)
+    lasers = targets.add_parser(
+        "lasers", help="laser beams and the line laser's plane from images of known surfaces",
+        description="Each spot seen on a known flat surface (level or tilted) is a point of its "
+                    "beam; every beam (and the line laser's plane) is fitted to its points by "
+                    "least squares, and an updated rig file is written with a report.")
+    lasers.add_argument("--rig", type=Path, required=True)
+    lasers.add_argument("--spots", type=Path, required=True,
+                        help="CSV: frame, laser_id, x_px, y_px[, visible] (full-frame pixels)")
+    lasers.add_argument("--surfaces", type=Path, required=True,
+                        help="CSV: frame, tilt_x_deg, tilt_y_deg[, offset_mm]")
+    lasers.add_argument("--line", type=Path, help="NPZ with line_x_px (frames x image rows)")
+    lasers.add_argument("--fit-emitters", action="store_true",
+                        help="also move each emitter onto its fitted beam")
+    lasers.add_argument("--out", type=Path, required=True, help="rig file to write")
+    lasers.set_defaults(run=_run_calibrate_lasers)
+
+
+def _run_calibrate_lasers(args: argparse.Namespace) -> int:
+    import json
+
+    from sds_recon.calibration.laser_files import calibrate_lasers, report_text
+    from sds_recon.rig import RigError, load_rig, save_rig
+
+    try:
+        rig = load_rig(args.rig)
+        calibrated, report = calibrate_lasers(rig, args.spots, args.surfaces, args.line,
+                                              args.fit_emitters)
+    except (RigError, OSError, ValueError) as error:
+        print(f"sds calibrate lasers: {error}", file=sys.stderr)
+        return 2
+    text = report_text(report)
+    comment = f"Calibrated by `sds calibrate lasers` from {args.rig}:\n{text}"
+    save_rig(calibrated, args.out, comment=comment)
+    report_path = args.out.with_suffix(".report.json")
+    report_path.write_text(json.dumps(report, indent=2) + "\n")
+    print(text)
+    print(f"wrote {args.out} and {report_path}")
+    return 0
 
 
 def _run_calibrate_camera(args: argparse.Namespace) -> int:

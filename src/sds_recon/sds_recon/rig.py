@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
@@ -216,3 +218,48 @@ def load_rig(path: str | Path) -> Rig:
         return rig_from_dict(content, path.parent)
     except RigError as error:
         raise RigError(f"{path}: {error}") from error
+
+
+def _numbers(values: ArrayLike) -> list[float]:
+    """Plain floats rounded to 12 significant digits (no 1e-31 noise in the file)."""
+    return [float(f"{v:.12g}") + 0.0 for v in np.asarray(values, dtype=float)]
+
+
+def rig_to_dict(rig: Rig, directory: Path) -> dict[str, Any]:
+    """The rig file's mapping, with the camera file path relative to `directory`."""
+    camera_to_world = Rotation.from_matrix(rig.world_to_camera.rotation.T)
+    try:
+        camera_file = rig.camera_file.relative_to(directory.resolve())
+    except ValueError:
+        camera_file = Path(os.path.relpath(rig.camera_file, directory.resolve()))
+    content: dict[str, Any] = {
+        "camera": {"model": str(camera_file),
+                   "position_mm": _numbers(rig.camera_position_mm),
+                   "orientation_xyz_deg": _numbers(camera_to_world.as_euler("xyz",
+                                                                            degrees=True))},
+        "container": {"radius_mm": rig.container.radius_mm,
+                      "fill_height_mm": rig.container.fill_height_mm,
+                      "height_mm": rig.container.height_mm},
+        "fluid": {"density_kg_m3": rig.fluid.density_kg_m3,
+                  "surface_tension_n_m": rig.fluid.surface_tension_n_m},
+        "gravity_m_s2": rig.gravity_m_s2,
+    }
+    if rig.line_laser is not None:
+        content["line_laser"] = {"emitter_mm": _numbers(rig.line_laser.emitter_mm),
+                                 "normal": _numbers(rig.line_laser.normal)}
+    content["diodes"] = [{"id": d.laser_id, "ring": d.ring,
+                          "emitter_mm": _numbers(d.emitter_mm),
+                          "direction": _numbers(d.direction)} for d in rig.diodes]
+    return content
+
+
+def save_rig(rig: Rig, path: str | Path, comment: str = "") -> Path:
+    """Write a rig file that load_rig reads back to the same rig."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    header = f"# SDS rig file (load with sds_recon.rig.load_rig).\n# World frame: {WORLD_FRAME}.\n"
+    header += "".join(f"# {line}\n" for line in comment.splitlines())
+    body = yaml.safe_dump(rig_to_dict(rig, path.parent), sort_keys=False,
+                          default_flow_style=None, width=100)
+    path.write_text(header + body)
+    return path

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -80,18 +81,28 @@ def triangulate_plane(rig: Rig, pixels: ArrayLike) -> np.ndarray:
     return centre + distance[:, None] * rays
 
 
-def beam_height_sigma(rig: Rig, pixels: ArrayLike, laser_ids: ArrayLike,
-                      sigma_px: ArrayLike) -> np.ndarray:
-    """Height uncertainty [mm] of beam points from an isotropic pixel uncertainty σ [px]."""
+def _height_sigma(heights: Callable[[np.ndarray], np.ndarray], pixels: ArrayLike,
+                  sigma_px: ArrayLike) -> np.ndarray:
+    """σ_Z = |∂Z/∂pixel| σ for an isotropic pixel uncertainty, by central differences."""
     pixels = np.atleast_2d(np.asarray(pixels, dtype=float))
     slopes = []
     for axis in (0, 1):
         step = np.zeros(2)
         step[axis] = PIXEL_STEP_PX
-        high = triangulate_beams(rig, pixels + step, laser_ids).points_mm[:, 2]
-        low = triangulate_beams(rig, pixels - step, laser_ids).points_mm[:, 2]
-        slopes.append((high - low) / (2 * PIXEL_STEP_PX))
+        slopes.append((heights(pixels + step) - heights(pixels - step)) / (2 * PIXEL_STEP_PX))
     return np.hypot(*slopes) * np.asarray(sigma_px, dtype=float)
+
+
+def beam_height_sigma(rig: Rig, pixels: ArrayLike, laser_ids: ArrayLike,
+                      sigma_px: ArrayLike) -> np.ndarray:
+    """Height uncertainty [mm] of beam points from an isotropic pixel uncertainty σ [px]."""
+    return _height_sigma(lambda p: triangulate_beams(rig, p, laser_ids).points_mm[:, 2],
+                         pixels, sigma_px)
+
+
+def plane_height_sigma(rig: Rig, pixels: ArrayLike, sigma_px: ArrayLike) -> np.ndarray:
+    """Height uncertainty [mm] of line-laser points from a pixel uncertainty σ [px]."""
+    return _height_sigma(lambda p: triangulate_plane(rig, p)[:, 2], pixels, sigma_px)
 
 
 def beam_image_path(rig: Rig, laser_id: int, heights_mm: ArrayLike) -> np.ndarray:

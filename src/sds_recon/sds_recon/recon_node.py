@@ -1,0 +1,143 @@
+"""ROS 2 node: tracked spots and line profiles in, surface points (PointCloud2) and fits out."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import PointCloud2, PointField
+
+from sds_msgs.msg import LaserLineProfile, LaserSpot, LaserSpotArray, SurfaceFit
+from sds_recon.rig import Rig, RigError, load_rig
+from sds_recon.surface_fit import fit_modes, fit_plane
+from sds_recon.triangulation import (
+    beam_height_sigma,
+    plane_height_sigma,
+    triangulate_beams,
+    triangulate_plane,
+)
+
+LINE_LASER_ID = 65535
+"""laser_id of the line laser's points in the cloud."""
+CLOUD_FIELDS = (("x", np.float32), ("y", np.float32), ("z", np.float32),
+                ("laser_id", np.uint16), ("height_sigma_mm", np.float32),
+                ("miss_distance_mm", np.float32))
+DATATYPES = {np.float32: PointField.FLOAT32, np.uint16: PointField.UINT16}
+MIN_PLANE_POINTS = 3
+EXIT_CONFIG_ERROR = 2
+
+
+def cloud_dtype() -> np.dtype:
+    """Packed layout of one cloud point."""
+    return np.dtype([(name, kind) for name, kind in CLOUD_FIELDS])
+
+
+def points_to_cloud(header, points: np.ndarray) -> PointCloud2:
+    """A PointCloud2 from a structured array of `cloud_dtype` (one row, unordered)."""
+    dtype = cloud_dtype()
+    msg = PointCloud2(header=header, height=1, width=len(points), is_bigendian=False,
+                      point_step=dtype.itemsize, row_step=dtype.itemsize * len(points),
+                      is_dense=True)
+    msg.fields = [PointField(name=name, offset=dtype.fields[name][1], datatype=DATATYPES[kind],
+                             count=1) for name, kind in CLOUD_FIELDS]
+    msg.data = points.astype(dtype).tobytes()
+    return msg
+
+
+class ReconstructionNode(Node):
+    """Triangulate every valid spot (Eq. 9) and line sample (Eqs. 10–11); fit the surface."""
+
+    def __init__(self, node_name: str = "recon", **node_kwargs) -> None:
+        super().__init__(node_name, **node_kwargs)
+        self.finished = threading.Event()
+        self.exit_code = 0
+        self.declare_parameter("rig", "")
+        self.declare_parameter("beam_weight", 0.5)
+        self.declare_parameter("default_sigma_px", 0.1)
+        self.declare_parameter("frame_id", "world")
+        try:
+            self._rig: Rig = load_rig(self.get_parameter("rig").value)
+        except (RigError, OSError) as error:
+            self.get_logger().error(f"cannot load the rig: {error}")
+            self.exit_code = EXIT_CONFIG_ERROR
+            self.finished.set()
+            return
+        self._beam_weight = float(self.get_parameter("beam_weight").value)
+        self._default_sigma = float(self.get_parameter("default_sigma_px").value)
+        self._frame_id = self.get_parameter("frame_id").value
+        qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE,
+                         history=HistoryPolicy.KEEP_LAST)
+        self._points_pub = self.create_publisher(PointCloud2, "points", qos)
+        self._line_pub = self.create_publisher(PointCloud2, "line_points", qos)
+        self._fit_pub = self.create_publisher(SurfaceFit, "surface_fit", qos)
+        self.create_subscription(LaserSpotArray, "spots", self._on_spots, qos)
+        self.create_subscription(LaserLineProfile, "line", self._on_line, qos)
+        self.get_logger().info(f"rig {self.get_parameter('rig').value}: "
+                               f"{len(self._rig.diodes)} diodes")
+
+    def _on_spots(self, msg: LaserSpotArray) -> None:
+        valid = [s for s in msg.spots if not s.flags & LaserSpot.FLAG_LOST
+                 and np.isfinite(s.x_px) and np.isfinite(s.y_px)]
+        pixels = np.array([[s.x_px, s.y_px] for s in valid]).reshape(-1, 2)
+        ids = np.array([s.laser_id for s in valid], dtype=int)
+        sigma = np.array([s.sigma_px if s.sigma_px > 0 else self._default_sigma for s in valid])
+        result = triangulate_beams(self._rig, pixels, ids, self._beam_weight)
+        heights_sigma = beam_height_sigma(self._rig, pixels, ids, sigma)
+        keep = np.isfinite(result.points_mm).all(axis=1)
+        cloud = np.zeros(int(keep.sum()), cloud_dtype())
+        for axis, name in enumerate("xyz"):
+            cloud[name] = result.points_mm[keep, axis]
+        cloud["laser_id"] = ids[keep]
+        cloud["height_sigma_mm"] = heights_sigma[keep]
+        cloud["miss_distance_mm"] = result.miss_distance_mm[keep]
+        header = msg.header
+        header.frame_id = self._frame_id
+        self._points_pub.publish(points_to_cloud(header, cloud))
+        self._publish_fit(msg, result.points_mm[keep])
+
+    def _publish_fit(self, msg: LaserSpotArray, points: np.ndarray) -> None:
+        fit = SurfaceFit(header=msg.header, frame_index=msg.frame_index, point_count=len(points))
+        nan = float("nan")
+        fit.p00_mm = fit.p10 = fit.p01 = fit.tilt_x_rad = fit.tilt_y_rad = nan
+        fit.r_squared = fit.rmse_mm = fit.sse_mm2 = nan
+        if len(points) >= MIN_PLANE_POINTS:
+            plane = fit_plane(points)
+            fit.p00_mm, fit.p10, fit.p01 = plane.p00_mm, plane.p10, plane.p01
+            fit.tilt_x_rad, fit.tilt_y_rad = plane.tilt_x_rad, plane.tilt_y_rad
+            fit.r_squared, fit.rmse_mm, fit.sse_mm2 = plane.r_squared, plane.rmse_mm, plane.sse_mm2
+        try:
+            modal = fit_modes(points, self._rig.container.radius_mm)
+            fit.mode_names = list(modal.names)
+            fit.modal_amplitudes_mm = [float(a) for a in modal.amplitudes_mm]
+        except ValueError:
+            pass  # too few points this frame: no modal amplitudes rather than invented ones
+        self._fit_pub.publish(fit)
+
+    def _on_line(self, msg: LaserLineProfile) -> None:
+        pixels = np.column_stack([msg.x_px, msg.y_px]).reshape(-1, 2)
+        finite = np.isfinite(pixels).all(axis=1)
+        sigma = np.asarray(msg.sigma_px, dtype=float)
+        sigma = np.where(sigma > 0, sigma, self._default_sigma)
+        points = np.full((len(pixels), 3), np.nan)
+        heights_sigma = np.full(len(pixels), np.nan)
+        if finite.any():
+            points[finite] = triangulate_plane(self._rig, pixels[finite])
+            heights_sigma[finite] = plane_height_sigma(self._rig, pixels[finite], sigma[finite])
+        keep = np.isfinite(points).all(axis=1)
+        cloud = np.zeros(int(keep.sum()), cloud_dtype())
+        for axis, name in enumerate("xyz"):
+            cloud[name] = points[keep, axis]
+        cloud["laser_id"] = LINE_LASER_ID
+        cloud["height_sigma_mm"] = heights_sigma[keep]
+        header = msg.header
+        header.frame_id = self._frame_id
+        self._line_pub.publish(points_to_cloud(header, cloud))
+
+
+def main(args: list[str] | None = None) -> None:
+    """Run the node alone in this process."""
+    from sds_bringup.node_host import run_nodes
+
+    raise SystemExit(run_nodes([(ReconstructionNode, "recon", False)], args))

@@ -1,0 +1,104 @@
+"""The reconstruction node as a real process: spots and line in, PointCloud2 and fits out."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+from ros_helpers import RELIABLE, Probe, SdsGraphRun
+from sds_recon.recon_node import LINE_LASER_ID, cloud_dtype
+from sds_recon.rig import load_rig
+from sds_sim.optics import line_laser_rays, ray_surface_points
+from sds_sim.surface import Surface
+from sensor_msgs.msg import PointCloud2
+
+from sds_msgs.msg import LaserLineProfile, LaserSpot, LaserSpotArray, SurfaceFit
+
+pytestmark = pytest.mark.ros
+
+TILT_DEG = 12.0
+
+
+def wait_until(condition, timeout: float = 30.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if condition():
+            return True
+        time.sleep(0.05)
+    return False
+
+
+def cloud_points(msg: PointCloud2) -> np.ndarray:
+    assert msg.point_step == cloud_dtype().itemsize
+    assert [f.name for f in msg.fields] == list(cloud_dtype().names)
+    return np.frombuffer(bytes(msg.data), dtype=cloud_dtype())
+
+
+def test_spots_and_line_in_point_cloud_and_fit_out(repo):
+    rig_file = repo / "config" / "rigs" / "stelium.yaml"
+    rig = load_rig(rig_file)
+    surface = Surface(55.0, (), np.radians(TILT_DEG), 0.0, 2.0)
+    emitters = np.array([d.emitter_mm for d in rig.diodes])
+    directions = np.array([d.direction for d in rig.diodes])
+    truth = ray_surface_points(surface, emitters, directions, 0.0)
+    pixels = rig.project(truth)
+    rays = line_laser_rays(rig.line_laser, 55.0, 300)
+    line_truth = ray_surface_points(surface, np.repeat(rig.line_laser.emitter_mm[None], 300, 0),
+                                    rays, 0.0)
+    line_truth = line_truth[np.isfinite(line_truth).all(axis=1)]
+    line_pixels = rig.project(line_truth)
+
+    probe = Probe("recon_probe")
+    graph = SdsGraphRun("recon.yaml", "--set", f"recon.rig={rig_file}")
+    try:
+        clouds = probe.collect(PointCloud2, "/recon/points")
+        line_clouds = probe.collect(PointCloud2, "/recon/line_points")
+        fits = probe.collect(SurfaceFit, "/recon/surface_fit")
+        spots_pub = probe.node.create_publisher(LaserSpotArray, "/tracker/spots", RELIABLE)
+        line_pub = probe.node.create_publisher(LaserLineProfile, "/tracker/line", RELIABLE)
+        assert wait_until(lambda: spots_pub.get_subscription_count() > 0
+                          and line_pub.get_subscription_count() > 0), graph.output()
+        message = LaserSpotArray(frame_index=7)
+        for diode, (x, y) in zip(rig.diodes, pixels, strict=True):
+            spot = LaserSpot(laser_id=diode.laser_id, x_px=x, y_px=y, sigma_px=0.05)
+            if diode.laser_id == 3:   # a lost spot gives no point
+                spot.flags = LaserSpot.FLAG_LOST
+                spot.x_px = spot.y_px = float("nan")
+            message.spots.append(spot)
+        spots_pub.publish(message)
+        line_pub.publish(LaserLineProfile(frame_index=7, x_px=line_pixels[:, 0].tolist(),
+                                          y_px=line_pixels[:, 1].tolist(),
+                                          sigma_px=[0.1] * len(line_pixels),
+                                          peak_intensity=[200.0] * len(line_pixels),
+                                          flags=[0] * len(line_pixels)))
+        assert wait_until(lambda: clouds and line_clouds and fits), graph.output()
+    finally:
+        probe.close()
+        graph.stop()
+    points = cloud_points(clouds[0])
+    assert clouds[0].header.frame_id == "world"
+    assert sorted(points["laser_id"]) == [d.laser_id for d in rig.diodes if d.laser_id != 3]
+    expected = truth[[d.laser_id for d in rig.diodes].index(0)]
+    row = points[points["laser_id"] == 0][0]
+    assert [row["x"], row["y"], row["z"]] == pytest.approx(expected, abs=1e-4)
+    xyz = np.column_stack([points["x"], points["y"], points["z"]])
+    truth_by_id = {d.laser_id: t for d, t in zip(rig.diodes, truth, strict=True)}
+    assert np.max(np.abs(xyz - np.array([truth_by_id[i] for i in points["laser_id"]]))) < 1e-4
+    assert (points["height_sigma_mm"] > 0.005).all() and (points["height_sigma_mm"] < 0.1).all()
+    assert np.max(points["miss_distance_mm"]) < 1e-6
+    line = cloud_points(line_clouds[0])
+    assert (line["laser_id"] == LINE_LASER_ID).all() and len(line) == len(line_truth)
+    line_xyz = np.column_stack([line["x"], line["y"], line["z"]])
+    assert np.max(np.abs(line_xyz - line_truth)) < 1e-4
+    fit = fits[0]
+    assert fit.frame_index == 7 and fit.point_count == 19
+    assert np.degrees(fit.tilt_x_rad) == pytest.approx(TILT_DEG, abs=1e-6)
+    assert fit.p00_mm == pytest.approx(2.0, abs=1e-6) and fit.rmse_mm < 1e-6
+    assert "m1n1_cos" in fit.mode_names
+
+
+def test_missing_rig_is_a_clear_error():
+    graph = SdsGraphRun("recon.yaml", "--set", "recon.rig=/nonexistent/rig.yaml")
+    assert graph.wait(timeout=60) == 2
+    assert "cannot load the rig" in graph.output() and "Traceback" not in graph.output()
