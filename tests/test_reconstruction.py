@@ -231,3 +231,22 @@ def test_sds_calibrate_lasers_writes_a_calibrated_rig(rig: Rig, repo: Path,
     report = json.loads((tmp_path / "out" / "rig.report.json").read_text())
     assert len(report["beams"]) == 20 and report["surfaces"] == 15
     assert "lean deg" in result.stdout
+
+
+def test_free_beam_fit_moves_the_emitter_onto_the_beam(rig: Rig) -> None:
+    truth = tilted_beams(rig, 1.0, seed=10)
+    shifted = replace(truth, diodes=tuple(
+        LaserDiode(d.laser_id, d.ring, d.emitter_mm + np.array([0.4, -0.3, 0.0]), d.direction)
+        for d in truth.diodes))
+    ids, pixels, known = [], [], []
+    for surface in tilt_table(shifted):
+        _, observed = observe(shifted, surface)
+        ids += [d.laser_id for d in shifted.diodes]
+        pixels.append(observed)
+        known += [KnownSurface(0.0, surface.tilt_x_rad, surface.tilt_y_rad)] * 20
+    fits = calibrate_beams(rig, ids, np.concatenate(pixels), known, fit_emitter=True)
+    for fit in fits:
+        beam = shifted.diode(fit.laser_id)
+        assert np.linalg.norm(fit.direction - beam.direction) < 1e-9
+        offset = fit.emitter_mm - beam.emitter_mm
+        assert np.linalg.norm(np.cross(offset, beam.direction)) < 1e-9   # on the true beam
