@@ -113,3 +113,23 @@ def beam_image_path(rig: Rig, laser_id: int, heights_mm: ArrayLike) -> np.ndarra
         raise ValueError(f"diode {laser_id}'s beam is horizontal: it has no height path")
     distance = (heights - diode.emitter_mm[2]) / diode.direction[2]
     return rig.project(diode.point_at(distance))
+
+
+def line_image_path(rig: Rig, height_mm: float, samples: int = 400) -> np.ndarray:
+    """The line laser's light on a flat surface at height Z [mm], across the container (N×2 px)."""
+    if rig.line_laser is None:
+        raise ValueError("the rig has no line laser")
+    normal, emitter = rig.line_laser.normal, rig.line_laser.emitter_mm
+    along = np.cross(normal, [0.0, 0.0, 1.0])
+    if np.linalg.norm(along) < 1e-9:
+        raise ValueError("the laser plane is horizontal: it draws no line on a level surface")
+    along /= np.linalg.norm(along)
+    across = np.cross([0.0, 0.0, 1.0], along)   # horizontal, in the plane's normal direction
+    # The point of the line nearest the axis: Z = height, on the plane, along `across`.
+    start = np.array([0.0, 0.0, height_mm])
+    shift = ((emitter - start) @ normal) / (across @ normal)
+    closest = start + shift * across
+    radius = rig.container.radius_mm
+    half = np.sqrt(max(radius**2 - shift**2, 0.0))
+    points = closest + np.linspace(-half, half, samples)[:, None] * along
+    return rig.project(points)

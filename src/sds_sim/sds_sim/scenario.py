@@ -39,7 +39,8 @@ class Optics:
     spot_peak: float = 420.0          # peak red level of a spot; above 255 it saturates
     line_width_mm: float = 0.8
     line_peak: float = 230.0
-    speckle: float = 0.25             # relative speckle modulation (0: none)
+    speckle: float = 0.1              # speckle contrast left after the exposure averages the
+                                      # moving pattern (0: none; a frozen pattern is ~0.3)
     exposure_s: float = 1 / 60
     blur_samples: int = 5             # sub-exposure samples for motion blur
     line_rays: int = 600

@@ -1,0 +1,99 @@
+"""The laser line's centre in every image row it crosses, to a fraction of a pixel."""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+INTERPOLATED, SATURATED_LINE, LOW_SIGNAL = 1, 2, 4
+"""Flag bits, the same as sds_msgs/LaserLineProfile's."""
+
+
+@dataclass(frozen=True)
+class LineSettings:
+    """Line tracking parameters (config/params/tracker.yaml documents each)."""
+
+    band_px: int = 30               # columns searched on each side of the expected line
+    threshold: float = 30.0         # peak above the row's background that makes a sample
+    saturation_level: float = 250.0
+    continuity_px: float = 2.0      # farthest a sample may stray from its neighbours' median
+    continuity_rows: int = 7        # neighbours on each side for that median
+    core_px: int = 6                # columns on each side of the peak in the centroid
+    clip_fraction: float = 0.15     # share of the peak removed before the centroid
+
+
+@dataclass(frozen=True)
+class LineProfile:
+    """Full-frame line centre per row: x, y, uncertainty [px], peak, flags (rows with a sample)."""
+
+    x_px: np.ndarray
+    y_px: np.ndarray
+    sigma_px: np.ndarray
+    peak: np.ndarray
+    flags: np.ndarray
+
+
+def track_line(image: np.ndarray, offset: tuple[int, int], expected_x: np.ndarray,
+               rows: np.ndarray, settings: LineSettings | None = None,
+               read_noise: float = 2.0) -> LineProfile:
+    """Line centre per row: centroid of the profile's core around its brightest column.
+
+    `rows` are full-frame rows and `expected_x` the line's expected column on each (e.g. the
+    previous frame's, or the rig's flat-surface line). `clip_fraction` of the peak is taken off
+    the background-subtracted profile first, leaving its symmetric core: a plain centre of mass
+    would be pulled by the background and by the window's edges. (A three-point Gaussian fit
+    is exact without noise but three times noisier with speckle: 0.32 against 0.09 px RMS on
+    the simulator's default drop.) Rows that stray from their neighbours are left out.
+    """
+    s = settings or LineSettings()
+    x0, y0 = offset
+    local_rows = np.asarray(rows, dtype=int) - y0
+    keep = (local_rows >= 0) & (local_rows < image.shape[0]) & np.isfinite(expected_x)
+    local_rows, centre = local_rows[keep], np.asarray(expected_x, dtype=float)[keep] - x0
+    empty = np.zeros(0)
+    if len(local_rows) == 0:
+        return LineProfile(empty, empty, empty, empty, np.zeros(0, np.uint8))
+    start = np.clip(np.round(centre).astype(int) - s.band_px, 0, image.shape[1] - 1)
+    columns = np.clip(start[:, None] + np.arange(2 * s.band_px + 1), 0, image.shape[1] - 1)
+    band = image[local_rows[:, None], columns].astype(np.float64)
+    background = np.median(band, axis=1)
+    signal = band - background[:, None]
+    peak_index = np.clip(np.argmax(signal, axis=1), s.core_px, band.shape[1] - 1 - s.core_px)
+    take = np.arange(len(band))
+    core = peak_index[:, None] + np.arange(-s.core_px, s.core_px + 1)
+    values = signal[take[:, None], core]
+    peak = values[:, s.core_px]
+    weights = np.clip(values - s.clip_fraction * peak[:, None], 0.0, None)
+    total = weights.sum(axis=1)
+    valid = (peak > s.threshold) & (total > 0)
+    positions = columns[take[:, None], core].astype(float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x = np.sum(weights * positions, axis=1) / total + x0
+        variance = np.clip(values + background[:, None], 0, None) + read_noise**2
+        sigma = np.sqrt(np.sum(variance * (weights > 0) * (positions + x0 - x[:, None]) ** 2,
+                               axis=1)) / total
+    flags = np.zeros(len(x), np.uint8)
+    flags[band[take, peak_index] >= s.saturation_level] |= SATURATED_LINE
+    middle = peak
+    x[~valid] = np.nan
+    x = _continuous(x, s)
+    found = np.isfinite(x)
+    return LineProfile(x[found], (local_rows + y0)[found].astype(float), sigma[found],
+                       (middle + background)[found], flags[found])
+
+
+def _continuous(x: np.ndarray, s: LineSettings) -> np.ndarray:
+    """NaN where a row's centre strays from the median of its neighbours (itself excluded)."""
+    k = s.continuity_rows
+    padded = np.pad(x, k, constant_values=np.nan)
+    windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * k + 1).copy()
+    windows[:, k] = np.nan
+    enough = np.sum(np.isfinite(windows), axis=1) >= 3
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # rows whose neighbours are all NaN
+        median = np.nanmedian(windows, axis=1)
+    result = x.copy()
+    result[enough & (np.abs(x - median) > s.continuity_px)] = np.nan
+    return result

@@ -1,0 +1,154 @@
+"""Laser spots frame by frame (seed Sec. 3.4): windowed centroids confined to each beam's path."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+LOST, SATURATED, REFLECTION_SUSPECTED, OFF_PATH, HAMPEL_REPLACED = 1, 2, 4, 8, 16
+"""Flag bits, the same as sds_msgs/LaserSpot's."""
+
+
+@dataclass(frozen=True)
+class SpotSettings:
+    """Tracking parameters (config/params/tracker.yaml documents each)."""
+
+    window_px: int = 24            # half size of the window read around a spot
+    prior_sigma_px: float = 8.0    # Gaussian prior on the motion since the previous frame
+    threshold: float = 30.0        # signal above the local background that makes a spot
+    aperture_factor: float = 1.6   # centroid aperture radius / the blob's radius at threshold
+    clip_fraction: float = 0.15    # share of the peak removed before the centroid (see below)
+    path_tolerance_px: float = 4.0  # farthest a spot may lie from its beam's image path
+    saturation_level: float = 250.0
+    read_noise: float = 2.0        # grey levels, for the position uncertainty
+    min_competitor: float = 0.3    # a second blob this bright (relative) flags a reflection
+
+
+@dataclass(frozen=True)
+class SpotEstimate:
+    """One spot in one frame: full-frame pixel, uncertainty [px], peak, flags."""
+
+    laser_id: int
+    x_px: float
+    y_px: float
+    sigma_px: float
+    peak: float
+    flags: int
+
+
+def distance_to_path(point: np.ndarray, path: np.ndarray) -> float:
+    """Shortest distance [px] from a point to a polyline."""
+    a, b = path[:-1], path[1:]
+    segment = b - a
+    length2 = np.maximum(np.sum(segment * segment, axis=1), 1e-12)
+    t = np.clip(np.sum((point - a) * segment, axis=1) / length2, 0.0, 1.0)
+    return float(np.min(np.linalg.norm(a + t[:, None] * segment - point, axis=1)))
+
+
+class SpotTracker:
+    """Track every diode's spot: acquire it on its path, then follow it in a small window.
+
+    Per spot and frame only a window is read (no full-frame work): background = median of the
+    window's border, connected blobs above `threshold`, the blob chosen by brightness times a
+    Gaussian prior around the previous position among those within `path_tolerance_px` of the
+    beam's path, and the position = intensity centroid of the background-subtracted signal in
+    a round aperture (re-centred once). A spot not found is reported lost, with no position,
+    and searched for along its whole path in the next frame.
+    """
+
+    def __init__(self, paths: dict[int, np.ndarray], settings: SpotSettings | None = None) -> None:
+        self.settings = settings or SpotSettings()
+        self.paths = {i: np.asarray(p, dtype=float) for i, p in paths.items()}
+        self.previous: dict[int, np.ndarray | None] = dict.fromkeys(self.paths)
+
+    def update(self, image: np.ndarray, offset: tuple[int, int] = (0, 0)) -> list[SpotEstimate]:
+        """Estimates for one frame; `image` is the red channel of the region at `offset` (x, y)."""
+        estimates = []
+        origin = np.array(offset, dtype=float)
+        for laser_id, path in self.paths.items():
+            estimate = self._track(image, origin, laser_id, path)
+            self.previous[laser_id] = None if estimate.flags & LOST else \
+                np.array([estimate.x_px, estimate.y_px])
+            estimates.append(estimate)
+        return estimates
+
+    def _search_box(self, laser_id: int, path: np.ndarray) -> np.ndarray:
+        """(x0, y0, x1, y1) full-frame: around the previous position, or the whole path."""
+        half = self.settings.window_px
+        previous = self.previous[laser_id]
+        if previous is not None:
+            return np.array([*(previous - half), *(previous + half)])
+        return np.array([*(path.min(axis=0) - half), *(path.max(axis=0) + half)])
+
+    def _track(self, image: np.ndarray, origin: np.ndarray, laser_id: int,
+               path: np.ndarray) -> SpotEstimate:
+        s = self.settings
+        lost = SpotEstimate(laser_id, np.nan, np.nan, np.nan, 0.0, LOST)
+        box = np.round(self._search_box(laser_id, path) - np.tile(origin, 2)).astype(int)
+        x0, y0 = max(box[0], 0), max(box[1], 0)
+        x1, y1 = min(box[2], image.shape[1] - 1), min(box[3], image.shape[0] - 1)
+        if x1 - x0 < 4 or y1 - y0 < 4:
+            return lost
+        window = image[y0:y1 + 1, x0:x1 + 1].astype(np.float32)
+        border = np.concatenate([window[0], window[-1], window[:, 0], window[:, -1]])
+        signal = window - float(np.median(border))
+        count, labels, stats, centroids = cv2.connectedComponentsWithStats(
+            (signal > s.threshold).astype(np.uint8), connectivity=8)
+        candidates = []
+        for label in range(1, count):
+            centre = centroids[label] + [x0, y0] + origin
+            if distance_to_path(centre, path) > s.path_tolerance_px + 2 * np.sqrt(
+                    stats[label, cv2.CC_STAT_AREA] / np.pi):
+                continue
+            mass = float(signal[labels == label].sum())
+            previous = self.previous[laser_id]
+            prior = 1.0 if previous is None else float(np.exp(
+                -np.sum((centre - previous) ** 2) / (2 * s.prior_sigma_px**2)))
+            candidates.append((mass * prior, mass, label, centre))
+        if not candidates:
+            return lost
+        candidates.sort(key=lambda c: c[0], reverse=True)
+        _, mass, label, centre = candidates[0]
+        flags = 0
+        if any(c[1] >= s.min_competitor * mass for c in candidates[1:]):
+            flags |= REFLECTION_SUSPECTED
+        background = float(np.median(border))
+        radius = max(s.aperture_factor * np.sqrt(stats[label, cv2.CC_STAT_AREA] / np.pi), 3.0)
+        peak_signal = float(signal[labels == label].max())
+        floor = background + s.clip_fraction * peak_signal
+        for _ in range(2):
+            region = self._aperture(image, origin, centre, radius, floor)
+            if region is None:
+                return lost
+            xs, ys, weights, raw = region
+            total = float(weights.sum())
+            if total <= 0:
+                return lost
+            centre = np.array([np.sum(weights * xs), np.sum(weights * ys)]) / total
+        if distance_to_path(centre, path) > s.path_tolerance_px:
+            return SpotEstimate(laser_id, np.nan, np.nan, np.nan, 0.0, LOST | OFF_PATH)
+        variance = np.clip(raw, 0, None) + s.read_noise**2
+        sigma = float(np.sqrt(np.sum(variance * ((xs - centre[0]) ** 2 +
+                                                 (ys - centre[1]) ** 2)) / 2) / total)
+        peak = float(raw.max())
+        if peak >= s.saturation_level:
+            flags |= SATURATED
+        return SpotEstimate(laser_id, float(centre[0]), float(centre[1]), sigma, peak, flags)
+
+    @staticmethod
+    def _aperture(image: np.ndarray, origin: np.ndarray, centre: np.ndarray, radius: float,
+                  background: float):
+        """Full-frame pixel coordinates, background-subtracted weights and raw values of the
+        pixels within `radius` of `centre`; None if the aperture leaves the image."""
+        half = int(np.ceil(radius)) + 1
+        cx, cy = np.round(centre - origin).astype(int)
+        x0, y0, x1, y1 = cx - half, cy - half, cx + half, cy + half
+        if x0 < 0 or y0 < 0 or x1 >= image.shape[1] or y1 >= image.shape[0]:
+            return None
+        raw = image[y0:y1 + 1, x0:x1 + 1].astype(np.float32)
+        ys, xs = np.mgrid[y0:y1 + 1, x0:x1 + 1].astype(float)
+        xs, ys = xs + origin[0], ys + origin[1]
+        inside = (xs - centre[0]) ** 2 + (ys - centre[1]) ** 2 <= radius**2
+        return xs[inside], ys[inside], np.clip(raw[inside] - background, 0, None), raw[inside]

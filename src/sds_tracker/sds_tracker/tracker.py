@@ -1,0 +1,111 @@
+"""One frame at a time: every diode's spot (Hampel-filtered) and the line, for the rig's paths."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from sds_recon.rig import Rig
+from sds_recon.triangulation import beam_image_path, line_image_path
+
+from sds_tracker.hampel import OnlineHampel
+from sds_tracker.line import LineProfile, LineSettings, track_line
+from sds_tracker.spots import HAMPEL_REPLACED, LOST, SpotEstimate, SpotSettings, SpotTracker
+
+
+@dataclass(frozen=True)
+class TrackedSpot:
+    """A spot after the Hampel filter: filtered and raw position, uncertainty, peak, flags."""
+
+    laser_id: int
+    x_px: float
+    y_px: float
+    x_raw_px: float
+    y_raw_px: float
+    sigma_px: float
+    peak: float
+    flags: int
+
+
+@dataclass(frozen=True)
+class TrackerConfig:
+    """Everything the tracker needs besides the rig."""
+
+    spots: SpotSettings = field(default_factory=SpotSettings)
+    line: LineSettings = field(default_factory=LineSettings)
+    hampel_window: int = 5
+    hampel_k: float = 3.0
+    hampel_floor_px: float = 0.5
+    path_heights_mm: tuple[float, float] = (-30.0, 40.0)   # surface heights the paths span
+
+
+class FrameTracker:
+    """Spots and line per frame; spots come out `hampel_window // 2` frames late, filtered."""
+
+    def __init__(self, rig: Rig, config: TrackerConfig | None = None) -> None:
+        self.config = config or TrackerConfig()
+        low, high = self.config.path_heights_mm
+        heights = np.linspace(low, high, 15)
+        self.paths = {d.laser_id: beam_image_path(rig, d.laser_id, heights) for d in rig.diodes}
+        self.spots = SpotTracker(self.paths, self.config.spots)
+        self.filters = {i: OnlineHampel(self.config.hampel_window, self.config.hampel_k,
+                                        self.config.hampel_floor_px) for i in self.paths}
+        self._pending: dict[int, dict[int, SpotEstimate]] = {}
+        self._line_rows, self._line_x = self._flat_line(rig)
+
+    @staticmethod
+    def _flat_line(rig: Rig) -> tuple[np.ndarray, np.ndarray]:
+        """Rows and columns of the line on the flat surface: where to look first."""
+        if rig.line_laser is None:
+            return np.zeros(0, int), np.zeros(0)
+        pixels = line_image_path(rig, 0.0)
+        pixels = pixels[np.isfinite(pixels).all(axis=1)]
+        order = np.argsort(pixels[:, 1])
+        rows = np.arange(int(np.ceil(pixels[order[0], 1])), int(pixels[order[-1], 1]) + 1)
+        return rows, np.interp(rows, pixels[order, 1], pixels[order, 0])
+
+    def process(self, frame: int, red: np.ndarray, offset: tuple[int, int]
+                ) -> tuple[list[tuple[int, list[TrackedSpot]]], LineProfile]:
+        """Track one frame (red channel of the region at `offset`).
+
+        Returns the spots of every frame whose Hampel window is now complete (frame, spots),
+        and this frame's line profile.
+        """
+        estimates = self.spots.update(red, offset)
+        self._pending[frame] = {e.laser_id: e for e in estimates}
+        ready: dict[int, list[TrackedSpot]] = {}
+        for estimate in estimates:
+            out = self.filters[estimate.laser_id].push(
+                frame, np.array([estimate.x_px, estimate.y_px]))
+            if out is not None:
+                ready.setdefault(out.frame, []).append(self._tracked(out, estimate.laser_id))
+        line = track_line(red, offset, self._line_x, self._line_rows, self.config.line,
+                          self.config.spots.read_noise)
+        if len(line.x_px) > len(self._line_rows) // 4:
+            # Follow the line: next frame looks around where it is now.
+            self._line_x = np.interp(self._line_rows, line.y_px, line.x_px)
+        return self._release(ready), line
+
+    def flush(self) -> list[tuple[int, list[TrackedSpot]]]:
+        """The last frames' spots at the end of a stream."""
+        ready: dict[int, list[TrackedSpot]] = {}
+        for laser_id, hampel in self.filters.items():
+            for out in hampel.flush():
+                ready.setdefault(out.frame, []).append(self._tracked(out, laser_id))
+        return self._release(ready)
+
+    def _tracked(self, out, laser_id: int) -> TrackedSpot:
+        raw = self._pending[out.frame][laser_id]
+        flags = raw.flags | (HAMPEL_REPLACED if out.replaced else 0)
+        return TrackedSpot(laser_id, float(out.filtered[0]), float(out.filtered[1]),
+                           raw.x_px, raw.y_px, raw.sigma_px, raw.peak, flags)
+
+    def _release(self, ready: dict[int, list[TrackedSpot]]) -> list[tuple[int, list[TrackedSpot]]]:
+        for frame in ready:
+            self._pending.pop(frame, None)
+        return sorted(ready.items())
+
+
+def is_lost(spot: TrackedSpot) -> bool:
+    """True when the spot has no position this frame."""
+    return bool(spot.flags & LOST)

@@ -1,0 +1,131 @@
+"""ROS 2 node: images in, laser spots (Hampel-filtered) and the line profile out."""
+
+from __future__ import annotations
+
+import threading
+from collections import deque
+
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sds_camera.image_msg import msg_to_image
+from sds_recon.rig import RigError, load_rig
+from sensor_msgs.msg import Image
+from std_msgs.msg import Header
+
+from sds_msgs.msg import CameraModel, LaserLineProfile, LaserSpot, LaserSpotArray
+from sds_tracker.line import LineSettings
+from sds_tracker.spots import SpotSettings
+from sds_tracker.tracker import FrameTracker, TrackerConfig
+
+EXIT_CONFIG_ERROR = 2
+IDLE_FLUSH_S = 1.0
+"""With no frame for this long, the spots still held by the Hampel window are published."""
+CHANNEL_INDEX = {"red": None, "bgr": 2}
+
+
+class TrackerNode(Node):
+    """Track the rig's spots and line in every frame; frames must be the red channel or BGR."""
+
+    def __init__(self, node_name: str = "tracker", **node_kwargs) -> None:
+        super().__init__(node_name, **node_kwargs)
+        self.finished = threading.Event()
+        self.exit_code = 0
+        for name, value in (("rig", ""), ("ack", True), ("hampel_window", 5),
+                            ("window_px", 24), ("threshold", 30.0), ("prior_sigma_px", 8.0),
+                            ("path_tolerance_px", 4.0), ("line_band_px", 30),
+                            ("path_heights_mm", [-30.0, 40.0])):
+            self.declare_parameter(name, value)
+        try:
+            rig = load_rig(self.get_parameter("rig").value)
+            config = TrackerConfig(
+                spots=SpotSettings(window_px=int(self._value("window_px")),
+                                   prior_sigma_px=float(self._value("prior_sigma_px")),
+                                   threshold=float(self._value("threshold")),
+                                   path_tolerance_px=float(self._value("path_tolerance_px"))),
+                line=LineSettings(band_px=int(self._value("line_band_px")),
+                                  threshold=float(self._value("threshold"))),
+                hampel_window=int(self._value("hampel_window")),
+                path_heights_mm=tuple(float(v) for v in self._value("path_heights_mm")))
+            self._tracker = FrameTracker(rig, config)
+        except (RigError, OSError, ValueError) as error:
+            self.get_logger().error(f"cannot start the tracker: {error}")
+            self.exit_code = EXIT_CONFIG_ERROR
+            self.finished.set()
+            return
+        self._ack = bool(self._value("ack"))
+        reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                              history=HistoryPolicy.KEEP_LAST)
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self._spots_pub = self.create_publisher(LaserSpotArray, "spots", reliable)
+        self._line_pub = self.create_publisher(LaserLineProfile, "line", reliable)
+        self._ack_pub = self.create_publisher(Header, "frame_ack", reliable)
+        self.create_subscription(CameraModel, "camera_model", self._on_model, latched)
+        self.create_subscription(Image, "image", self._on_image, reliable)
+        self._offset: tuple[int, int] | None = None
+        self._headers: deque[tuple[int, Header]] = deque(maxlen=64)
+        self._frame = 0
+        self._last_frame_time = self.get_clock().now()
+        self._flushed = True
+        self.create_timer(0.25, self._flush_if_idle)
+
+    def _value(self, name: str):
+        return self.get_parameter(name).value
+
+    def _on_model(self, msg: CameraModel) -> None:
+        self._offset = (int(msg.roi.x_offset), int(msg.roi.y_offset))
+        if msg.channel not in CHANNEL_INDEX:
+            self.get_logger().error(f"frames carry channel {msg.channel!r}; the tracker needs "
+                                    "'red' (mono8) or 'bgr'")
+
+    def _on_image(self, msg: Image) -> None:
+        if self._offset is None:
+            self.get_logger().warning("no camera_model yet: frame offset unknown, frame skipped",
+                                      throttle_duration_sec=5.0)
+            self._acknowledge(msg)
+            return
+        image = msg_to_image(msg)
+        red = image[..., 2] if image.ndim == 3 else image
+        frame = self._frame
+        self._frame += 1
+        self._headers.append((frame, msg.header))
+        ready, line = self._tracker.process(frame, red, self._offset)
+        self._publish_spots(ready)
+        self._line_pub.publish(LaserLineProfile(
+            header=msg.header, frame_index=frame, x_px=line.x_px.tolist(),
+            y_px=line.y_px.tolist(), sigma_px=line.sigma_px.astype(float).tolist(),
+            peak_intensity=line.peak.astype(float).tolist(), flags=line.flags.tolist()))
+        self._last_frame_time = self.get_clock().now()
+        self._flushed = False
+        self._acknowledge(msg)
+
+    def _acknowledge(self, msg: Image) -> None:
+        if self._ack:
+            self._ack_pub.publish(Header(stamp=msg.header.stamp, frame_id=self.get_name()))
+
+    def _publish_spots(self, ready) -> None:
+        headers = dict(self._headers)
+        for frame, spots in ready:
+            message = LaserSpotArray(header=headers.get(frame, Header()), frame_index=frame)
+            for spot in spots:
+                message.spots.append(LaserSpot(
+                    laser_id=spot.laser_id, x_px=spot.x_px, y_px=spot.y_px,
+                    sigma_px=float(spot.sigma_px), x_raw_px=spot.x_raw_px, y_raw_px=spot.y_raw_px,
+                    peak_intensity=float(spot.peak), flags=int(spot.flags)))
+            self._spots_pub.publish(message)
+
+    def _flush_if_idle(self) -> None:
+        idle = (self.get_clock().now() - self._last_frame_time).nanoseconds * 1e-9
+        if not self._flushed and idle > IDLE_FLUSH_S:
+            self._publish_spots(self._tracker.flush())
+            self._flushed = True
+            self.get_logger().info(f"stream idle: published the last spots ({self._frame} "
+                                   "frames tracked)")
+
+
+def main(args: list[str] | None = None) -> None:
+    """Run the node alone in this process."""
+    from sds_bringup.node_host import run_nodes
+
+    raise SystemExit(run_nodes([(TrackerNode, "tracker", False)], args))
+

@@ -1,0 +1,118 @@
+"""The tracker against the simulator's truth: accuracy, pixel locking, reflections, occlusions."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import stats
+from sds_sim.render import FrameRenderer
+from sds_sim.scenario import load_scenario
+from sds_tracker.hampel import OnlineHampel
+from sds_tracker.tracker import FrameTracker, is_lost
+
+
+def run_tracker(repo: Path, frames: int, overrides: dict) -> dict:
+    """Render a 4K drop, track it, and compare every output with the truth."""
+    scenario = load_scenario(repo / "config" / "scenarios" / "ground_kick.yaml",
+                             {"duration_s": frames / 30, **overrides})
+    renderer, rig = FrameRenderer(scenario), scenario.rig
+    x, y, w, h = rig.container_region_px(rig.camera)
+    tracker = FrameTracker(rig)
+    truths, outputs, line_errors = {}, [], []
+    for index in range(frames):
+        frame, truth = renderer.render(index)
+        truths[index] = truth
+        ready, line = tracker.process(index, frame[y:y + h, x:x + w, 2], (x, y))
+        outputs += ready
+        expected = dict(zip(truth.line_rows.tolist(), truth.line_x_px, strict=True))
+        line_errors += [lx - expected[int(ly)] for lx, ly in zip(line.x_px, line.y_px,
+                                                                 strict=True)]
+    outputs += tracker.flush()
+    ids = [d.laser_id for d in rig.diodes]
+    result = {"errors": [], "estimates": [], "truth": [], "fabricated": 0, "wrong": 0,
+              "missed": [], "occluded": 0, "frames": sorted(f for f, _ in outputs)}
+    for frame, spots in outputs:
+        truth = truths[frame]
+        for spot in spots:
+            i = ids.index(spot.laser_id)
+            if not truth.visible[i]:
+                result["occluded"] += 1
+                result["fabricated"] += not is_lost(spot)
+                continue
+            if is_lost(spot):
+                result["missed"].append((frame, spot.laser_id))
+                continue
+            error = np.array([spot.x_px, spot.y_px]) - truth.spot_exposure_px[i]
+            if np.linalg.norm(error) > 1.0:
+                result["wrong"] += 1
+            result["errors"].append(error)
+            result["estimates"].append([spot.x_px, spot.y_px])
+            result["truth"].append(truth.spot_exposure_px[i])
+    result["line_errors"] = np.array(line_errors)
+    for key in ("errors", "estimates", "truth"):
+        result[key] = np.array(result[key])
+    return result
+
+
+@pytest.fixture(scope="module")
+def default_drop(repo: Path) -> dict:
+    return run_tracker(repo, 60, {})
+
+
+def test_spots_are_accurate_at_the_default_noise(default_drop: dict) -> None:
+    errors = default_drop["errors"]
+    assert len(errors) > 1100 and default_drop["frames"] == list(range(60))
+    assert np.sqrt(np.mean(errors**2)) <= 0.05
+    assert default_drop["wrong"] == 0 and default_drop["fabricated"] == 0
+
+
+def test_no_pixel_locking(default_drop: dict) -> None:
+    estimated = (default_drop["estimates"] % 1).ravel()
+    true = (default_drop["truth"] % 1).ravel()
+    # The estimates' fractional parts spread like the truth's...
+    assert stats.ks_2samp(estimated, true).pvalue > 0.01
+    # ...and the error does not depend on where in its pixel the spot sits.
+    phase = np.exp(2j * np.pi * true)
+    assert 2 * abs(np.mean(default_drop["errors"].ravel() * phase)) < 0.01
+
+
+def test_line_centre_is_accurate(default_drop: dict) -> None:
+    line = default_drop["line_errors"]
+    assert len(line) > 60 * 900
+    assert np.sqrt(np.mean(line**2)) <= 0.1
+
+
+def test_reflections_and_occlusions_give_no_swaps_and_no_inventions(repo: Path) -> None:
+    result = run_tracker(repo, 60, {
+        "disturbances": {"reflection_strength": 0.5, "occlusion_rate_per_s": 0.8},
+        "modes": [{"order": 1, "index": 1, "amplitude_mm": 8.0, "damping_ratio": 0.01},
+                  {"order": 1, "index": 2, "amplitude_mm": 2.0, "damping_ratio": 0.01}]})
+    assert result["occluded"] > 30
+    assert result["fabricated"] == 0          # every occlusion reported lost
+    assert result["wrong"] == 0               # no reflection or neighbour taken for a spot
+    assert result["missed"] == []             # found again on the first visible frame
+    assert np.sqrt(np.mean(result["errors"] ** 2)) <= 0.06
+
+
+def test_hampel_keeps_a_fast_spot_and_replaces_a_reflection() -> None:
+    t = np.arange(60)
+    track = np.column_stack([25 * np.sin(2 * np.pi * 2.8 * t / 30), 8 * np.cos(t / 5)])
+    corrupted = track.copy()
+    corrupted[20] += [6.0, -4.0]        # a reflection for one frame
+    corrupted[41] += [0.0, 3.0]
+    corrupted[33] = np.nan              # an occlusion
+    corrupted[58] += [6.0, 0.0]         # next to the end: no two-sided window, kept
+    hampel = OnlineHampel(window=5)
+    outputs = [o for i, p in enumerate(corrupted) if (o := hampel.push(i, p)) is not None]
+    outputs += hampel.flush()
+    assert [o.frame for o in outputs] == list(range(60))
+    replaced = {o.frame for o in outputs if o.replaced}
+    assert replaced == {20, 41}
+    assert np.isnan(outputs[33].filtered).all()
+    assert not outputs[58].replaced and not outputs[59].replaced
+    for frame in (20, 41):
+        assert np.linalg.norm(outputs[frame].filtered - track[frame]) < 0.5
+    with pytest.raises(ValueError, match="odd"):
+        OnlineHampel(window=4)
