@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -72,13 +73,19 @@ class OnlineHampel:
                                                            times[j]))
         scale = np.maximum(MAD_TO_SIGMA * np.median(np.abs(np.array(rest)), axis=0),
                            self.floor_px)
+
         outlier = bool(np.any(np.abs(centre) > self.k * scale))
         return HampelOutput(frame, raw, raw - centre if outlier else raw.copy(), outlier)
 
 
 def _quadratic_prediction(times: np.ndarray, values: np.ndarray, at: float) -> np.ndarray:
     """Value at `at` of the least-squares quadratic (linear with 2 points) through the samples."""
-    degree = min(2, len(times) - 1)
-    design = np.vander(times - at, degree + 1)
-    coefficients, *_ = np.linalg.lstsq(design, values, rcond=None)
-    return coefficients[-1]
+    return _prediction_weights(tuple(times - at)) @ values
+
+
+@lru_cache(maxsize=256)
+def _prediction_weights(offsets: tuple[float, ...]) -> np.ndarray:
+    """Weights w with w · values = the fitted polynomial at offset 0 (depends on timing only)."""
+    degree = min(2, len(offsets) - 1)
+    design = np.vander(np.array(offsets), degree + 1)
+    return np.linalg.pinv(design)[-1]
