@@ -11,7 +11,7 @@ from ros_helpers import Probe, SdsGraphRun
 from sds_recon.rig import load_rig
 from sds_sim.scenario import load_scenario
 from sds_sim.simulate import simulate
-from sensor_msgs.msg import PointCloud2
+from sensor_msgs.msg import Image, PointCloud2
 
 from sds_msgs.msg import LaserLineProfile, LaserSpot, LaserSpotArray, SurfaceFit
 
@@ -30,10 +30,19 @@ def test_simulated_drop_is_tracked_and_reconstructed(repo, tmp_path):
     lines = probe.collect(LaserLineProfile, "/tracker/line")
     clouds = probe.collect(PointCloud2, "/recon/points")
     fits = probe.collect(SurfaceFit, "/recon/surface_fit")
+    # The camera waits for two image subscribers: the tracker, and this probe once it has
+    # found the tracker's and the reconstruction's publishers (so that no output is missed).
     graph = SdsGraphRun("drop.yaml", "--set", f"camera.source={output.video}",
                         "--set", f"camera.roi={region}", "--set", f"tracker.rig={rig_file}",
-                        "--set", f"recon.rig={rig_file}")
+                        "--set", f"recon.rig={rig_file}", "--set", "camera.wait_for_subscribers=2")
     try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and not all(
+                probe.node.count_publishers(topic) for topic in
+                ("/tracker/spots", "/tracker/line", "/recon/points", "/recon/surface_fit")):
+            time.sleep(0.1)
+        time.sleep(0.5)
+        probe.collect(Image, "/camera/image")
         deadline = time.monotonic() + 120
         while time.monotonic() < deadline and (len(spots) < 30 or len(fits) < 30):
             time.sleep(0.2)

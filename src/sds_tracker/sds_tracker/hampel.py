@@ -29,9 +29,11 @@ class OnlineHampel:
     sample is predicted by a quadratic in time through the others, and it is an outlier when
     its residual exceeds `k` scaled MADs of the residuals the same model leaves on the other
     samples, each predicted without itself and without the centre (with a floor, `floor_px`,
-    as quantised or very smooth tracks give a MAD of 0). An outlier is
-    replaced by its prediction. Missing samples (NaN) stay missing; a sample without `half`
-    valid samples on each side (stream ends, next to an occlusion) is passed on unchanged.
+    as quantised or very smooth tracks give a MAD of 0). An outlier is replaced by its
+    prediction. The one motion this model misses is a kink (a hard kick from rest): there a
+    good sample can be replaced, flagged as such, with its raw position kept. Missing samples
+    (NaN) stay missing; a sample without `half` valid samples on each side (stream ends, next
+    to an occlusion) is passed on unchanged.
     """
 
     def __init__(self, window: int = 5, k: float = 3.0, floor_px: float = 0.5) -> None:

@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.ndimage import median_filter
 
 INTERPOLATED, SATURATED_LINE, LOW_SIGNAL = 1, 2, 4
 """Flag bits, the same as sds_msgs/LaserLineProfile's."""
@@ -58,7 +58,8 @@ def track_line(image: np.ndarray, offset: tuple[int, int], expected_x: np.ndarra
     start = np.clip(np.round(centre).astype(int) - s.band_px, 0, image.shape[1] - 1)
     columns = np.clip(start[:, None] + np.arange(2 * s.band_px + 1), 0, image.shape[1] - 1)
     band = image[local_rows[:, None], columns].astype(np.float64)
-    background = np.median(band, axis=1)
+    edges = s.band_px // 3   # the band's outer columns, away from the line
+    background = np.median(np.concatenate([band[:, :edges], band[:, -edges:]], axis=1), axis=1)
     signal = band - background[:, None]
     peak_index = np.clip(np.argmax(signal, axis=1), s.core_px, band.shape[1] - 1 - s.core_px)
     take = np.arange(len(band))
@@ -85,15 +86,13 @@ def track_line(image: np.ndarray, offset: tuple[int, int], expected_x: np.ndarra
 
 
 def _continuous(x: np.ndarray, s: LineSettings) -> np.ndarray:
-    """NaN where a row's centre strays from the median of its neighbours (itself excluded)."""
-    k = s.continuity_rows
-    padded = np.pad(x, k, constant_values=np.nan)
-    windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * k + 1).copy()
-    windows[:, k] = np.nan
-    enough = np.sum(np.isfinite(windows), axis=1) >= 3
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # rows whose neighbours are all NaN
-        median = np.nanmedian(windows, axis=1)
+    """NaN where a row's centre strays from the running median of the rows around it."""
+    finite = np.isfinite(x)
+    if finite.sum() < 3:
+        return x
+    index = np.arange(len(x))
+    filled = np.interp(index, index[finite], x[finite])
+    median = median_filter(filled, size=2 * s.continuity_rows + 1, mode="nearest")
     result = x.copy()
-    result[enough & (np.abs(x - median) > s.continuity_px)] = np.nan
+    result[np.abs(x - median) > s.continuity_px] = np.nan
     return result

@@ -64,15 +64,89 @@ class SpotTracker:
         self.previous: dict[int, np.ndarray | None] = dict.fromkeys(self.paths)
 
     def update(self, image: np.ndarray, offset: tuple[int, int] = (0, 0)) -> list[SpotEstimate]:
-        """Estimates for one frame; `image` is the red channel of the region at `offset` (x, y)."""
-        estimates = []
+        """Estimates for one frame; `image` is the red channel of the region at `offset` (x, y).
+
+        Spots tracked in the previous frame go through one batched pass over all their windows;
+        any spot that pass cannot settle (not found, a competing blob, off its path, near the
+        image edge) and every spot not yet acquired take the full per-spot search.
+        """
         origin = np.array(offset, dtype=float)
+        tracked = [i for i in self.paths if self.previous[i] is not None]
+        settled = self._track_batch(image, origin, tracked) if tracked else {}
+        estimates = []
         for laser_id, path in self.paths.items():
-            estimate = self._track(image, origin, laser_id, path)
+            estimate = settled.get(laser_id) or self._track(image, origin, laser_id, path)
             self.previous[laser_id] = None if estimate.flags & LOST else \
                 np.array([estimate.x_px, estimate.y_px])
             estimates.append(estimate)
         return estimates
+
+    def _track_batch(self, image: np.ndarray, origin: np.ndarray,
+                     ids: list[int]) -> dict[int, SpotEstimate]:
+        """The steady state, vectorised over spots: the same centroid as `_track` for every
+        spot whose window holds one clear blob near its previous position."""
+        s = self.settings
+        half = s.window_px
+        size = 2 * half + 1
+        previous = np.array([self.previous[i] for i in ids]) - origin
+        corner = np.round(previous).astype(int) - half
+        inside = (corner >= 0).all(axis=1) & (corner[:, 0] + size <= image.shape[1]) & \
+            (corner[:, 1] + size <= image.shape[0])
+        ids = [i for i, ok in zip(ids, inside, strict=True) if ok]
+        if not ids:
+            return {}
+        corner, previous = corner[inside], previous[inside]
+        steps = np.arange(size)
+        windows = image[corner[:, 1, None, None] + steps[None, :, None],
+                        corner[:, 0, None, None] + steps[None, None, :]].astype(np.float32)
+        border = np.concatenate([windows[:, 0], windows[:, -1], windows[:, :, 0],
+                                 windows[:, :, -1]], axis=1)
+        background = np.median(border, axis=1)
+        signal = windows - background[:, None, None]
+        yy, xx = np.mgrid[0:size, 0:size].astype(np.float32)
+        local = previous - corner                      # previous position in window pixels
+        prior = np.exp(-((xx - local[:, 0, None, None]) ** 2 + (yy - local[:, 1, None, None]) ** 2)
+                       / (2 * s.prior_sigma_px**2))
+        best = np.argmax((signal * prior).reshape(len(ids), -1), axis=1)
+        gy, gx = np.divmod(best, size)
+        distance2 = (xx - gx[:, None, None]) ** 2 + (yy - gy[:, None, None]) ** 2
+        above = signal > s.threshold
+        near = distance2 <= (0.5 * half) ** 2
+        area = np.sum(above & near, axis=(1, 2))
+        radius = np.maximum(s.aperture_factor * np.sqrt(area / np.pi), 3.0)
+        main = np.sum(np.where(above & near, signal, 0.0), axis=(1, 2))
+        far = np.sum(np.where(above & ~near, signal, 0.0), axis=(1, 2))
+        peak = np.max(np.where(near, signal, -np.inf), axis=(1, 2))
+        centre = np.column_stack([gx, gy]).astype(float)
+        ok = (area > 0) & (far < s.min_competitor * np.maximum(main, 1e-9)) & \
+            (peak > s.threshold)
+        weights = np.clip(signal - s.clip_fraction * peak[:, None, None], 0.0, None)
+        for _ in range(2):
+            inside_aperture = (xx - centre[:, 0, None, None]) ** 2 + \
+                (yy - centre[:, 1, None, None]) ** 2 <= radius[:, None, None] ** 2
+            w = np.where(inside_aperture, weights, 0.0)
+            total = np.sum(w, axis=(1, 2))
+            ok &= total > 0
+            with np.errstate(invalid="ignore", divide="ignore"):
+                centre = np.column_stack([np.sum(w * xx, axis=(1, 2)),
+                                          np.sum(w * yy, axis=(1, 2))]) / total[:, None]
+        ok &= np.all(np.abs(centre - half) + radius[:, None] <= half, axis=1)
+        raw = np.where(inside_aperture, windows, 0.0)
+        variance = np.clip(raw, 0, None) + s.read_noise**2
+        spread = (xx - centre[:, 0, None, None]) ** 2 + (yy - centre[:, 1, None, None]) ** 2
+        with np.errstate(invalid="ignore", divide="ignore"):
+            sigma = np.sqrt(np.sum(np.where(inside_aperture, variance * spread, 0.0),
+                                   axis=(1, 2)) / 2) / total
+        peak_raw = np.max(raw, axis=(1, 2))
+        full = centre + corner + origin
+        settled = {}
+        for k, laser_id in enumerate(ids):
+            if not ok[k] or distance_to_path(full[k], self.paths[laser_id]) > s.path_tolerance_px:
+                continue
+            flags = SATURATED if peak_raw[k] >= s.saturation_level else 0
+            settled[laser_id] = SpotEstimate(laser_id, float(full[k, 0]), float(full[k, 1]),
+                                             float(sigma[k]), float(peak_raw[k]), flags)
+        return settled
 
     def _search_box(self, laser_id: int, path: np.ndarray) -> np.ndarray:
         """(x0, y0, x1, y1) full-frame: around the previous position, or the whole path."""

@@ -42,12 +42,17 @@ class TrackerConfig:
 class FrameTracker:
     """Spots and line per frame; spots come out `hampel_window // 2` frames late, filtered."""
 
-    def __init__(self, rig: Rig, config: TrackerConfig | None = None) -> None:
+    def __init__(self, rig: Rig, config: TrackerConfig | None = None,
+                 seeds: dict[int, tuple[float, float]] | None = None) -> None:
         self.config = config or TrackerConfig()
         low, high = self.config.path_heights_mm
         heights = np.linspace(low, high, 15)
         self.paths = {d.laser_id: beam_image_path(rig, d.laser_id, heights) for d in rig.diodes}
         self.spots = SpotTracker(self.paths, self.config.spots)
+        for laser_id, position in (seeds or {}).items():
+            if laser_id not in self.paths:
+                raise ValueError(f"seed for laser {laser_id}, which the rig does not have")
+            self.spots.previous[laser_id] = np.asarray(position, dtype=float)
         self.filters = {i: OnlineHampel(self.config.hampel_window, self.config.hampel_k,
                                         self.config.hampel_floor_px) for i in self.paths}
         self._pending: dict[int, dict[int, SpotEstimate]] = {}

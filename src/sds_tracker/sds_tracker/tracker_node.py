@@ -14,7 +14,7 @@ from std_msgs.msg import Header
 
 from sds_msgs.msg import CameraModel, LaserLineProfile, LaserSpot, LaserSpotArray
 from sds_tracker.line import LineSettings
-from sds_tracker.spots import SpotSettings
+from sds_tracker.spots import LOST, SpotSettings
 from sds_tracker.tracker import FrameTracker, TrackerConfig
 
 EXIT_CONFIG_ERROR = 2
@@ -33,7 +33,8 @@ class TrackerNode(Node):
         for name, value in (("rig", ""), ("ack", True), ("hampel_window", 5),
                             ("window_px", 24), ("threshold", 30.0), ("prior_sigma_px", 8.0),
                             ("path_tolerance_px", 4.0), ("line_band_px", 30),
-                            ("path_heights_mm", [-30.0, 40.0])):
+                            ("path_heights_mm", [-30.0, 40.0]), ("seeds", [0.0]),
+                            ("lost_report_frames", 15)):
             self.declare_parameter(name, value)
         try:
             rig = load_rig(self.get_parameter("rig").value)
@@ -46,7 +47,7 @@ class TrackerNode(Node):
                                   threshold=float(self._value("threshold"))),
                 hampel_window=int(self._value("hampel_window")),
                 path_heights_mm=tuple(float(v) for v in self._value("path_heights_mm")))
-            self._tracker = FrameTracker(rig, config)
+            self._tracker = FrameTracker(rig, config, self._seeds(self._value("seeds")))
         except (RigError, OSError, ValueError) as error:
             self.get_logger().error(f"cannot start the tracker: {error}")
             self.exit_code = EXIT_CONFIG_ERROR
@@ -67,10 +68,34 @@ class TrackerNode(Node):
         self._frame = 0
         self._last_frame_time = self.get_clock().now()
         self._flushed = True
+        self._lost_streak: dict[int, int] = {}
         self.create_timer(0.25, self._flush_if_idle)
 
     def _value(self, name: str):
         return self.get_parameter(name).value
+
+    @staticmethod
+    def _seeds(values: list[float]) -> dict[int, tuple[float, float]]:
+        """Manual starting positions: [id, x, y, id, x, y, ...] (full-frame px); [0.0]: none."""
+        if len(values) <= 1:
+            return {}
+        if len(values) % 3:
+            raise ValueError(f"seeds must be triples id, x, y; got {len(values)} numbers")
+        return {int(values[i]): (float(values[i + 1]), float(values[i + 2]))
+                for i in range(0, len(values), 3)}
+
+    def _report_lost(self, frame: int, spots) -> None:
+        """Say which lasers are not found: at the first frame, and after a long loss."""
+        limit = int(self._value("lost_report_frames"))
+        for spot in spots:
+            streak = self._lost_streak.get(spot.laser_id, 0) + 1 if spot.flags & LOST else 0
+            self._lost_streak[spot.laser_id] = streak
+            if frame == 0 and streak:
+                self.get_logger().warning(f"laser {spot.laser_id} not found on its image path "
+                                          "in the first frame")
+            elif streak == limit:
+                self.get_logger().warning(f"laser {spot.laser_id} lost for {limit} frames "
+                                          f"(since frame {frame - limit + 1})")
 
     def _on_model(self, msg: CameraModel) -> None:
         self._offset = (int(msg.roi.x_offset), int(msg.roi.y_offset))
@@ -106,6 +131,7 @@ class TrackerNode(Node):
     def _publish_spots(self, ready) -> None:
         headers = dict(self._headers)
         for frame, spots in ready:
+            self._report_lost(frame, spots)
             message = LaserSpotArray(header=headers.get(frame, Header()), frame_index=frame)
             for spot in spots:
                 message.spots.append(LaserSpot(
