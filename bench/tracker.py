@@ -37,7 +37,7 @@ def main() -> None:
     region = Region(x, y, w, h)
     frames, start = [], time.perf_counter()
     for frame in VideoFileSource(output.video).frames():
-        frames.append(select(frame.image, region, "red"))
+        frames.append(np.ascontiguousarray(select(frame.image, region, "red")))
     decode_s = (time.perf_counter() - start) / len(frames)
     tracker = FrameTracker(rig)
     outputs, start = [], time.perf_counter()

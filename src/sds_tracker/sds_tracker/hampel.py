@@ -39,50 +39,91 @@ class OnlineHampel:
     def __init__(self, window: int = 5, k: float = 3.0, floor_px: float = 0.5) -> None:
         if window < 5 or window % 2 == 0:
             raise ValueError(f"the Hampel window must be odd and at least 5, got {window}")
-        self.half, self.k, self.floor_px = window // 2, k, floor_px
-        self._samples: deque[tuple[int, np.ndarray]] = deque(maxlen=window)
+        self._bank = HampelBank(window, k, floor_px)
 
     def push(self, frame: int, position: np.ndarray) -> HampelOutput | None:
         """Add this frame's position; return the filtered sample `half` frames back, once known."""
-        self._samples.append((frame, np.asarray(position, dtype=float)))
-        if len(self._samples) <= self.half:
-            return None
-        return self._filter(len(self._samples) - 1 - self.half)
+        out = self._bank.push(frame, np.asarray(position, dtype=float)[None, :])
+        return None if out is None else _single(out)
 
     def flush(self) -> list[HampelOutput]:
         """The last `half` samples at the end of a stream (with the window they have)."""
-        start = max(len(self._samples) - self.half, 0)
-        outputs = [self._filter(i) for i in range(start, len(self._samples))]
-        self._samples.clear()
+        return [_single(out) for out in self._bank.flush()]
+
+
+def _single(out: BankOutput) -> HampelOutput:
+    return HampelOutput(out.frame, out.raw[0], out.filtered[0], bool(out.replaced[0]))
+
+
+@dataclass(frozen=True)
+class BankOutput:
+    """One frame of a HampelBank: raw and filtered positions (N×2) and replacements (N)."""
+
+    frame: int
+    raw: np.ndarray
+    filtered: np.ndarray
+    replaced: np.ndarray
+
+
+class HampelBank:
+    """OnlineHampel's filter for N tracks at once (N×2 positions per frame), vectorised; a
+    track with a missing sample in the window is passed on unchanged (no two-sided window)."""
+
+    def __init__(self, window: int = 5, k: float = 3.0, floor_px: float = 0.5) -> None:
+        if window < 5 or window % 2 == 0:
+            raise ValueError(f"the Hampel window must be odd and at least 5, got {window}")
+        self.half, self.k, self.floor_px = window // 2, k, floor_px
+        self._frames: deque[int] = deque(maxlen=window)
+        self._values: deque[np.ndarray] = deque(maxlen=window)
+
+    def push(self, frame: int, positions: np.ndarray) -> BankOutput | None:
+        """Add this frame's N×2 positions; return the frame `half` back, once known."""
+        self._frames.append(frame)
+        self._values.append(np.asarray(positions, dtype=float))
+        if len(self._frames) <= self.half:
+            return None
+        return self._filter(len(self._frames) - 1 - self.half)
+
+    def flush(self) -> list[BankOutput]:
+        """The last `half` frames at the end of a stream, passed on unchanged (one-sided)."""
+        start = max(len(self._frames) - self.half, 0)
+        outputs = [self._filter(i) for i in range(start, len(self._frames))]
+        self._frames.clear()
+        self._values.clear()
         return outputs
 
-    def _filter(self, index: int) -> HampelOutput:
-        frame, raw = self._samples[index]
-        times = np.array([f for f, _ in self._samples], dtype=float)
-        values = np.array([p for _, p in self._samples])
-        finite = np.isfinite(values).all(axis=1)
-        before, after = finite[:index].sum(), finite[index + 1:].sum()
-        if not np.isfinite(raw).all() or before < self.half or after < self.half:
-            return HampelOutput(frame, raw, raw.copy(), False)   # no two-sided window
-        others = finite.copy()
-        others[index] = False
-        centre = raw - _quadratic_prediction(times[others], values[others], times[index])
-        rest = []
-        for j in np.flatnonzero(others):   # the motion model's own error, without the centre
-            rest_of = others.copy()
-            rest_of[j] = False
-            rest.append(values[j] - _quadratic_prediction(times[rest_of], values[rest_of],
-                                                           times[j]))
-        scale = np.maximum(MAD_TO_SIGMA * np.median(np.abs(np.array(rest)), axis=0),
-                           self.floor_px)
-
-        outlier = bool(np.any(np.abs(centre) > self.k * scale))
-        return HampelOutput(frame, raw, raw - centre if outlier else raw.copy(), outlier)
+    def _filter(self, index: int) -> BankOutput:
+        times = np.array(self._frames, dtype=float)
+        values = np.stack(self._values)                       # window × N × 2
+        raw = values[index]
+        filtered = raw.copy()
+        replaced = np.zeros(len(raw), dtype=bool)
+        if index < self.half or len(times) - 1 - index < self.half:
+            return BankOutput(self._frames[index], raw, filtered, replaced)
+        finite = np.isfinite(values).all(axis=2)               # window × N
+        complete = finite.all(axis=0)
+        if complete.any():
+            centre, scale = _residuals(times, values[:, complete], index)
+            outlier = np.any(np.abs(centre) > self.k * np.maximum(scale, self.floor_px), axis=1)
+            rows = np.flatnonzero(complete)[outlier]
+            filtered[rows] = raw[rows] - centre[outlier]
+            replaced[rows] = True
+        return BankOutput(self._frames[index], raw, filtered, replaced)
 
 
-def _quadratic_prediction(times: np.ndarray, values: np.ndarray, at: float) -> np.ndarray:
-    """Value at `at` of the least-squares quadratic (linear with 2 points) through the samples."""
-    return _prediction_weights(tuple(times - at)) @ values
+def _residuals(times: np.ndarray, values: np.ndarray, index: int
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """For every track (values: samples × N × 2): the centre's residual from the quadratic
+    through the others, and the scaled MAD of the others' residuals without the centre."""
+    others = np.flatnonzero(np.arange(len(times)) != index)
+    centre = values[index] - np.tensordot(
+        _prediction_weights(tuple(times[others] - times[index])), values[others], axes=1)
+    rest = []
+    for j in others:
+        subset = others[others != j]
+        rest.append(values[j] - np.tensordot(
+            _prediction_weights(tuple(times[subset] - times[j])), values[subset], axes=1))
+    return centre, MAD_TO_SIGMA * np.median(np.abs(np.stack(rest)), axis=0)
 
 
 @lru_cache(maxsize=256)

@@ -59,7 +59,7 @@ def track_line(image: np.ndarray, offset: tuple[int, int], expected_x: np.ndarra
     columns = np.clip(start[:, None] + np.arange(2 * s.band_px + 1), 0, image.shape[1] - 1)
     band = image[local_rows[:, None], columns].astype(np.float64)
     edges = s.band_px // 3   # the band's outer columns, away from the line
-    background = np.median(np.concatenate([band[:, :edges], band[:, -edges:]], axis=1), axis=1)
+    background = (band[:, :edges].mean(axis=1) + band[:, -edges:].mean(axis=1)) / 2
     signal = band - background[:, None]
     peak_index = np.clip(np.argmax(signal, axis=1), s.core_px, band.shape[1] - 1 - s.core_px)
     take = np.arange(len(band))

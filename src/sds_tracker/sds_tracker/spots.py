@@ -40,11 +40,17 @@ class SpotEstimate:
 
 def distance_to_path(point: np.ndarray, path: np.ndarray) -> float:
     """Shortest distance [px] from a point to a polyline."""
-    a, b = path[:-1], path[1:]
+    return float(distances_to_paths(point[None], path[None])[0])
+
+
+def distances_to_paths(points: np.ndarray, paths: np.ndarray) -> np.ndarray:
+    """Shortest distance [px] from each point (N×2) to its polyline (N×M×2)."""
+    a, b = paths[:, :-1], paths[:, 1:]
     segment = b - a
-    length2 = np.maximum(np.sum(segment * segment, axis=1), 1e-12)
-    t = np.clip(np.sum((point - a) * segment, axis=1) / length2, 0.0, 1.0)
-    return float(np.min(np.linalg.norm(a + t[:, None] * segment - point, axis=1)))
+    length2 = np.maximum(np.sum(segment * segment, axis=2), 1e-12)
+    t = np.clip(np.sum((points[:, None] - a) * segment, axis=2) / length2, 0.0, 1.0)
+    closest = a + t[..., None] * segment
+    return np.min(np.linalg.norm(closest - points[:, None], axis=2), axis=1)
 
 
 class SpotTracker:
@@ -104,9 +110,8 @@ class SpotTracker:
         background = np.median(border, axis=1)
         signal = windows - background[:, None, None]
         yy, xx = np.mgrid[0:size, 0:size].astype(np.float32)
-        local = previous - corner                      # previous position in window pixels
-        prior = np.exp(-((xx - local[:, 0, None, None]) ** 2 + (yy - local[:, 1, None, None]) ** 2)
-                       / (2 * s.prior_sigma_px**2))
+        # The previous position is the window's centre (to half a pixel): one prior for all.
+        prior = np.exp(-((xx - half) ** 2 + (yy - half) ** 2) / (2 * s.prior_sigma_px**2))
         best = np.argmax((signal * prior).reshape(len(ids), -1), axis=1)
         gy, gx = np.divmod(best, size)
         distance2 = (xx - gx[:, None, None]) ** 2 + (yy - gy[:, None, None]) ** 2
@@ -139,9 +144,15 @@ class SpotTracker:
                                    axis=(1, 2)) / 2) / total
         peak_raw = np.max(raw, axis=(1, 2))
         full = centre + corner + origin
+        paths = [self.paths[i] for i in ids]
+        if len({len(p) for p in paths}) == 1:
+            ok &= distances_to_paths(full, np.stack(paths)) <= s.path_tolerance_px
+        else:
+            ok &= np.array([distance_to_path(f, p) for f, p in zip(full, paths, strict=True)])\
+                <= s.path_tolerance_px
         settled = {}
         for k, laser_id in enumerate(ids):
-            if not ok[k] or distance_to_path(full[k], self.paths[laser_id]) > s.path_tolerance_px:
+            if not ok[k]:
                 continue
             flags = SATURATED if peak_raw[k] >= s.saturation_level else 0
             settled[laser_id] = SpotEstimate(laser_id, float(full[k, 0]), float(full[k, 1]),

@@ -8,7 +8,7 @@ import numpy as np
 from sds_recon.rig import Rig
 from sds_recon.triangulation import beam_image_path, line_image_path
 
-from sds_tracker.hampel import OnlineHampel
+from sds_tracker.hampel import BankOutput, HampelBank
 from sds_tracker.line import LineProfile, LineSettings, track_line
 from sds_tracker.spots import HAMPEL_REPLACED, LOST, SpotEstimate, SpotSettings, SpotTracker
 
@@ -53,8 +53,9 @@ class FrameTracker:
             if laser_id not in self.paths:
                 raise ValueError(f"seed for laser {laser_id}, which the rig does not have")
             self.spots.previous[laser_id] = np.asarray(position, dtype=float)
-        self.filters = {i: OnlineHampel(self.config.hampel_window, self.config.hampel_k,
-                                        self.config.hampel_floor_px) for i in self.paths}
+        self.ids = list(self.paths)
+        self.hampel = HampelBank(self.config.hampel_window, self.config.hampel_k,
+                                 self.config.hampel_floor_px)
         self._pending: dict[int, dict[int, SpotEstimate]] = {}
         self._line_rows, self._line_x = self._flat_line(rig)
 
@@ -78,37 +79,31 @@ class FrameTracker:
         """
         estimates = self.spots.update(red, offset)
         self._pending[frame] = {e.laser_id: e for e in estimates}
-        ready: dict[int, list[TrackedSpot]] = {}
-        for estimate in estimates:
-            out = self.filters[estimate.laser_id].push(
-                frame, np.array([estimate.x_px, estimate.y_px]))
-            if out is not None:
-                ready.setdefault(out.frame, []).append(self._tracked(out, estimate.laser_id))
+        positions = np.array([[e.x_px, e.y_px] for e in estimates])
+        out = self.hampel.push(frame, positions)
+        ready = [] if out is None else [(out.frame, self._tracked(out))]
         line = track_line(red, offset, self._line_x, self._line_rows, self.config.line,
                           self.config.spots.read_noise)
         if len(line.x_px) > len(self._line_rows) // 4:
             # Follow the line: next frame looks around where it is now.
             self._line_x = np.interp(self._line_rows, line.y_px, line.x_px)
-        return self._release(ready), line
+        return ready, line
 
     def flush(self) -> list[tuple[int, list[TrackedSpot]]]:
         """The last frames' spots at the end of a stream."""
-        ready: dict[int, list[TrackedSpot]] = {}
-        for laser_id, hampel in self.filters.items():
-            for out in hampel.flush():
-                ready.setdefault(out.frame, []).append(self._tracked(out, laser_id))
-        return self._release(ready)
+        return [(out.frame, self._tracked(out)) for out in self.hampel.flush()]
 
-    def _tracked(self, out, laser_id: int) -> TrackedSpot:
-        raw = self._pending[out.frame][laser_id]
-        flags = raw.flags | (HAMPEL_REPLACED if out.replaced else 0)
-        return TrackedSpot(laser_id, float(out.filtered[0]), float(out.filtered[1]),
-                           raw.x_px, raw.y_px, raw.sigma_px, raw.peak, flags)
-
-    def _release(self, ready: dict[int, list[TrackedSpot]]) -> list[tuple[int, list[TrackedSpot]]]:
-        for frame in ready:
-            self._pending.pop(frame, None)
-        return sorted(ready.items())
+    def _tracked(self, out: BankOutput) -> list[TrackedSpot]:
+        """The frame's spots with their filtered positions; the frame leaves the pending set."""
+        pending = self._pending.pop(out.frame)
+        spots = []
+        for k, laser_id in enumerate(self.ids):
+            raw = pending[laser_id]
+            flags = raw.flags | (HAMPEL_REPLACED if out.replaced[k] else 0)
+            spots.append(TrackedSpot(laser_id, float(out.filtered[k, 0]),
+                                     float(out.filtered[k, 1]), raw.x_px, raw.y_px,
+                                     raw.sigma_px, raw.peak, flags))
+        return spots
 
 
 def is_lost(spot: TrackedSpot) -> bool:
