@@ -115,15 +115,26 @@ def _residuals(times: np.ndarray, values: np.ndarray, index: int
                ) -> tuple[np.ndarray, np.ndarray]:
     """For every track (values: samples × N × 2): the centre's residual from the quadratic
     through the others, and the scaled MAD of the others' residuals without the centre."""
-    others = np.flatnonzero(np.arange(len(times)) != index)
-    centre = values[index] - np.tensordot(
-        _prediction_weights(tuple(times[others] - times[index])), values[others], axes=1)
-    rest = []
-    for j in others:
+    centre_weights, rest_weights = _window_weights(tuple(times - times[index]), index)
+    centre = values[index] - np.tensordot(centre_weights, values, axes=1)
+    rest = values[np.arange(len(times)) != index] - np.tensordot(rest_weights, values, axes=1)
+    return centre, MAD_TO_SIGMA * np.median(np.abs(rest), axis=0)
+
+
+@lru_cache(maxsize=64)
+def _window_weights(offsets: tuple[float, ...], index: int) -> tuple[np.ndarray, np.ndarray]:
+    """Weights over the whole window: the centre's prediction from the others (a row), and
+    each other sample's prediction from the rest without the centre (a matrix)."""
+    times = np.array(offsets)
+    count = len(times)
+    others = np.flatnonzero(np.arange(count) != index)
+    centre = np.zeros(count)
+    centre[others] = _prediction_weights(tuple(times[others]))
+    rest = np.zeros((len(others), count))
+    for row, j in enumerate(others):
         subset = others[others != j]
-        rest.append(values[j] - np.tensordot(
-            _prediction_weights(tuple(times[subset] - times[j])), values[subset], axes=1))
-    return centre, MAD_TO_SIGMA * np.median(np.abs(np.stack(rest)), axis=0)
+        rest[row, subset] = _prediction_weights(tuple(times[subset] - times[j]))
+    return centre, rest
 
 
 @lru_cache(maxsize=256)

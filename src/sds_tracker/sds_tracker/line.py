@@ -7,6 +7,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import median_filter
 
+from sds_tracker.kernels import line_rows
+
 INTERPOLATED, SATURATED_LINE, LOW_SIGNAL = 1, 2, 4
 """Flag bits, the same as sds_msgs/LaserLineProfile's."""
 
@@ -55,34 +57,19 @@ def track_line(image: np.ndarray, offset: tuple[int, int], expected_x: np.ndarra
     empty = np.zeros(0)
     if len(local_rows) == 0:
         return LineProfile(empty, empty, empty, empty, np.zeros(0, np.uint8))
-    start = np.clip(np.round(centre).astype(int) - s.band_px, 0, image.shape[1] - 1)
-    columns = np.clip(start[:, None] + np.arange(2 * s.band_px + 1), 0, image.shape[1] - 1)
-    band = image[local_rows[:, None], columns].astype(np.float64)
-    edges = s.band_px // 3   # the band's outer columns, away from the line
-    background = (band[:, :edges].mean(axis=1) + band[:, -edges:].mean(axis=1)) / 2
-    signal = band - background[:, None]
-    peak_index = np.clip(np.argmax(signal, axis=1), s.core_px, band.shape[1] - 1 - s.core_px)
-    take = np.arange(len(band))
-    core = peak_index[:, None] + np.arange(-s.core_px, s.core_px + 1)
-    values = signal[take[:, None], core]
-    peak = values[:, s.core_px]
-    weights = np.clip(values - s.clip_fraction * peak[:, None], 0.0, None)
-    total = weights.sum(axis=1)
-    valid = (peak > s.threshold) & (total > 0)
-    positions = columns[take[:, None], core].astype(float)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        x = np.sum(weights * positions, axis=1) / total + x0
-        variance = np.clip(values + background[:, None], 0, None) + read_noise**2
-        sigma = np.sqrt(np.sum(variance * (weights > 0) * (positions + x0 - x[:, None]) ** 2,
-                               axis=1)) / total
-    flags = np.zeros(len(x), np.uint8)
-    flags[band[take, peak_index] >= s.saturation_level] |= SATURATED_LINE
-    middle = peak
-    x[~valid] = np.nan
+    width = 2 * s.band_px + 1
+    if image.shape[1] < width:
+        return LineProfile(empty, empty, empty, empty, np.zeros(0, np.uint8))
+    start = np.clip(np.round(centre).astype(np.int64) - s.band_px, 0, image.shape[1] - width)
+    x, sigma, peak, top = line_rows(image, local_rows.astype(np.int64), start, width,
+                                    s.core_px, s.band_px // 3, s.clip_fraction, s.threshold,
+                                    read_noise)
+    x = x + x0
+    flags = np.where(top >= s.saturation_level, SATURATED_LINE, 0).astype(np.uint8)
     x = _continuous(x, s)
     found = np.isfinite(x)
     return LineProfile(x[found], (local_rows + y0)[found].astype(float), sigma[found],
-                       (middle + background)[found], flags[found])
+                       peak[found], flags[found])
 
 
 def _continuous(x: np.ndarray, s: LineSettings) -> np.ndarray:

@@ -7,6 +7,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from sds_tracker.kernels import spot_windows
+
 LOST, SATURATED, REFLECTION_SUSPECTED, OFF_PATH, HAMPEL_REPLACED = 1, 2, 4, 8, 16
 """Flag bits, the same as sds_msgs/LaserSpot's."""
 
@@ -68,6 +70,10 @@ class SpotTracker:
         self.settings = settings or SpotSettings()
         self.paths = {i: np.asarray(p, dtype=float) for i, p in paths.items()}
         self.previous: dict[int, np.ndarray | None] = dict.fromkeys(self.paths)
+        half = self.settings.window_px
+        yy, xx = np.mgrid[-half:half + 1, -half:half + 1]
+        # The previous position is a window's centre (to half a pixel): one prior for all.
+        self._prior = np.exp(-(xx**2 + yy**2) / (2 * self.settings.prior_sigma_px**2))
 
     def update(self, image: np.ndarray, offset: tuple[int, int] = (0, 0)) -> list[SpotEstimate]:
         """Estimates for one frame; `image` is the red channel of the region at `offset` (x, y).
@@ -89,8 +95,9 @@ class SpotTracker:
 
     def _track_batch(self, image: np.ndarray, origin: np.ndarray,
                      ids: list[int]) -> dict[int, SpotEstimate]:
-        """The steady state, vectorised over spots: the same centroid as `_track` for every
-        spot whose window holds one clear blob near its previous position."""
+        """The steady state, compiled over all spots (kernels.spot_windows): the same centroid
+        as `_track` for every spot whose window holds one clear blob near its previous
+        position."""
         s = self.settings
         half = s.window_px
         size = 2 * half + 1
@@ -101,48 +108,10 @@ class SpotTracker:
         ids = [i for i, ok in zip(ids, inside, strict=True) if ok]
         if not ids:
             return {}
-        corner, previous = corner[inside], previous[inside]
-        steps = np.arange(size)
-        windows = image[corner[:, 1, None, None] + steps[None, :, None],
-                        corner[:, 0, None, None] + steps[None, None, :]].astype(np.float32)
-        border = np.concatenate([windows[:, 0], windows[:, -1], windows[:, :, 0],
-                                 windows[:, :, -1]], axis=1)
-        background = np.median(border, axis=1)
-        signal = windows - background[:, None, None]
-        yy, xx = np.mgrid[0:size, 0:size].astype(np.float32)
-        # The previous position is the window's centre (to half a pixel): one prior for all.
-        prior = np.exp(-((xx - half) ** 2 + (yy - half) ** 2) / (2 * s.prior_sigma_px**2))
-        best = np.argmax((signal * prior).reshape(len(ids), -1), axis=1)
-        gy, gx = np.divmod(best, size)
-        distance2 = (xx - gx[:, None, None]) ** 2 + (yy - gy[:, None, None]) ** 2
-        above = signal > s.threshold
-        near = distance2 <= (0.5 * half) ** 2
-        area = np.sum(above & near, axis=(1, 2))
-        radius = np.maximum(s.aperture_factor * np.sqrt(area / np.pi), 3.0)
-        main = np.sum(np.where(above & near, signal, 0.0), axis=(1, 2))
-        far = np.sum(np.where(above & ~near, signal, 0.0), axis=(1, 2))
-        peak = np.max(np.where(near, signal, -np.inf), axis=(1, 2))
-        centre = np.column_stack([gx, gy]).astype(float)
-        ok = (area > 0) & (far < s.min_competitor * np.maximum(main, 1e-9)) & \
-            (peak > s.threshold)
-        weights = np.clip(signal - s.clip_fraction * peak[:, None, None], 0.0, None)
-        for _ in range(2):
-            inside_aperture = (xx - centre[:, 0, None, None]) ** 2 + \
-                (yy - centre[:, 1, None, None]) ** 2 <= radius[:, None, None] ** 2
-            w = np.where(inside_aperture, weights, 0.0)
-            total = np.sum(w, axis=(1, 2))
-            ok &= total > 0
-            with np.errstate(invalid="ignore", divide="ignore"):
-                centre = np.column_stack([np.sum(w * xx, axis=(1, 2)),
-                                          np.sum(w * yy, axis=(1, 2))]) / total[:, None]
-        ok &= np.all(np.abs(centre - half) + radius[:, None] <= half, axis=1)
-        raw = np.where(inside_aperture, windows, 0.0)
-        variance = np.clip(raw, 0, None) + s.read_noise**2
-        spread = (xx - centre[:, 0, None, None]) ** 2 + (yy - centre[:, 1, None, None]) ** 2
-        with np.errstate(invalid="ignore", divide="ignore"):
-            sigma = np.sqrt(np.sum(np.where(inside_aperture, variance * spread, 0.0),
-                                   axis=(1, 2)) / 2) / total
-        peak_raw = np.max(raw, axis=(1, 2))
+        corner = corner[inside]
+        centre, sigma, peak_raw, ok = spot_windows(
+            image, corner, half, self._prior, s.threshold, s.min_competitor, s.aperture_factor,
+            s.clip_fraction, s.read_noise)
         full = centre + corner + origin
         paths = [self.paths[i] for i in ids]
         if len({len(p) for p in paths}) == 1:

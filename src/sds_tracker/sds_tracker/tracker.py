@@ -9,6 +9,7 @@ from sds_recon.rig import Rig
 from sds_recon.triangulation import beam_image_path, line_image_path
 
 from sds_tracker.hampel import BankOutput, HampelBank
+from sds_tracker.kernels import warm_up
 from sds_tracker.line import LineProfile, LineSettings, track_line
 from sds_tracker.spots import HAMPEL_REPLACED, LOST, SpotEstimate, SpotSettings, SpotTracker
 
@@ -58,6 +59,7 @@ class FrameTracker:
                                  self.config.hampel_floor_px)
         self._pending: dict[int, dict[int, SpotEstimate]] = {}
         self._line_rows, self._line_x = self._flat_line(rig)
+        warm_up()
 
     @staticmethod
     def _flat_line(rig: Rig) -> tuple[np.ndarray, np.ndarray]:
