@@ -21,6 +21,8 @@ EXIT_CONFIG_ERROR = 2
 IDLE_FLUSH_S = 1.0
 """With no frame for this long, the spots still held by the Hampel window are published."""
 CHANNEL_INDEX = {"red": None, "bgr": 2}
+WAITING_FRAMES = 30
+"""Frames kept while the camera_model (region offset) has not arrived yet."""
 
 
 class TrackerNode(Node):
@@ -64,6 +66,7 @@ class TrackerNode(Node):
         self.create_subscription(CameraModel, "camera_model", self._on_model, latched)
         self.create_subscription(Image, "image", self._on_image, reliable)
         self._offset: tuple[int, int] | None = None
+        self._waiting: deque[Image] = deque(maxlen=WAITING_FRAMES)
         self._headers: deque[tuple[int, Header]] = deque(maxlen=64)
         self._frame = 0
         self._last_frame_time = self.get_clock().now()
@@ -102,13 +105,21 @@ class TrackerNode(Node):
         if msg.channel not in CHANNEL_INDEX:
             self.get_logger().error(f"frames carry channel {msg.channel!r}; the tracker needs "
                                     "'red' (mono8) or 'bgr'")
+        while self._waiting:   # frames that arrived before the model, in order
+            self._track(self._waiting.popleft())
 
     def _on_image(self, msg: Image) -> None:
         if self._offset is None:
-            self.get_logger().warning("no camera_model yet: frame offset unknown, frame skipped",
-                                      throttle_duration_sec=5.0)
-            self._acknowledge(msg)
+            # The latched camera_model can arrive just after the first frames: keep them.
+            if len(self._waiting) == self._waiting.maxlen:
+                self.get_logger().warning("no camera_model: region offset unknown, oldest "
+                                          "waiting frame dropped", throttle_duration_sec=5.0)
+                self._acknowledge(self._waiting.popleft())
+            self._waiting.append(msg)
             return
+        self._track(msg)
+
+    def _track(self, msg: Image) -> None:
         image = msg_to_image(msg)
         red = image[..., 2] if image.ndim == 3 else image
         frame = self._frame
