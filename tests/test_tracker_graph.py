@@ -31,10 +31,12 @@ def test_simulated_drop_is_tracked_and_reconstructed(repo, tmp_path):
     clouds = probe.collect(PointCloud2, "/recon/points")
     fits = probe.collect(SurfaceFit, "/recon/surface_fit")
     # The camera waits for two image subscribers: the tracker, and this probe once it has
-    # found the tracker's and the reconstruction's publishers (so that no output is missed).
+    # found the tracker's and the reconstruction's publishers; the tracker takes no frame
+    # before its spots reach two subscribers (the reconstruction and this probe).
     graph = SdsGraphRun("drop.yaml", "--set", f"camera.source={output.video}",
                         "--set", f"camera.roi={region}", "--set", f"tracker.rig={rig_file}",
-                        "--set", f"recon.rig={rig_file}", "--set", "camera.wait_for_subscribers=2")
+                        "--set", f"recon.rig={rig_file}", "--set", "camera.wait_for_subscribers=2",
+                        "--set", "tracker.wait_for_consumers=2")
     try:
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline and not all(

@@ -36,7 +36,7 @@ class TrackerNode(Node):
                             ("window_px", 24), ("threshold", 30.0), ("prior_sigma_px", 8.0),
                             ("path_tolerance_px", 4.0), ("line_band_px", 30),
                             ("path_heights_mm", [-30.0, 40.0]), ("seeds", [0.0]),
-                            ("lost_report_frames", 15)):
+                            ("lost_report_frames", 15), ("wait_for_consumers", 0)):
             self.declare_parameter(name, value)
         try:
             rig = load_rig(self.get_parameter("rig").value)
@@ -63,8 +63,14 @@ class TrackerNode(Node):
         self._spots_pub = self.create_publisher(LaserSpotArray, "spots", reliable)
         self._line_pub = self.create_publisher(LaserLineProfile, "line", reliable)
         self._ack_pub = self.create_publisher(Header, "frame_ack", reliable)
-        self.create_subscription(CameraModel, "camera_model", self._on_model, latched)
-        self.create_subscription(Image, "image", self._on_image, reliable)
+        self._inputs = (latched, reliable)
+        self._consumers = int(self._value("wait_for_consumers"))
+        if self._consumers > 0:
+            # No frame is taken before the spots have their consumers: none is lost to them.
+            self.get_logger().info(f"waiting for {self._consumers} subscriber(s) on spots")
+            self._wait_timer = self.create_timer(0.05, self._subscribe_when_consumed)
+        else:
+            self._subscribe_inputs()
         self._offset: tuple[int, int] | None = None
         self._waiting: deque[Image] = deque(maxlen=WAITING_FRAMES)
         self._headers: deque[tuple[int, Header]] = deque(maxlen=64)
@@ -73,6 +79,16 @@ class TrackerNode(Node):
         self._flushed = True
         self._lost_streak: dict[int, int] = {}
         self.create_timer(0.25, self._flush_if_idle)
+
+    def _subscribe_when_consumed(self) -> None:
+        if self._spots_pub.get_subscription_count() >= self._consumers:
+            self._wait_timer.cancel()
+            self._subscribe_inputs()
+
+    def _subscribe_inputs(self) -> None:
+        latched, reliable = self._inputs
+        self.create_subscription(CameraModel, "camera_model", self._on_model, latched)
+        self.create_subscription(Image, "image", self._on_image, reliable)
 
     def _value(self, name: str):
         return self.get_parameter(name).value
