@@ -9,7 +9,7 @@ import pytest
 from scipy import stats
 from sds_sim.render import FrameRenderer
 from sds_sim.scenario import load_scenario
-from sds_tracker.hampel import OnlineHampel
+from sds_tracker.hampel import HampelBank
 from sds_tracker.spots import HAMPEL_REPLACED
 from sds_tracker.tracker import FrameTracker, is_lost
 
@@ -108,18 +108,18 @@ def test_hampel_keeps_a_fast_spot_and_replaces_a_reflection() -> None:
     corrupted[41] += [0.0, 3.0]
     corrupted[33] = np.nan              # an occlusion
     corrupted[58] += [6.0, 0.0]         # next to the end: no two-sided window, kept
-    hampel = OnlineHampel(window=5)
-    outputs = [o for i, p in enumerate(corrupted) if (o := hampel.push(i, p)) is not None]
+    hampel = HampelBank(window=5)   # one track: 1×2 positions per frame
+    outputs = [o for i, p in enumerate(corrupted) if (o := hampel.push(i, p[None])) is not None]
     outputs += hampel.flush()
     assert [o.frame for o in outputs] == list(range(60))
-    replaced = {o.frame for o in outputs if o.replaced}
+    replaced = {o.frame for o in outputs if o.replaced[0]}
     assert replaced == {20, 41}
     assert np.isnan(outputs[33].filtered).all()
-    assert not outputs[58].replaced and not outputs[59].replaced
+    assert not outputs[58].replaced[0] and not outputs[59].replaced[0]
     for frame in (20, 41):
-        assert np.linalg.norm(outputs[frame].filtered - track[frame]) < 0.5
+        assert np.linalg.norm(outputs[frame].filtered[0] - track[frame]) < 0.5
     with pytest.raises(ValueError, match="odd"):
-        OnlineHampel(window=4)
+        HampelBank(window=4)
 
 
 def test_manual_seeds_start_the_spots_and_bad_seeds_are_refused(repo: Path) -> None:

@@ -12,17 +12,18 @@ MAD_TO_SIGMA = 1.4826
 
 
 @dataclass(frozen=True)
-class HampelOutput:
-    """The sample from `half` frames ago: raw and filtered position, and whether it was replaced."""
+class BankOutput:
+    """One frame of a HampelBank: raw and filtered positions (N×2) and replacements (N)."""
 
     frame: int
     raw: np.ndarray
     filtered: np.ndarray
-    replaced: bool
+    replaced: np.ndarray
 
 
-class OnlineHampel:
-    """Hampel filter over a window of 2·half + 1 frames, with a latency of `half` frames.
+class HampelBank:
+    """Hampel filter for N tracks (N×2 positions per frame, vectorised) over a window of
+    2·half + 1 frames, with a latency of `half` frames.
 
     A spot moves during the window, so the test runs on residuals from the motion rather than
     on raw positions (whose median lags a fast spot and would replace good samples): the centre
@@ -35,39 +36,6 @@ class OnlineHampel:
     (NaN) stay missing; a sample without `half` valid samples on each side (stream ends, next
     to an occlusion) is passed on unchanged.
     """
-
-    def __init__(self, window: int = 5, k: float = 3.0, floor_px: float = 0.5) -> None:
-        if window < 5 or window % 2 == 0:
-            raise ValueError(f"the Hampel window must be odd and at least 5, got {window}")
-        self._bank = HampelBank(window, k, floor_px)
-
-    def push(self, frame: int, position: np.ndarray) -> HampelOutput | None:
-        """Add this frame's position; return the filtered sample `half` frames back, once known."""
-        out = self._bank.push(frame, np.asarray(position, dtype=float)[None, :])
-        return None if out is None else _single(out)
-
-    def flush(self) -> list[HampelOutput]:
-        """The last `half` samples at the end of a stream (with the window they have)."""
-        return [_single(out) for out in self._bank.flush()]
-
-
-def _single(out: BankOutput) -> HampelOutput:
-    return HampelOutput(out.frame, out.raw[0], out.filtered[0], bool(out.replaced[0]))
-
-
-@dataclass(frozen=True)
-class BankOutput:
-    """One frame of a HampelBank: raw and filtered positions (N×2) and replacements (N)."""
-
-    frame: int
-    raw: np.ndarray
-    filtered: np.ndarray
-    replaced: np.ndarray
-
-
-class HampelBank:
-    """OnlineHampel's filter for N tracks at once (N×2 positions per frame), vectorised; a
-    track with a missing sample in the window is passed on unchanged (no two-sided window)."""
 
     def __init__(self, window: int = 5, k: float = 3.0, floor_px: float = 0.5) -> None:
         if window < 5 or window % 2 == 0:

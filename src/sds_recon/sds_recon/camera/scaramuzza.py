@@ -74,11 +74,6 @@ class ScaramuzzaCamera(CameraModel):
         return np.array([[self.c, self.e], [self.m, 1.0]])
 
     @property
-    def image_radius_px(self) -> float:
-        """Largest undistorted radius r' of any pixel of the image."""
-        return float(self._radius_table[-1] / 1.05) if self.covers_image else self.max_radius_px
-
-    @property
     def covers_image(self) -> bool:
         """True when the model is one-to-one over the whole image (and a margin of 5 %)."""
         return len(self._radius_table) == TABLE_SAMPLES
