@@ -163,11 +163,11 @@ class FrameRenderer:
                                  s.disturbances.reflection_strength / len(samples))
                     reflection_px[i] = wall_px[i]
             if len(self.line_directions):
-                rows, x_px, width = self._line(surface_t, pose_t, t)
+                rows, x_px, width = self._line(self._line_points(surface_t, t), pose_t)
                 red.line(rows, x_px, width, optics.line_peak / len(samples))
         if len(self.line_directions):
-            line_rows, line_x, _ = self._line(surface, pose, time_s)
             line_mm = self._line_points(surface, time_s)
+            line_rows, line_x, _ = self._line(line_mm, pose)
         if optics.speckle > 0:
             red.speckle(self.rng, optics.speckle)
         led = s.events.led_on_s <= time_s < s.events.led_off_s
@@ -181,9 +181,8 @@ class FrameRenderer:
         origins = np.repeat(line.emitter_mm[None, :], len(self.line_directions), axis=0)
         return ray_surface_points(surface, origins, self.line_directions, time_s)
 
-    def _line(self, surface, pose: RigidTransform, time_s: float):
-        """Rows the line crosses, its centre per row [px], and its Gaussian width σ [px]."""
-        points = self._line_points(surface, time_s)
+    def _line(self, points: np.ndarray, pose: RigidTransform):
+        """Rows the line's world points cross, its centre per row [px], its Gaussian σ [px]."""
         pixels = self.camera.project(pose.apply(points))
         pixels = pixels[np.isfinite(pixels).all(axis=1)]
         if len(pixels) < 2:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cache
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -80,6 +81,7 @@ class Surface:
             sum(abs(m.amplitude_mm) * _shape_bound(m.shape) for m in self.modes)
 
 
+@cache
 def _shape_bound(shape: ModeShape) -> float:
     """max |ψ| over the disc (J_m(ξ r/R)/J_m(ξ) peaks inside for higher modes)."""
     r = np.linspace(0.0, 1.0, 2001)
