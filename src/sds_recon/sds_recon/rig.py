@@ -88,15 +88,22 @@ class Rig:
         """Unit rays (N×3) in the world frame from the camera centre through the pixels."""
         return self.camera.pixel_to_ray(pixels) @ self.world_to_camera.rotation
 
+    def rim_px(self, camera: CameraModel, samples: int = 361) -> np.ndarray:
+        """The liquid's rim at rest (the wall at Z = 0) in the image (samples×2 px).
+
+        `camera` is this rig's camera or a scaled copy of it.
+        """
+        angle = np.linspace(0.0, 2 * np.pi, samples)
+        radius = self.container.radius_mm
+        rim = radius * np.column_stack([np.cos(angle), np.sin(angle), np.zeros_like(angle)])
+        return camera.project(self.world_to_camera.apply(rim))
+
     def container_region_px(self, camera: CameraModel, margin_px: int = 16) -> tuple[int, ...]:
         """(x, y, width, height) [px] of the image region that holds the liquid's rim.
 
         `camera` is this rig's camera or a scaled copy of it; the region is clipped to the image.
         """
-        angle = np.linspace(0.0, 2 * np.pi, 361)
-        radius = self.container.radius_mm
-        rim = radius * np.column_stack([np.cos(angle), np.sin(angle), np.zeros_like(angle)])
-        pixels = camera.project(self.world_to_camera.apply(rim))
+        pixels = self.rim_px(camera)
         low = np.maximum(np.floor(np.nanmin(pixels, axis=0)) - margin_px, 0).astype(int)
         high = np.minimum(np.ceil(np.nanmax(pixels, axis=0)) + margin_px + 1,
                           [camera.width_px, camera.height_px]).astype(int)

@@ -81,11 +81,7 @@ class FrameRenderer:
         texture = cv2.resize(texture.astype(np.float32), (self.width, self.height),
                              interpolation=cv2.INTER_CUBIC)
         image = level * (1.0 + 0.15 * texture)
-        rig = self.scenario.rig
-        angle = np.linspace(0, 2 * np.pi, 721)
-        radius = rig.container.radius_mm
-        rim = radius * np.column_stack([np.cos(angle), np.sin(angle), np.zeros_like(angle)])
-        rim_px = self.camera.project(rig.world_to_camera.apply(rim))
+        rim_px = self.scenario.rig.rim_px(self.camera, samples=721)
         mask = np.zeros((self.height, self.width), np.uint8)
         if np.isfinite(rim_px).all():
             polygon = np.round(rim_px * 16).astype(np.int32)
