@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from functools import cache
+
 import numpy as np
 from sds_arduino.protocol import WRAP, Record
 
@@ -38,14 +40,20 @@ def specific_force_m_s2(scenario: Scenario, time_s: np.ndarray) -> np.ndarray:
     return force
 
 
+@cache
+def tof_footprint_mm(radius_mm: float) -> tuple[np.ndarray, np.ndarray]:
+    """Fixed sample points (x, y) spread evenly over the half of the surface at x > 0."""
+    rng = np.random.default_rng(0)
+    r = radius_mm * np.sqrt(rng.uniform(0, 1, TOF_FOOTPRINT_SAMPLES))
+    theta = rng.uniform(-np.pi / 2, np.pi / 2, TOF_FOOTPRINT_SAMPLES)
+    return r * np.cos(theta), r * np.sin(theta)
+
+
 def tof_range_mm(scenario: Scenario, time_s: float) -> float:
     """Distance from the ToF sensor to the liquid: its height minus the mean level it sees
     (the half of the surface at x > 0, as the seed's sensor covered about half)."""
-    radius = scenario.rig.container.radius_mm
-    rng = np.random.default_rng(0)
-    r = radius * np.sqrt(rng.uniform(0, 1, TOF_FOOTPRINT_SAMPLES))
-    theta = rng.uniform(-np.pi / 2, np.pi / 2, TOF_FOOTPRINT_SAMPLES)
-    level = scenario.surface_at(time_s).height(r * np.cos(theta), r * np.sin(theta), time_s)
+    x, y = tof_footprint_mm(scenario.rig.container.radius_mm)
+    level = scenario.surface_at(time_s).height(x, y, time_s)
     return scenario.arduino.tof_height_mm - float(np.mean(level))
 
 
