@@ -70,6 +70,12 @@ class SpotTracker:
         self.settings = settings or SpotSettings()
         self.paths = {i: np.asarray(p, dtype=float) for i, p in paths.items()}
         self.previous: dict[int, np.ndarray | None] = dict.fromkeys(self.paths)
+        # All paths in one array for the batched pass; shorter ones repeat their last point
+        # (a zero-length segment, which changes no distance).
+        longest = max((len(p) for p in self.paths.values()), default=0)
+        self._row = {i: k for k, i in enumerate(self.paths)}
+        self._stacked_paths = np.array([np.vstack([p, np.repeat(p[-1:], longest - len(p), 0)])
+                                        for p in self.paths.values()])
         half = self.settings.window_px
         yy, xx = np.mgrid[-half:half + 1, -half:half + 1]
         # The previous position is a window's centre (to half a pixel): one prior for all.
@@ -113,12 +119,8 @@ class SpotTracker:
             image, corner, half, self._prior, s.threshold, s.min_competitor, s.aperture_factor,
             s.clip_fraction, s.read_noise)
         full = centre + corner + origin
-        paths = [self.paths[i] for i in ids]
-        if len({len(p) for p in paths}) == 1:
-            ok &= distances_to_paths(full, np.stack(paths)) <= s.path_tolerance_px
-        else:
-            ok &= np.array([distance_to_path(f, p) for f, p in zip(full, paths, strict=True)])\
-                <= s.path_tolerance_px
+        paths = self._stacked_paths[[self._row[i] for i in ids]]
+        ok &= distances_to_paths(full, paths) <= s.path_tolerance_px
         settled = {}
         for k, laser_id in enumerate(ids):
             if not ok[k]:
