@@ -96,13 +96,13 @@ def _run_calibrate_lasers(args: argparse.Namespace) -> int:
     import json
 
     from sds_recon.calibration.laser_files import calibrate_lasers, report_text
-    from sds_recon.rig import RigError, load_rig, save_rig
+    from sds_recon.rig import load_rig, save_rig
 
     try:
         rig = load_rig(args.rig)
         calibrated, report = calibrate_lasers(rig, args.spots, args.surfaces, args.line,
                                               args.fit_emitters)
-    except (RigError, OSError, ValueError) as error:
+    except (OSError, ValueError) as error:  # RigError is a ValueError
         print(f"sds calibrate lasers: {error}", file=sys.stderr)
         return 2
     text = report_text(report)
@@ -208,7 +208,7 @@ def _add_simulate(commands: argparse._SubParsersAction) -> None:
 def _run_simulate(args: argparse.Namespace) -> int:
     import time
 
-    from sds_sim.scenario import ScenarioError, load_scenario
+    from sds_sim.scenario import load_scenario
     from sds_sim.simulate import simulate
 
     overrides = {key: value for key, value in (("duration_s", args.seconds),
@@ -216,7 +216,7 @@ def _run_simulate(args: argparse.Namespace) -> int:
                  if value is not None}
     try:
         scenario = load_scenario(args.scenario, overrides)
-    except (ScenarioError, ValueError) as error:
+    except ValueError as error:  # ScenarioError, RigError and CameraModelError included
         print(f"sds simulate: {error}", file=sys.stderr)
         return 2
     start = time.perf_counter()

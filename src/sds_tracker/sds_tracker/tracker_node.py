@@ -8,7 +8,7 @@ from collections import deque
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sds_camera.image_msg import msg_to_image
-from sds_recon.rig import RigError, load_rig
+from sds_recon.rig import load_rig
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 
@@ -50,7 +50,7 @@ class TrackerNode(Node):
                 hampel_window=int(self._value("hampel_window")),
                 path_heights_mm=tuple(float(v) for v in self._value("path_heights_mm")))
             self._tracker = FrameTracker(rig, config, self._seeds(self._value("seeds")))
-        except (RigError, OSError, ValueError) as error:
+        except (OSError, ValueError) as error:  # RigError is a ValueError
             self.get_logger().error(f"cannot start the tracker: {error}")
             self.exit_code = EXIT_CONFIG_ERROR
             self.finished.set()
