@@ -95,7 +95,7 @@ def test_spots_and_line_in_point_cloud_and_fit_out(repo):
     assert fit.frame_index == 7 and fit.point_count == 19
     assert np.degrees(fit.tilt_x_rad) == pytest.approx(TILT_DEG, abs=1e-6)
     assert fit.p00_mm == pytest.approx(2.0, abs=1e-6) and fit.rmse_mm < 1e-6
-    assert "m1n1_cos" in fit.mode_names
+    assert "lateral_1_cos" in fit.mode_names
 
 
 def test_missing_rig_is_a_clear_error():

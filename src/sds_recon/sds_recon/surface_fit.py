@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from sds_recon.sloshing.theory import ModeShape
+from sds_recon.sloshing.theory import ModeShape, mode_name
 
 DEFAULT_MODES = ((1, 1), (1, 2), (0, 1))
 """Lateral modes ξ = 1.8412, 5.3314 and the first axisymmetric mode ξ = 3.8317."""
@@ -80,7 +80,7 @@ def fit_modes(points_mm: ArrayLike, radius_mm: float,
                 continue
             shape = ModeShape(order, index, azimuth / max(order, 1))
             columns.append(shape.height(points[:, 0], points[:, 1], radius_mm))
-            names.append(f"m{order}n{index}_{label}" if order else f"m0n{index}")
+            names.append(f"{mode_name(order, index)}_{label}" if order else mode_name(order, index))
     design = np.column_stack(columns)
     if len(points) < design.shape[1]:
         raise ValueError(f"{design.shape[1]} modal terms need as many points, got {len(points)}")

@@ -49,3 +49,39 @@ def natural_frequency_hz(xi: float, radius_mm: float, depth_mm: float, gravity_m
     capillary = surface_tension_n_m * xi**3 / (density_kg_m3 * radius**3)
     stiffness = gravity_m_s2 * xi / radius + capillary
     return float(np.sqrt(stiffness * np.tanh(xi * depth / radius)) / (2 * np.pi))
+
+
+def mode_name(order: int, index: int) -> str:
+    """lateral_n for order 1, axisymmetric_n for order 0, m<order>n<index> otherwise."""
+    return {1: f"lateral_{index}", 0: f"axisymmetric_{index}"}.get(order, f"m{order}n{index}")
+
+
+@dataclass(frozen=True)
+class TheoreticalMode:
+    """A container mode's name, root ξ and linear natural frequency [Hz]."""
+
+    name: str
+    order: int
+    index: int
+    xi: float
+    frequency_hz: float
+
+
+THEORY_MODES = ((1, 1), (1, 2), (1, 3), (0, 1))
+"""Lateral modes 1–3 and the first axisymmetric mode, as in the method notes."""
+
+
+def theoretical_modes(radius_mm: float, depth_mm: float, gravity_m_s2: float,
+                      surface_tension_n_m: float, density_kg_m3: float,
+                      modes: tuple[tuple[int, int], ...] = THEORY_MODES) -> list[TheoreticalMode]:
+    """Linear frequencies of a flat free surface with surface tension (valid in 1 g).
+
+    At g → 0 only the capillary term is left; it assumes a flat interface with a 90° contact
+    angle, which a real microgravity meniscus (or a magnetised ferrofluid) does not have, so
+    give measured or modelled frequencies for drops instead.
+    """
+    return [TheoreticalMode(mode_name(order, index), order, index, mode_root(order, index),
+                            natural_frequency_hz(mode_root(order, index), radius_mm, depth_mm,
+                                                 gravity_m_s2, surface_tension_n_m,
+                                                 density_kg_m3))
+            for order, index in modes]

@@ -1,0 +1,266 @@
+"""The sloshing analysis of one recording: modes, estimators side by side, tilts, meniscus."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from sds_recon.rig import Rig
+from sds_recon.sloshing.estimators import (
+    DampedSinusoid,
+    DampedSinusoidFit,
+    DecayError,
+    ModeEstimate,
+    excitation_onset,
+    fft_peaks,
+    finite_window,
+    fit_damped_sinusoids,
+    free_decay_start,
+    half_power,
+    log_decrement,
+)
+from sds_recon.sloshing.modal import ModeCoordinate, modal_series, mode_coordinates
+from sds_recon.sloshing.recording import SurfaceRecording
+from sds_recon.sloshing.theory import TheoreticalMode, theoretical_modes
+from sds_recon.surface_fit import fit_plane, radial_profile
+
+MATCH_TOLERANCE = 0.15
+"""A component matches an expected frequency within ±15 %."""
+TILT_STEP_DEG = 0.5
+"""Frames whose tilt stays within this of a plateau's median belong to it."""
+MIN_PLATEAU_FRAMES = 5
+MIN_MENISCUS_POINTS = 200
+
+
+@dataclass(frozen=True)
+class AnalysisOptions:
+    """Analysis window and model inputs.
+
+    The free decay starts at `start_s`; else `forcing_s` after the excitation's onset (a forced
+    motion of known duration, e.g. a robot's); else at the largest swing (an impulsive kick).
+    `gravity_m_s2` overrides the rig's for the theory; `expected_hz` (mode name → Hz) supplies
+    frequencies where the theory does not hold (microgravity, a magnetised ferrofluid).
+    """
+
+    start_s: float | None = None
+    end_s: float | None = None
+    forcing_s: float | None = None
+    gravity_m_s2: float | None = None
+    expected_hz: dict[str, float] = field(default_factory=dict)
+    max_components: int = 4
+    min_snr: float = 8.0
+
+
+@dataclass(frozen=True)
+class ModeResult:
+    """One mode's (or series component's) estimates by every method, with the fitted model."""
+
+    name: str
+    time_s: np.ndarray
+    values: np.ndarray
+    unit: str
+    fit: DampedSinusoidFit | None
+    component: DampedSinusoid | None
+    estimates: tuple[ModeEstimate, ...]
+    notes: tuple[str, ...] = ()
+    azimuth_deg: float = float("nan")
+
+    def as_dict(self) -> dict:
+        """JSON-ready summary (no samples)."""
+        return {"mode": self.name, "unit": self.unit, "azimuth_deg": self.azimuth_deg,
+                "estimates": [e.as_dict() for e in self.estimates], "notes": list(self.notes)}
+
+
+@dataclass(frozen=True)
+class TiltStep:
+    """One static plateau of a tilt series: the plane of Eq. 12 through all its points."""
+
+    start_s: float
+    end_s: float
+    frames: int
+    p00_mm: float
+    p10: float
+    p01: float
+    tilt_x_deg: float
+    tilt_y_deg: float
+    r_squared: float
+    rmse_mm: float
+    sse_mm2: float
+    point_count: int
+
+
+@dataclass(frozen=True)
+class SloshingAnalysis:
+    """Everything `sds analyze` reports."""
+
+    source: str
+    window_s: tuple[float, float]
+    gravity_m_s2: float
+    theory: tuple[TheoreticalMode, ...]
+    modes: tuple[ModeResult, ...]
+    tof: tuple[ModeResult, ...]
+    tilt_steps: tuple[TiltStep, ...]
+    meniscus: tuple[np.ndarray, np.ndarray, np.ndarray]   # radius [mm], height [mm], count
+    meniscus_source: str
+
+    def as_dict(self) -> dict:
+        """JSON-ready results."""
+        radius, height, count = self.meniscus
+        return {
+            "source": self.source, "window_s": list(self.window_s),
+            "gravity_m_s2": self.gravity_m_s2,
+            "theory": [{"mode": m.name, "xi": m.xi, "frequency_hz": m.frequency_hz}
+                       for m in self.theory],
+            "modes": [m.as_dict() for m in self.modes],
+            "tof": [m.as_dict() for m in self.tof],
+            "tilt_steps": [vars(s) for s in self.tilt_steps],
+            "meniscus": {"source": self.meniscus_source, "radius_mm": radius.tolist(),
+                         "height_mm": [None if not np.isfinite(h) else float(h) for h in height],
+                         "count": count.tolist()},
+        }
+
+
+def _significant(fit: DampedSinusoidFit, component: DampedSinusoid, min_snr: float) -> bool:
+    """Matched-filter SNR of a component, √(Σ c(τ)²) / residual RMS, at least `min_snr`."""
+    tau = np.linspace(0.0, fit.end_s - fit.start_s, fit.sample_count)
+    energy = float(np.sum(component.evaluate(tau) ** 2))
+    return np.sqrt(energy) >= min_snr * max(fit.residual_rms, np.finfo(float).tiny)
+
+
+def _pick(fit: DampedSinusoidFit, expected_hz: float | None, min_snr: float
+          ) -> DampedSinusoid | None:
+    """The component nearest the expected frequency (within 15 %), else the largest."""
+    candidates = [c for c in fit.components if _significant(fit, c, min_snr)]
+    if expected_hz is not None:
+        candidates = [c for c in candidates
+                      if abs(c.natural_frequency_hz / expected_hz - 1) <= MATCH_TOLERANCE]
+        candidates.sort(key=lambda c: abs(c.natural_frequency_hz - expected_hz))
+    return candidates[0] if candidates else None
+
+
+def analyze_series(name: str, time_s: np.ndarray, values: np.ndarray, unit: str,
+                   start_s: float, end_s: float | None, options: AnalysisOptions,
+                   expected_hz: float | None = None, pencil_method: str = "matrix_pencil",
+                   ) -> ModeResult:
+    """One mode of one series: matrix pencil, FFT peak, half-power and log decrement."""
+    notes: list[str] = []
+    fit = component = None
+    try:
+        fit = fit_damped_sinusoids(time_s, values, options.max_components, start_s, end_s)
+        component = _pick(fit, expected_hz, options.min_snr)
+    except DecayError as error:
+        notes.append(f"{pencil_method}: {error}")
+    if component is None:
+        if fit is not None:
+            near = f" near {expected_hz:.3f} Hz" if expected_hz else ""
+            notes.append(f"no oscillation{near} above the noise (SNR < {options.min_snr:g})")
+        return ModeResult(name, time_s, values, unit, fit, None, (), tuple(notes))
+    frequency = component.natural_frequency_hz
+    estimates = [fit.estimate(component, pencil_method)]
+    try:
+        peaks = fft_peaks(time_s, values, 4, start_s=start_s, end_s=end_s)
+        if peaks:
+            estimates.append(min(peaks, key=lambda p: abs(p.frequency_hz - frequency)))
+    except DecayError as error:
+        notes.append(f"fft_peak: {error}")
+    for estimator in (half_power, log_decrement):
+        try:
+            estimates.append(estimator(time_s, values, frequency, start_s=start_s, end_s=end_s))
+        except DecayError as error:
+            notes.append(f"{estimator.__name__}: {error}")
+    return ModeResult(name, time_s, values, unit, fit, component, tuple(estimates), tuple(notes))
+
+
+def decay_start(time_s: np.ndarray, values: np.ndarray, options: AnalysisOptions) -> float:
+    """Start of the free decay [s] by the rule `AnalysisOptions` describes."""
+    if options.start_s is not None:
+        return options.start_s
+    if options.forcing_s is not None:
+        return excitation_onset(time_s, values) + options.forcing_s
+    return free_decay_start(time_s, values)
+
+
+def tof_quick_estimate(time_s: np.ndarray, range_mm: np.ndarray, options: AnalysisOptions,
+                       expected_hz: float | None = None) -> ModeResult:
+    """The fundamental from the ToF range alone (between drops).
+
+    The ToF sees the mean level over its footprint, so it sees the lateral mode only where the
+    footprint is off-centre, and its clock is the Arduino's: the window starts at the series'
+    own excitation (largest swing, or onset + forcing), not the camera's.
+    """
+    start = decay_start(time_s, range_mm, replace(options, start_s=None))
+    return analyze_series("lateral_1", time_s, range_mm, "mm", start, None, options,
+                          expected_hz, pencil_method="tof")
+
+
+def tilt_steps(recording: SurfaceRecording) -> list[TiltStep]:
+    """Static plateaus of the per-frame plane tilt; two or more apart make a tilt series."""
+    tilts = np.full((len(recording.time_s), 2), np.nan)
+    for frame, points in enumerate(recording.points_mm):
+        if np.isfinite(points).all(axis=1).sum() >= 3:
+            plane = fit_plane(points)
+            tilts[frame] = np.degrees([plane.tilt_x_rad, plane.tilt_y_rad])
+    plateaus: list[list[int]] = []
+    for frame in np.flatnonzero(np.isfinite(tilts).all(axis=1)):
+        current = plateaus[-1] if plateaus else None
+        if current and np.all(np.abs(tilts[frame] - np.median(tilts[current], axis=0))
+                              <= TILT_STEP_DEG):
+            current.append(int(frame))
+        else:
+            plateaus.append([int(frame)])
+    steps = []
+    for frames in (p for p in plateaus if len(p) >= MIN_PLATEAU_FRAMES):
+        plane = fit_plane(recording.points_mm[frames].reshape(-1, 3))
+        steps.append(TiltStep(float(recording.time_s[frames[0]]),
+                              float(recording.time_s[frames[-1]]), len(frames), plane.p00_mm,
+                              plane.p10, plane.p01, float(np.degrees(plane.tilt_x_rad)),
+                              float(np.degrees(plane.tilt_y_rad)), plane.r_squared,
+                              plane.rmse_mm, plane.sse_mm2, plane.point_count))
+    angles = np.array([[s.tilt_x_deg, s.tilt_y_deg] for s in steps]).reshape(-1, 2)
+    spread = np.ptp(angles, axis=0).max() if len(steps) >= 2 else 0.0
+    return steps if spread > 2 * TILT_STEP_DEG else []
+
+
+def meniscus_profile(recording: SurfaceRecording, radius_mm: float, before_s: float
+                     ) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], str]:
+    """Radial profile of the line laser's points: before the excitation if enough, else all."""
+    points, times = recording.line_points_mm, recording.line_time_s
+    source = "line laser, whole record"
+    if (times < before_s).sum() >= MIN_MENISCUS_POINTS:
+        points, source = points[times < before_s], f"line laser before {before_s:.2f} s"
+    if len(points) == 0:
+        spots = recording.points_mm.reshape(-1, 3)
+        points, source = spots, "laser spots, whole record (no line points)"
+    return radial_profile(points, radius_mm), source
+
+
+def analyze(recording: SurfaceRecording, rig: Rig, options: AnalysisOptions | None = None
+            ) -> SloshingAnalysis:
+    """Separate the modes, estimate each one's frequency and damping, tilt table, meniscus."""
+    options = options or AnalysisOptions()
+    gravity = rig.gravity_m_s2 if options.gravity_m_s2 is None else options.gravity_m_s2
+    theory = theoretical_modes(rig.container.radius_mm, rig.container.fill_height_mm, gravity,
+                               rig.fluid.surface_tension_n_m, rig.fluid.density_kg_m3)
+    expected = {m.name: m.frequency_hz for m in theory} if gravity > 0 else {}
+    expected.update(options.expected_hz)
+    modal = modal_series(recording.time_s, recording.points_mm, rig.container.radius_mm)
+    coordinates = mode_coordinates(modal)
+    first: ModeCoordinate = coordinates[0]
+    start = decay_start(first.time_s, first.values_mm, options)
+    finite_window(first.time_s, first.values_mm, start, options.end_s)
+    end = options.end_s if options.end_s is not None else float(recording.time_s[-1])
+    modes = []
+    for coordinate in coordinates:
+        result = analyze_series(coordinate.name, coordinate.time_s, coordinate.values_mm, "mm",
+                                start, options.end_s, options, expected.get(coordinate.name))
+        modes.append(ModeResult(**{**vars(result),
+                                   "azimuth_deg": float(np.degrees(coordinate.azimuth_rad))}))
+    tof = ()
+    if len(recording.tof_time_s) >= 16:
+        tof = (tof_quick_estimate(recording.tof_time_s, recording.tof_range_mm, options,
+                                  expected.get("lateral_1")),)
+    meniscus, meniscus_source = meniscus_profile(recording, rig.container.radius_mm, start)
+    return SloshingAnalysis(recording.source, (float(start), end), gravity, tuple(theory),
+                            tuple(modes), tof, tuple(tilt_steps(recording)), meniscus,
+                            meniscus_source)

@@ -1,0 +1,140 @@
+"""What the analysis reads: surface points per frame and laser, line points, ToF ranges.
+
+Sources: an MCAP recording (the reconstruction node's PointCloud2 topics, sensor_msgs/Range for
+the ToF, decoded from the schemas the file carries), or a points CSV with the columns
+`frame, t_s, laser_id, X_mm, Y_mm, Z_mm` (more columns are ignored; laser_id 65535 is the line).
+"""
+
+from __future__ import annotations
+
+import csv
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+LINE_LASER_ID = 65535
+"""laser_id of the line laser's points (as in the reconstruction node's clouds)."""
+POINT_FIELD_TYPES = {1: "i1", 2: "u1", 3: "<i2", 4: "<u2", 5: "<i4", 6: "<u4", 7: "<f4", 8: "<f8"}
+"""sensor_msgs/PointField datatype → numpy type (little-endian clouds)."""
+POINTS_COLUMNS = ("frame", "t_s", "laser_id", "X_mm", "Y_mm", "Z_mm")
+
+
+class RecordingError(ValueError):
+    """A recording or table the analysis cannot read; the message names the problem."""
+
+
+@dataclass(frozen=True)
+class SurfaceRecording:
+    """Surface points per frame and diode [mm] (NaN = not measured), line points, ToF ranges."""
+
+    time_s: np.ndarray              # (F,) frame times
+    laser_ids: np.ndarray           # (L,)
+    points_mm: np.ndarray           # (F, L, 3)
+    line_time_s: np.ndarray = field(default_factory=lambda: np.empty(0))  # (M,)
+    line_points_mm: np.ndarray = field(default_factory=lambda: np.empty((0, 3)))  # (M, 3)
+    tof_time_s: np.ndarray = field(default_factory=lambda: np.empty(0))
+    tof_range_mm: np.ndarray = field(default_factory=lambda: np.empty(0))
+    source: str = ""
+
+
+def recording_from_rows(time_s: np.ndarray, laser_ids: np.ndarray, points_mm: np.ndarray,
+                        source: str = "", tof: tuple[np.ndarray, np.ndarray] | None = None,
+                        ) -> SurfaceRecording:
+    """Group rows of (time [s], laser id, X Y Z [mm]) into frames; the line's rows stay a list."""
+    time_s, laser_ids = np.asarray(time_s, dtype=float), np.asarray(laser_ids, dtype=int)
+    points_mm = np.asarray(points_mm, dtype=float).reshape(-1, 3)
+    line = laser_ids == LINE_LASER_ID
+    spot_times, frame_of = np.unique(time_s[~line], return_inverse=True)
+    ids, laser_of = np.unique(laser_ids[~line], return_inverse=True)
+    if len(spot_times) == 0:
+        raise RecordingError(f"{source}: no laser spot points")
+    table = np.full((len(spot_times), len(ids), 3), np.nan)
+    table[frame_of, laser_of] = points_mm[~line]
+    tof_time, tof_range = tof if tof is not None else (np.empty(0), np.empty(0))
+    return SurfaceRecording(spot_times, ids, table, time_s[line], points_mm[line],
+                            np.asarray(tof_time, dtype=float), np.asarray(tof_range, dtype=float),
+                            source)
+
+
+def read_points_csv(path: str | Path) -> SurfaceRecording:
+    """A points CSV (`sds export` layout; lines starting with # are comments)."""
+    path = Path(path)
+    with path.open(newline="") as stream:
+        reader = csv.DictReader(line for line in stream if not line.startswith("#"))
+        missing = [c for c in POINTS_COLUMNS if c not in (reader.fieldnames or ())]
+        if missing:
+            raise RecordingError(f"{path}: missing columns {', '.join(missing)}")
+        rows = list(reader)
+    try:
+        times = np.array([float(r["t_s"]) for r in rows])
+        ids = np.array([int(r["laser_id"]) for r in rows])
+        points = np.array([[float(r["X_mm"]), float(r["Y_mm"]), float(r["Z_mm"])] for r in rows])
+    except ValueError as error:
+        raise RecordingError(f"{path}: {error}") from None
+    return recording_from_rows(times, ids, points, str(path))
+
+
+def _cloud_points(msg) -> tuple[np.ndarray, np.ndarray] | None:
+    """(laser ids, X Y Z) of a decoded PointCloud2 with a laser_id field, else None."""
+    names = [f.name for f in msg.fields]
+    if "laser_id" not in names or msg.is_bigendian:
+        return None
+    dtype = np.dtype({"names": names, "offsets": [f.offset for f in msg.fields],
+                      "formats": [POINT_FIELD_TYPES[f.datatype] for f in msg.fields],
+                      "itemsize": msg.point_step})
+    cloud = np.frombuffer(bytes(msg.data), dtype, count=msg.width * msg.height)
+    return (cloud["laser_id"].astype(int),
+            np.column_stack([cloud["x"], cloud["y"], cloud["z"]]).astype(float))
+
+
+def _stamp_s(msg) -> float:
+    return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+
+
+def read_mcap(path: str | Path) -> SurfaceRecording:
+    """Every surface cloud (PointCloud2 with laser_id) and ToF range (sensor_msgs/Range [m])."""
+    from mcap.exceptions import McapError
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    path = Path(path)
+    rows: dict[str, list[np.ndarray]] = defaultdict(list)
+    tof_time, tof_range = [], []
+    try:
+        with path.open("rb") as stream:
+            reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+            for schema, _, _, msg in reader.iter_decoded_messages():
+                if schema.name == "sensor_msgs/msg/PointCloud2":
+                    cloud = _cloud_points(msg)
+                    if cloud is not None and len(cloud[0]):
+                        rows["time"].append(np.full(len(cloud[0]), _stamp_s(msg)))
+                        rows["id"].append(cloud[0])
+                        rows["xyz"].append(cloud[1])
+                elif schema.name == "sensor_msgs/msg/Range" and np.isfinite(msg.range):
+                    tof_time.append(_stamp_s(msg))
+                    tof_range.append(msg.range * 1e3)
+    except (McapError, OSError, ValueError) as error:
+        raise RecordingError(f"{path}: {error}") from None
+    if not rows:
+        raise RecordingError(f"{path}: no PointCloud2 with a laser_id field (a recording of the "
+                             "reconstruction node's points topic is needed)")
+    return recording_from_rows(np.concatenate(rows["time"]), np.concatenate(rows["id"]),
+                               np.concatenate(rows["xyz"]), str(path),
+                               (np.array(tof_time), np.array(tof_range)))
+
+
+def read_series_csv(path: str | Path) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """A time-series table: first column time [s], one column per series (e.g. one spot's px)."""
+    path = Path(path)
+    with path.open(newline="") as stream:
+        rows = [r for r in csv.reader(line for line in stream if not line.startswith("#")) if r]
+    if len(rows) < 2 or len(rows[0]) < 2:
+        raise RecordingError(f"{path}: need a header and a time column plus one or more series")
+    try:
+        table = np.array([[float(v) if v.strip() else np.nan for v in r] for r in rows[1:]])
+    except ValueError as error:
+        raise RecordingError(f"{path}: {error}") from None
+    names = [name.strip() for name in rows[0]]
+    return table[:, 0], {name: table[:, k] for k, name in enumerate(names[1:], start=1)}
