@@ -15,7 +15,11 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
 
 HEADER = "$SDS1"
 FIELDS = {"IMU": ("ax_mg", "ay_mg", "az_mg"), "TOF": ("range_mm", "status"), "TRG": ("level",),
@@ -84,3 +88,26 @@ def parse_line(line: str | bytes) -> Record:
     except ValueError as error:
         raise ProtocolError(f"non-integer field in {body!r}") from error
     return Record(numbers[0], numbers[1], parts[3], tuple(numbers[2:]))
+
+
+def read_log(path: str | Path) -> tuple[list[Record], int]:
+    """Every valid record of a serial capture or SD-card log, and how many lines were rejected."""
+    records, rejected = [], 0
+    with Path(path).open("rb") as stream:
+        for line in stream:
+            if not line.strip():
+                continue
+            try:
+                records.append(parse_line(line))
+            except ProtocolError:
+                rejected += 1
+    return records, rejected
+
+
+def unwrap_time_s(t_us: Sequence[int]) -> np.ndarray:
+    """Device times [s] from `t_us` values, undoing the 2³² µs wrap of micros()."""
+    ticks = np.asarray(t_us, dtype=np.int64)
+    if len(ticks) == 0:
+        return np.empty(0)
+    elapsed_us = np.concatenate([[0], np.cumsum(np.diff(ticks) % WRAP)])
+    return (ticks[0] + elapsed_us) * 1e-6

@@ -14,7 +14,6 @@ from sds_recon.sloshing.estimators import (
     ModeEstimate,
     excitation_onset,
     fft_peaks,
-    finite_window,
     fit_damped_sinusoids,
     free_decay_start,
     half_power,
@@ -247,8 +246,10 @@ def analyze(recording: SurfaceRecording, rig: Rig, options: AnalysisOptions | No
     modal = modal_series(recording.time_s, recording.points_mm, rig.container.radius_mm)
     coordinates = mode_coordinates(modal)
     first: ModeCoordinate = coordinates[0]
-    start = decay_start(first.time_s, first.values_mm, options)
-    finite_window(first.time_s, first.values_mm, start, options.end_s)
+    try:
+        start = decay_start(first.time_s, first.values_mm, options)
+    except DecayError:
+        start = float(recording.time_s[0])   # no decay to find: each mode says why below
     end = options.end_s if options.end_s is not None else float(recording.time_s[-1])
     modes = []
     for coordinate in coordinates:
@@ -264,3 +265,33 @@ def analyze(recording: SurfaceRecording, rig: Rig, options: AnalysisOptions | No
     return SloshingAnalysis(recording.source, (float(start), end), gravity, tuple(theory),
                             tuple(modes), tof, tuple(tilt_steps(recording)), meniscus,
                             meniscus_source)
+
+
+def analyze_table(source: str, time_s: np.ndarray, series: dict[str, np.ndarray], rig: Rig,
+                  options: AnalysisOptions | None = None, unit: str = "",
+                  tof: bool = False) -> SloshingAnalysis:
+    """Each column of a time-series table as one record (single-point mode, seed Sec. 4.4).
+
+    Without expected frequencies a column reports its largest oscillation; with them (or the
+    1 g theory), one result per expected mode found in it. `tof`: the columns are ToF ranges.
+    """
+    options = options or AnalysisOptions()
+    gravity = rig.gravity_m_s2 if options.gravity_m_s2 is None else options.gravity_m_s2
+    theory = theoretical_modes(rig.container.radius_mm, rig.container.fill_height_mm, gravity,
+                               rig.fluid.surface_tension_n_m, rig.fluid.density_kg_m3)
+    expected = dict(options.expected_hz) or (
+        {m.name: m.frequency_hz for m in theory[:2]} if gravity > 0 else {})
+    results, windows = [], []
+    for column, values in series.items():
+        start = decay_start(time_s, values, options)
+        windows.append(start)
+        targets = expected.items() if expected else [(column, None)]
+        for mode, frequency in targets:
+            name = mode if len(series) == 1 or not expected else f"{column}:{mode}"
+            results.append(analyze_series(name, time_s, values, unit, start, options.end_s,
+                                          options, frequency, "tof" if tof else "matrix_pencil"))
+    end = options.end_s if options.end_s is not None else float(np.nanmax(time_s))
+    empty = (np.empty(0), np.empty(0), np.empty(0, dtype=int))
+    modes, tof_results = (tuple(results), ()) if not tof else ((), tuple(results))
+    return SloshingAnalysis(source, (float(min(windows)), end), gravity, tuple(theory), modes,
+                            tof_results, (), empty, "none")
