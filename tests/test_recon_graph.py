@@ -9,11 +9,18 @@ import pytest
 from ros_helpers import RELIABLE, Probe, SdsGraphRun
 from sds_recon.recon_node import LINE_LASER_ID, cloud_dtype
 from sds_recon.rig import load_rig
+from sds_recon.sloshing.theory import ModeShape
 from sds_sim.optics import line_laser_rays, ray_surface_points
-from sds_sim.surface import Surface
+from sds_sim.surface import ModeMotion, Surface
 from sensor_msgs.msg import PointCloud2
 
-from sds_msgs.msg import LaserLineProfile, LaserSpot, LaserSpotArray, SurfaceFit
+from sds_msgs.msg import (
+    LaserLineProfile,
+    LaserSpot,
+    LaserSpotArray,
+    SloshingEstimate,
+    SurfaceFit,
+)
 
 pytestmark = pytest.mark.ros
 
@@ -102,3 +109,43 @@ def test_missing_rig_is_a_clear_error():
     graph = SdsGraphRun("recon.yaml", "--set", "recon.rig=/nonexistent/rig.yaml")
     assert graph.wait(timeout=60) == 2
     assert "cannot load the rig" in graph.output() and "Traceback" not in graph.output()
+
+
+def test_running_estimates_follow_a_decay(repo):
+    """A 1 g lateral decay fed frame by frame: the node publishes its frequency and damping."""
+    rig_file = repo / "config" / "rigs" / "stelium.yaml"
+    rig = load_rig(rig_file)
+    motion = ModeMotion(ModeShape(1, 1), 3.0, 2.79, 0.01, 0.0, 0.2)
+    emitters = np.array([d.emitter_mm for d in rig.diodes])
+    directions = np.array([d.direction for d in rig.diodes])
+    probe = Probe("recon_probe")
+    graph = SdsGraphRun("recon.yaml", "--set", f"recon.rig={rig_file}")
+    try:
+        estimates = probe.collect(SloshingEstimate, "/recon/sloshing")
+        fits = probe.collect(SurfaceFit, "/recon/surface_fit")
+        spots_pub = probe.node.create_publisher(LaserSpotArray, "/tracker/spots", RELIABLE)
+        assert wait_until(lambda: spots_pub.get_subscription_count() > 0
+                          and probe.node.count_publishers("/recon/sloshing") > 0
+                          and probe.node.count_publishers("/recon/surface_fit") > 0), \
+            graph.output()
+        for frame in range(120):
+            time_s = frame / 30.0
+            surface = Surface(55.0, (motion,))
+            pixels = rig.project(ray_surface_points(surface, emitters, directions, time_s))
+            message = LaserSpotArray(frame_index=frame)
+            message.header.stamp.sec, nanosec = divmod(round(time_s * 1e9), 10**9)
+            message.header.stamp.nanosec = nanosec
+            message.spots = [LaserSpot(laser_id=d.laser_id, x_px=x, y_px=y, sigma_px=0.05)
+                             for d, (x, y) in zip(rig.diodes, pixels, strict=True)]
+            spots_pub.publish(message)
+            time.sleep(0.005)
+        assert wait_until(lambda: len(fits) == 120), graph.output()
+        assert wait_until(lambda: any(e.window_end_s > 2.9 for e in estimates)), graph.output()
+    finally:
+        probe.close()
+        graph.stop()
+    last = [e for e in estimates if e.window_end_s == max(x.window_end_s for x in estimates)]
+    pencil = next(e for e in last if e.mode == "lateral_1" and e.method == "matrix_pencil")
+    assert pencil.frequency_hz == pytest.approx(2.79, rel=1e-3)
+    assert pencil.damping_ratio == pytest.approx(0.01, rel=0.05)
+    assert 0.2 <= pencil.window_start_s <= 0.2 + 1 / 2.79 / 4 + 0.04   # the first crest

@@ -9,8 +9,15 @@ from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2, PointField
 
-from sds_msgs.msg import LaserLineProfile, LaserSpot, LaserSpotArray, SurfaceFit
+from sds_msgs.msg import (
+    LaserLineProfile,
+    LaserSpot,
+    LaserSpotArray,
+    SloshingEstimate,
+    SurfaceFit,
+)
 from sds_recon.rig import Rig, RigError, load_rig
+from sds_recon.sloshing.running import RunningAnalysis
 from sds_recon.surface_fit import fit_modes, fit_plane
 from sds_recon.triangulation import (
     beam_height_sigma,
@@ -57,6 +64,7 @@ class ReconstructionNode(Node):
         self.declare_parameter("beam_weight", 0.5)
         self.declare_parameter("default_sigma_px", 0.1)
         self.declare_parameter("frame_id", "world")
+        self.declare_parameter("estimate_period_s", 1.0)
         try:
             self._rig: Rig = load_rig(self.get_parameter("rig").value)
         except (RigError, OSError) as error:
@@ -72,6 +80,9 @@ class ReconstructionNode(Node):
         self._points_pub = self.create_publisher(PointCloud2, "points", qos)
         self._line_pub = self.create_publisher(PointCloud2, "line_points", qos)
         self._fit_pub = self.create_publisher(SurfaceFit, "surface_fit", qos)
+        self._estimate_pub = self.create_publisher(SloshingEstimate, "sloshing", qos)
+        period = float(self.get_parameter("estimate_period_s").value)
+        self._running = RunningAnalysis(period) if period > 0 else None
         self.create_subscription(LaserSpotArray, "spots", self._on_spots, qos)
         self.create_subscription(LaserLineProfile, "line", self._on_line, qos)
         self.get_logger().info(f"rig {self.get_parameter('rig').value}: "
@@ -114,6 +125,23 @@ class ReconstructionNode(Node):
         except ValueError:
             pass  # too few points this frame: no modal amplitudes rather than invented ones
         self._fit_pub.publish(fit)
+        if self._running is not None and fit.mode_names:
+            stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+            self._running.add(stamp, tuple(fit.mode_names), np.array(fit.modal_amplitudes_mm))
+            if self._running.due():
+                self._publish_estimates(msg.header)
+
+    def _publish_estimates(self, header) -> None:
+        """The running estimates of the lateral modes on the free decay seen so far."""
+        for mode in self._running.estimate():
+            for estimate in mode.estimates:
+                self._estimate_pub.publish(SloshingEstimate(
+                    header=header, mode=mode.name, method=estimate.method,
+                    frequency_hz=estimate.frequency_hz,
+                    frequency_sigma_hz=estimate.frequency_sigma_hz,
+                    damping_ratio=estimate.damping_ratio,
+                    damping_ratio_sigma=estimate.damping_ratio_sigma,
+                    window_start_s=estimate.window_start_s, window_end_s=estimate.window_end_s))
 
     def _on_line(self, msg: LaserLineProfile) -> None:
         pixels = np.column_stack([msg.x_px, msg.y_px]).reshape(-1, 2)

@@ -1,0 +1,57 @@
+"""Running estimates during a drop: modal amplitudes accumulated frame by frame, re-analysed."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sds_recon.sloshing.analysis import AnalysisOptions, ModeResult, analyze_series, decay_start
+from sds_recon.sloshing.estimators import DecayError
+from sds_recon.sloshing.modal import ModalSeries, mode_coordinates
+
+
+class RunningAnalysis:
+    """Per-frame modal amplitudes in; every `period_s` of data, the modes' current estimates."""
+
+    def __init__(self, period_s: float, options: AnalysisOptions | None = None,
+                 expected_hz: dict[str, float] | None = None, max_frames: int = 3600) -> None:
+        self.period_s = period_s
+        self.options = options or AnalysisOptions()
+        self.expected_hz = expected_hz or {}
+        self.max_frames = max_frames
+        self._names: tuple[str, ...] = ()
+        self._times: list[float] = []
+        self._rows: list[np.ndarray] = []
+        self._last_s = -np.inf
+
+    def add(self, time_s: float, names: tuple[str, ...], amplitudes_mm: np.ndarray) -> None:
+        """One frame's modal fit; a change of mode set starts over."""
+        if names != self._names:
+            self._names, self._times, self._rows = names, [], []
+        self._times.append(time_s)
+        self._rows.append(np.asarray(amplitudes_mm, dtype=float))
+        if len(self._times) > self.max_frames:
+            del self._times[0], self._rows[0]
+
+    def due(self) -> bool:
+        """True when `period_s` of data has arrived since the last estimate."""
+        return bool(self._times) and self._times[-1] - self._last_s >= self.period_s
+
+    def estimate(self, modes: tuple[str, ...] = ("lateral_1", "lateral_2")) -> list[ModeResult]:
+        """The named modes' estimates on the free decay so far (empty until one is found)."""
+        if not self._times:
+            return []
+        self._last_s = self._times[-1]
+        series = ModalSeries(np.array(self._times), self._names, np.array(self._rows),
+                             np.full(len(self._times), np.nan))
+        results = []
+        for coordinate in mode_coordinates(series):
+            if coordinate.name not in modes:
+                continue
+            try:
+                start = decay_start(coordinate.time_s, coordinate.values_mm, self.options)
+            except DecayError:
+                continue
+            results.append(analyze_series(coordinate.name, coordinate.time_s,
+                                          coordinate.values_mm, "mm", start, None, self.options,
+                                          self.expected_hz.get(coordinate.name)))
+        return results
