@@ -335,3 +335,29 @@ def test_points_rows_round_trip(repo: Path) -> None:
     recording = observe(scenario)
     again = recording_from_rows(*points_rows(recording))
     np.testing.assert_array_equal(again.points_mm, recording.points_mm)
+
+
+def test_single_point_mode_from_one_spots_pixels(repo: Path, tmp_path: Path) -> None:
+    """Seed Sec. 4.4: one spot's pixel track, no triangulation, gives the 1 g lateral modes."""
+    scenario = load_scenario(repo / "config" / "scenarios" / "ground_kick.yaml")
+    rig = scenario.rig
+    diode = rig.diodes[0]
+    rng = np.random.default_rng(3)
+    rows = ["t_s,x_px,y_px"]
+    for frame in range(scenario.frame_count):
+        time_s = frame / scenario.fps
+        hit = ray_surface_points(scenario.surface_at(time_s), np.array([diode.emitter_mm]),
+                                 np.array([diode.direction]), time_s)
+        x, y = rig.project(hit)[0] + rng.normal(0, TRACKER_NOISE_PX, 2)
+        rows.append(f"{time_s:.6f},{x:.4f},{y:.4f}")
+    table = tmp_path / "spot0.csv"
+    table.write_text("\n".join(rows) + "\n")
+    done = run_sds("analyze", str(table), "--out", str(tmp_path / "out"))
+    assert done.returncode == 0, done.stderr
+    result = json.loads((tmp_path / "out" / "analysis.json").read_text())
+    found = {m["mode"]: m["estimates"][0] for m in result["modes"] if m["estimates"]}
+    truth = {f"lateral_{m.shape.index}": m.frequency_hz
+             for m in scenario.mode_motions() if m.shape.order == 1}
+    # diode 0 sits on the X axis, where the kick along X moves its spot along image x
+    assert found["x_px:lateral_1"]["frequency_hz"] == pytest.approx(truth["lateral_1"], rel=0.005)
+    assert found["x_px:lateral_2"]["frequency_hz"] == pytest.approx(truth["lateral_2"], rel=0.005)
