@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import threading
+from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
 from rclpy.node import Node
@@ -17,6 +18,7 @@ from sds_msgs.msg import (
     SurfaceFit,
 )
 from sds_recon.rig import Rig, RigError, load_rig
+from sds_recon.sloshing.modal import ModalSeries
 from sds_recon.sloshing.running import RunningAnalysis
 from sds_recon.surface_fit import fit_modes, fit_plane
 from sds_recon.triangulation import (
@@ -65,6 +67,8 @@ class ReconstructionNode(Node):
         self.declare_parameter("default_sigma_px", 0.1)
         self.declare_parameter("frame_id", "world")
         self.declare_parameter("estimate_period_s", 1.0)
+        self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sloshing")
+        self._estimating: Future | None = None
         try:
             self._rig: Rig = load_rig(self.get_parameter("rig").value)
         except (RigError, OSError) as error:
@@ -128,12 +132,20 @@ class ReconstructionNode(Node):
         if self._running is not None and fit.mode_names:
             stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
             self._running.add(stamp, tuple(fit.mode_names), np.array(fit.modal_amplitudes_mm))
-            if self._running.due():
-                self._publish_estimates(msg.header)
+            if self._running.due() and (self._estimating is None or self._estimating.done()):
+                self._estimating = self._worker.submit(self._publish_estimates, msg.header,
+                                                       self._running.snapshot())
+                self._estimating.add_done_callback(self._report_failure)
 
-    def _publish_estimates(self, header) -> None:
-        """The running estimates of the lateral modes on the free decay seen so far."""
-        for mode in self._running.estimate():
+    def _report_failure(self, future: Future) -> None:
+        """A running estimate that raised is logged; frames and fits go on."""
+        if not future.cancelled() and future.exception() is not None:
+            self.get_logger().error(f"running sloshing estimate failed: {future.exception()!r}")
+
+    def _publish_estimates(self, header, series: ModalSeries) -> None:
+        """The running estimates of the lateral modes (in the worker thread: a fit takes up to
+        0.15 s, which must not hold up the frames)."""
+        for mode in self._running.estimate(series):
             for estimate in mode.estimates:
                 self._estimate_pub.publish(SloshingEstimate(
                     header=header, mode=mode.name, method=estimate.method,
@@ -142,6 +154,11 @@ class ReconstructionNode(Node):
                     damping_ratio=estimate.damping_ratio,
                     damping_ratio_sigma=estimate.damping_ratio_sigma,
                     window_start_s=estimate.window_start_s, window_end_s=estimate.window_end_s))
+
+    def destroy_node(self) -> None:
+        """Let a running estimate finish before the publishers go."""
+        self._worker.shutdown(wait=True, cancel_futures=True)
+        super().destroy_node()
 
     def _on_line(self, msg: LaserLineProfile) -> None:
         pixels = np.column_stack([msg.x_px, msg.y_px]).reshape(-1, 2)

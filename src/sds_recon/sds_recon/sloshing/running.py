@@ -36,13 +36,18 @@ class RunningAnalysis:
         """True when `period_s` of data has arrived since the last estimate."""
         return bool(self._times) and self._times[-1] - self._last_s >= self.period_s
 
-    def estimate(self, modes: tuple[str, ...] = ("lateral_1", "lateral_2")) -> list[ModeResult]:
-        """The named modes' estimates on the free decay so far (empty until one is found)."""
-        if not self._times:
+    def snapshot(self) -> ModalSeries:
+        """A copy of the amplitudes so far, to estimate from (in another thread if need be)."""
+        self._last_s = self._times[-1] if self._times else self._last_s
+        return ModalSeries(np.array(self._times), self._names,
+                           np.array(self._rows).reshape(len(self._times), len(self._names)),
+                           np.full(len(self._times), np.nan))
+
+    def estimate(self, series: ModalSeries,
+                 modes: tuple[str, ...] = ("lateral_1", "lateral_2")) -> list[ModeResult]:
+        """The named modes' estimates on the free decay in `series` (none until one is found)."""
+        if len(series.time_s) == 0:
             return []
-        self._last_s = self._times[-1]
-        series = ModalSeries(np.array(self._times), self._names, np.array(self._rows),
-                             np.full(len(self._times), np.nan))
         results = []
         for coordinate in mode_coordinates(series):
             if coordinate.name not in modes:
