@@ -6,6 +6,7 @@ import json
 import re
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -32,7 +33,7 @@ from sds_recon.sloshing.recording import SurfaceRecording, read_mcap, recording_
 from sds_recon.sloshing.theory import theoretical_modes
 from sds_recon.triangulation import triangulate_beams
 from sds_sim.arduino import arduino_records
-from sds_sim.optics import ray_surface_points
+from sds_sim.optics import line_laser_rays, ray_surface_points
 from sds_sim.scenario import Scenario, load_scenario
 
 TRACKER_NOISE_PX = 0.05
@@ -361,3 +362,31 @@ def test_single_point_mode_from_one_spots_pixels(repo: Path, tmp_path: Path) -> 
     # diode 0 sits on the X axis, where the kick along X moves its spot along image x
     assert found["x_px:lateral_1"]["frequency_hz"] == pytest.approx(truth["lateral_1"], rel=0.005)
     assert found["x_px:lateral_2"]["frequency_hz"] == pytest.approx(truth["lateral_2"], rel=0.005)
+
+
+def test_meniscus_profile_from_the_line_laser_before_the_kick(repo: Path) -> None:
+    """Line points before the excitation give the meniscus: flat inside, rising at the wall."""
+    scenario = load_scenario(repo / "config" / "scenarios" / "ground_kick.yaml",
+                             {"meniscus_height_mm": 2.0})
+    rig = scenario.rig
+    rays = line_laser_rays(rig.line_laser, rig.container.radius_mm, 400)
+    emitters = np.repeat(rig.line_laser.emitter_mm[None], len(rays), axis=0)
+    recording = observe(scenario)
+    times, points = [], []
+    for time_s in recording.time_s:
+        hits = ray_surface_points(scenario.surface_at(time_s), emitters, rays, time_s)
+        hits = hits[np.isfinite(hits).all(axis=1)]
+        times.append(np.full(len(hits), time_s))
+        points.append(hits)
+    recording = replace(recording, line_time_s=np.concatenate(times),
+                        line_points_mm=np.concatenate(points))
+    analysis = analyze(recording, rig)
+    radius, height, _ = analysis.meniscus
+    assert "before" in analysis.meniscus_source
+    truth = scenario.surface_at(0.0).height(radius, np.zeros_like(radius), 0.0)
+    finite = np.isfinite(height)
+    assert finite.sum() >= 15
+    inside = finite & (radius < 45)
+    assert np.abs(height[inside] - truth[inside]).max() < 0.01
+    rise = height[finite][-1] - height[finite][0]   # the last bin's mean, under the wall's 2 mm
+    assert truth[finite][-1] - truth[finite][0] < rise < 2.0

@@ -223,7 +223,8 @@ def tilt_steps(recording: SurfaceRecording) -> list[TiltStep]:
 
 def meniscus_profile(recording: SurfaceRecording, radius_mm: float, before_s: float
                      ) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], str]:
-    """Radial profile of the line laser's points: before the excitation if enough, else all."""
+    """Radial profile of the line laser's points before `before_s` (the excitation) if there are
+    enough, else over the whole record (the oscillation then averages out only partly)."""
     points, times = recording.line_points_mm, recording.line_time_s
     source = "line laser, whole record"
     if (times < before_s).sum() >= MIN_MENISCUS_POINTS:
@@ -261,7 +262,12 @@ def analyze(recording: SurfaceRecording, rig: Rig, options: AnalysisOptions | No
     if len(recording.tof_time_s) >= 16:
         tof = (tof_quick_estimate(recording.tof_time_s, recording.tof_range_mm, options,
                                   expected.get("lateral_1")),)
-    meniscus, meniscus_source = meniscus_profile(recording, rig.container.radius_mm, start)
+    try:
+        quiet_until = excitation_onset(first.time_s, first.values_mm)
+    except DecayError:
+        quiet_until = start
+    meniscus, meniscus_source = meniscus_profile(recording, rig.container.radius_mm,
+                                                 min(quiet_until, start))
     return SloshingAnalysis(recording.source, (float(start), end), gravity, tuple(theory),
                             tuple(modes), tof, tuple(tilt_steps(recording)), meniscus,
                             meniscus_source)

@@ -153,12 +153,15 @@ def free_decay_start(time_s: ArrayLike, values: ArrayLike) -> float:
     return float(t[np.argmax(np.abs(y - np.median(y)))])
 
 
-def excitation_onset(time_s: ArrayLike, values: ArrayLike, rest_fraction: float = 0.2,
-                     threshold: float = 8.0, samples: int = 5) -> float:
+def excitation_onset(time_s: ArrayLike, values: ArrayLike, threshold: float = 8.0,
+                     samples: int = 5) -> float:
     """First time [s] the record leaves its rest level: `samples` in a row beyond `threshold`
-    robust sigmas (1.4826 MAD) of the first `rest_fraction` of the record."""
+    robust sigmas (1.4826 MAD) of the rest, the samples before the largest swing."""
     t, y = finite_window(time_s, values)
-    rest = y[: max(MIN_SAMPLES, int(len(y) * rest_fraction))]
+    peak = int(np.argmax(np.abs(y - np.median(y))))
+    if peak < MIN_SAMPLES:
+        raise DecayError(f"{peak} samples before the largest swing; {MIN_SAMPLES} needed as rest")
+    rest = y[:peak]
     level = np.median(rest)
     sigma = 1.4826 * np.median(np.abs(rest - level))
     outside = np.abs(y - level) > threshold * max(sigma, np.finfo(float).tiny)
