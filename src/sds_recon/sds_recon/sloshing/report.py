@@ -165,6 +165,11 @@ def _format(value: float, digits: int) -> str:
     return "—" if value is None or not np.isfinite(value) else f"{value:.{digits}f}"
 
 
+def _sigma(value: float) -> str:
+    """An uncertainty to two significant digits."""
+    return "—" if value is None or not np.isfinite(value) else f"{value:.2g}"
+
+
 def _estimate_rows(result: dict) -> list[str]:
     rows = []
     for group in ("modes", "tof"):
@@ -176,9 +181,8 @@ def _estimate_rows(result: dict) -> list[str]:
                             f"{html.escape('; '.join(mode['notes']))}</td></tr>")
             for e in mode["estimates"]:
                 cells = [name, e["method"],
-                         f"{_format(e['frequency_hz'], 4)} ± {_format(e['frequency_sigma_hz'], 4)}",
-                         f"{_format(e['damping_ratio'], 4)} ± "
-                         f"{_format(e['damping_ratio_sigma'], 4)}",
+                         f"{_format(e['frequency_hz'], 4)} ± {_sigma(e['frequency_sigma_hz'])}",
+                         f"{_format(e['damping_ratio'], 4)} ± {_sigma(e['damping_ratio_sigma'])}",
                          _format(truth.get("frequency_hz", float("nan")), 4),
                          _format(truth.get("damping_ratio", float("nan")), 4),
                          _format(e.get("frequency_error_pct", float("nan")), 2),
@@ -258,12 +262,12 @@ def summary_lines(result: dict) -> list[str]:
                 lines.append(f"{name:16s} {'; '.join(mode['notes'])}")
             for e in mode["estimates"]:
                 error = ""
-                damping = (f"ζ = {e['damping_ratio']:.4f} ± {e['damping_ratio_sigma']:.4f}"
+                damping = (f"ζ = {e['damping_ratio']:.4f} ± {_sigma(e['damping_ratio_sigma'])}"
                            if np.isfinite(e["damping_ratio"]) else "ζ —")
                 if "frequency_error_pct" in e:
                     error = f"  error f {e['frequency_error_pct']:+.2f} %"
                     if np.isfinite(e["damping_error_pct"]):
                         error += f", ζ {e['damping_error_pct']:+.1f} %"
                 lines.append(f"{name:16s} {e['method']:14s} f = {e['frequency_hz']:.4f} ± "
-                             f"{e['frequency_sigma_hz']:.4f} Hz  {damping}{error}")
+                             f"{_sigma(e['frequency_sigma_hz'])} Hz  {damping}{error}")
     return lines
