@@ -1,0 +1,205 @@
+"""MCAP files of serialized ROS 2 messages: a crash-safe writer, a tolerant reader, repair.
+
+Files follow rosbag2's MCAP layout (profile "ros2", schemas in `ros2msg` encoding, CDR
+messages), so the `mcap` readers, `rosbags` and Foxglove open them.
+"""
+
+from __future__ import annotations
+
+import struct
+import threading
+import time
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+from mcap.exceptions import McapError
+from mcap.reader import NonSeekingReader, make_reader
+from mcap.records import Channel, Message, Schema
+from mcap.stream_reader import StreamReader
+from mcap.writer import CompressionType, Writer
+
+from sds_record.schemas import MESSAGE_ENCODING, SCHEMA_ENCODING, message_definition
+
+PROFILE = "ros2"
+DURABILITY_KEY = "durability"
+"""Channel metadata key: the recorded publishers' durability, transient_local or volatile."""
+COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
+                "none": CompressionType.NONE}
+
+
+@dataclass(frozen=True)
+class RecordedMessage:
+    """One message of a recording: topic, type ('pkg/msg/Type'), CDR bytes, times [ns]."""
+
+    topic: str
+    type_name: str
+    data: bytes
+    log_time_ns: int
+    publish_time_ns: int
+    latched: bool = False
+
+
+def header_stamp_ns(cdr: bytes) -> int:
+    """Stamp [ns] of a serialized message whose first field is std_msgs/Header.
+
+    CDR: a 4-byte encapsulation (byte 1 odd = little-endian), then int32 sec, uint32 nanosec.
+    """
+    order = "<" if cdr[1] & 1 else ">"
+    sec, nanosec = struct.unpack_from(f"{order}iI", cdr, 4)
+    return sec * 1_000_000_000 + nanosec
+
+
+class McapRecorder:
+    """Writes serialized messages; a chunk is closed and flushed at least every `flush_period_s`
+    so that a killed process loses at most that much (the OS keeps what was written)."""
+
+    def __init__(self, path: str | Path, compression: str = "zstd",
+                 chunk_size: int = 4 * 1024 * 1024, flush_period_s: float = 0.5) -> None:
+        if compression not in COMPRESSIONS:
+            raise ValueError(f"compression {compression!r} is not one of {sorted(COMPRESSIONS)}")
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._stream = self.path.open("wb")
+        self._writer = Writer(self._stream, chunk_size=chunk_size,
+                              compression=COMPRESSIONS[compression])
+        self._writer.start(profile=PROFILE, library="sds_record")
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, int] = {}
+        self._sequence: dict[str, int] = {}
+        self._flush_period_s = flush_period_s
+        self._last_flush = time.monotonic()
+        self._lock = threading.Lock()
+        self.message_count = 0
+        self.closed = False
+
+    def add_topic(self, topic: str, type_name: str, latched: bool = False) -> None:
+        """Register a topic (and its type's schema) before its first message; `latched`
+        (transient-local publishers) is kept in the channel's metadata for playback."""
+        with self._lock:
+            if topic in self._channels:
+                return
+            if type_name not in self._schemas:
+                self._schemas[type_name] = self._writer.register_schema(
+                    type_name, SCHEMA_ENCODING, message_definition(type_name).encode())
+            self._channels[topic] = self._writer.register_channel(
+                topic, MESSAGE_ENCODING, self._schemas[type_name],
+                {DURABILITY_KEY: "transient_local" if latched else "volatile"})
+            self._sequence[topic] = 0
+
+    def write(self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int) -> None:
+        """Append one serialized message of a registered topic."""
+        with self._lock:
+            if self.closed:
+                return
+            self._writer.add_message(self._channels[topic], log_time_ns, data, publish_time_ns,
+                                     self._sequence[topic])
+            self._sequence[topic] += 1
+            self.message_count += 1
+            self._flush_if_due()
+
+    def flush_if_due(self) -> None:
+        """Close the open chunk if `flush_period_s` has passed (call from a timer)."""
+        with self._lock:
+            if not self.closed:
+                self._flush_if_due()
+
+    def _flush_if_due(self) -> None:
+        if time.monotonic() - self._last_flush >= self._flush_period_s:
+            self._writer.flush()
+            self._last_flush = time.monotonic()
+
+    def close(self) -> None:
+        """Write the summary section and close the file."""
+        with self._lock:
+            if self.closed:
+                return
+            self.closed = True
+            self._writer.finish()
+            self._stream.close()
+
+
+def _linear_messages(path: Path) -> Iterator[tuple[Schema | None, Channel, Message]]:
+    """Every complete message in file order, stopping quietly at a truncated tail."""
+    with path.open("rb") as stream:
+        try:
+            yield from NonSeekingReader(stream).iter_messages(log_time_order=False)
+        except (McapError, EOFError, ValueError):
+            return
+
+
+def _indexed_messages(path: Path, topics: Iterable[str] | None
+                      ) -> Iterator[tuple[Schema | None, Channel, Message]]:
+    with path.open("rb") as stream:
+        yield from make_reader(stream).iter_messages(topics=topics, log_time_order=True)
+
+
+def read_messages(path: str | Path, topics: Iterable[str] | None = None
+                  ) -> Iterator[RecordedMessage]:
+    """Messages in log-time order; a file without its summary (a crash) is read linearly."""
+    path = Path(path)
+    wanted = set(topics) if topics is not None else None
+    with path.open("rb") as stream:
+        try:
+            complete = make_reader(stream).get_summary() is not None
+        except (McapError, OSError, ValueError, StopIteration):
+            complete = False
+    source = _indexed_messages(path, wanted) if complete else _linear_messages(path)
+    for schema, channel, message in source:
+        if wanted is not None and channel.topic not in wanted:
+            continue
+        yield RecordedMessage(channel.topic, schema.name if schema else "", message.data,
+                              message.log_time, message.publish_time,
+                              channel.metadata.get(DURABILITY_KEY) == "transient_local")
+
+
+@dataclass(frozen=True)
+class RepairReport:
+    """What `repair` copied."""
+
+    messages: int
+    topics: int
+    had_summary: bool
+
+
+def repair(source: str | Path, target: str | Path, compression: str = "zstd") -> RepairReport:
+    """Copy every complete message of `source` into a new file with a summary section."""
+    source, target = Path(source), Path(target)
+    if source.resolve() == target.resolve():
+        raise ValueError("repair writes a new file: give a target other than the source")
+    with source.open("rb") as stream:
+        try:
+            had_summary = make_reader(stream).get_summary() is not None
+        except (McapError, OSError, ValueError, StopIteration):
+            had_summary = False
+    schemas: dict[int, int] = {}
+    channels: dict[int, int] = {}
+    count = 0
+    with target.open("wb") as output:
+        writer = Writer(output, compression=COMPRESSIONS[compression])
+        writer.start(profile=PROFILE, library="sds_record repair")
+        for record in _linear_records(source):
+            if isinstance(record, Schema) and record.id not in schemas:
+                schemas[record.id] = writer.register_schema(record.name, record.encoding,
+                                                            record.data)
+            elif isinstance(record, Channel) and record.id not in channels:
+                channels[record.id] = writer.register_channel(
+                    record.topic, record.message_encoding, schemas.get(record.schema_id, 0),
+                    record.metadata)
+            elif isinstance(record, Message) and record.channel_id in channels:
+                writer.add_message(channels[record.channel_id], record.log_time, record.data,
+                                   record.publish_time, record.sequence)
+                count += 1
+        writer.finish()
+    return RepairReport(count, len(channels), had_summary)
+
+
+def _linear_records(path: Path) -> Iterator[Schema | Channel | Message]:
+    """Schema, channel and message records in file order (chunks opened), to a truncated end."""
+    with path.open("rb") as stream:
+        try:
+            for record in StreamReader(stream, skip_magic=False).records:
+                if isinstance(record, Schema | Channel | Message):
+                    yield record
+        except (McapError, EOFError, ValueError):
+            return

@@ -1,0 +1,180 @@
+"""ROS 2 node: play an MCAP recording into the graph, with /clock, at a rate or as fast as acked."""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+from rclpy.duration import Duration
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.time import Time
+from rosgraph_msgs.msg import Clock
+from std_msgs.msg import Header
+
+from sds_record.mcap_files import RecordedMessage, header_stamp_ns, read_messages
+from sds_record.recorder_node import message_class
+
+EXIT_INPUT_ERROR = 2
+PACINGS = ("recorded", "flood")
+
+
+def parse_remaps(items: list[str]) -> dict[str, str]:
+    """'from:=to' pairs as a dictionary."""
+    remaps = {}
+    for item in (i for i in items if i):
+        source, separator, target = item.partition(":=")
+        if not separator or not source or not target:
+            raise ValueError(f"remap {item!r}: give FROM:=TO")
+        remaps[source] = target
+    return remaps
+
+
+class PlayerNode(Node):
+    """Publish a recording's messages as they were (serialized), in log-time order.
+
+    `pacing: recorded` keeps the recorded intervals divided by `rate`; `pacing: flood` goes as
+    fast as the consumers of `ack_topic_for` acknowledge (the frame source's frame_ack
+    protocol), so nothing is dropped. /clock follows the recording's log time.
+    """
+
+    def __init__(self, node_name: str = "player", **node_kwargs) -> None:
+        super().__init__(node_name, **node_kwargs)
+        self.finished = threading.Event()
+        self.exit_code = 0
+        self.published = 0
+        for name, default in (("input", ""), ("topics", [""]), ("remap", [""]), ("rate", 1.0),
+                              ("pacing", "recorded"), ("start_s", 0.0), ("stop_s", 0.0),
+                              ("clock", True), ("wait_topic", ""), ("wait_for_subscribers", 1),
+                              ("ack_topic_for", ""), ("ack_consumers", 1),
+                              ("max_in_flight", 2), ("linger_s", 2.0)):
+            self.declare_parameter(name, default)
+        self._p = {name: self.get_parameter(name).value for name in
+                   ("input", "topics", "rate", "pacing", "start_s", "stop_s", "clock",
+                    "wait_topic", "wait_for_subscribers", "ack_topic_for", "ack_consumers",
+                    "max_in_flight", "linger_s")}
+        self._stop = threading.Event()
+        self._pending: dict[int, int] = {}   # stamp [ns] -> acks still awaited
+        self._acks = threading.Condition()
+        try:
+            self._remaps = parse_remaps(self.get_parameter("remap").value)
+            self._check_parameters()
+        except (ValueError, OSError) as error:
+            self._fail(str(error))
+            return
+        self._outputs: dict[str, object] = {}
+        self._clock_pub = self.create_publisher(Clock, "/clock", 10)
+        reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        self.create_subscription(Header, "frame_ack", self._on_ack, reliable)
+        self._thread = threading.Thread(target=self._play, name="play", daemon=True)
+        self._thread.start()
+
+    def _check_parameters(self) -> None:
+        p = self._p
+        if not p["input"] or not Path(p["input"]).is_file():
+            raise ValueError(f"parameter input={p['input']!r}: no such recording")
+        if p["pacing"] not in PACINGS:
+            raise ValueError(f"parameter pacing={p['pacing']!r} is not one of {PACINGS}")
+        if p["rate"] <= 0:
+            raise ValueError("parameter rate must be positive")
+
+    def _fail(self, reason: str) -> None:
+        self.get_logger().error(reason)
+        self.exit_code = EXIT_INPUT_ERROR
+        self.finished.set()
+
+    def _publisher(self, message: RecordedMessage):
+        topic = self._remaps.get(message.topic, message.topic)
+        if topic not in self._outputs:
+            durability = DurabilityPolicy.TRANSIENT_LOCAL if message.latched \
+                else DurabilityPolicy.VOLATILE
+            qos = QoSProfile(depth=100, history=HistoryPolicy.KEEP_LAST,
+                             reliability=ReliabilityPolicy.RELIABLE, durability=durability)
+            self._outputs[topic] = self.create_publisher(
+                message_class(message.type_name), topic, qos)
+        return self._outputs[topic]
+
+    def _wait_for_subscribers(self, topic: str) -> bool:
+        wanted = self._p["wait_for_subscribers"]
+        while self.count_subscribers(topic) < wanted and not self._stop.is_set():
+            time.sleep(0.02)
+        return not self._stop.is_set()
+
+    def _on_ack(self, msg: Header) -> None:
+        stamp_ns = Time.from_msg(msg.stamp).nanoseconds
+        with self._acks:
+            if stamp_ns in self._pending:
+                self._pending[stamp_ns] -= 1
+                if self._pending[stamp_ns] <= 0:
+                    del self._pending[stamp_ns]
+                self._acks.notify_all()
+
+    def _wait_for_credit(self) -> None:
+        with self._acks:
+            while not self._acks.wait_for(
+                    lambda: len(self._pending) < self._p["max_in_flight"] or self._stop.is_set(),
+                    timeout=5.0):
+                self.get_logger().warning(f"{len(self._pending)} message(s) still await acks")
+
+    def _play(self) -> None:
+        """Publish thread: every selected message between the start and stop offsets."""
+        p = self._p
+        topics = [t for t in p["topics"] if t] or None
+        flow_topic = p["ack_topic_for"] if p["pacing"] == "flood" else ""
+        first_ns = None
+        wall_start = 0.0
+        try:
+            for message in read_messages(p["input"], topics):
+                if self._stop.is_set():
+                    return
+                if first_ns is None:
+                    first_ns = message.log_time_ns
+                offset_s = (message.log_time_ns - first_ns) * 1e-9
+                if offset_s < p["start_s"]:
+                    continue
+                if p["stop_s"] > 0 and offset_s > p["stop_s"]:
+                    break
+                publisher = self._publisher(message)
+                if not wall_start:
+                    if p["wait_topic"] and not self._wait_for_subscribers(p["wait_topic"]):
+                        return
+                    wall_start = time.monotonic() - (offset_s - p["start_s"]) / p["rate"]
+                if p["pacing"] == "recorded":
+                    delay = wall_start + (offset_s - p["start_s"]) / p["rate"] - time.monotonic()
+                    if delay > 0:
+                        time.sleep(delay)
+                if message.topic == flow_topic:
+                    self._wait_for_credit()
+                    with self._acks:
+                        self._pending[header_stamp_ns(message.data)] = p["ack_consumers"]
+                if p["clock"]:
+                    self._clock_pub.publish(Clock(clock=Time(
+                        nanoseconds=message.log_time_ns).to_msg()))
+                publisher.publish(message.data)
+                self.published += 1
+        except (OSError, ValueError, ImportError, AttributeError) as error:
+            self._fail(f"cannot play {p['input']}: {error}")
+            return
+        if flow_topic:
+            with self._acks:
+                self._acks.wait_for(lambda: not self._pending or self._stop.is_set(),
+                                    timeout=10.0)
+        for publisher in self._outputs.values():
+            publisher.wait_for_all_acked(Duration(seconds=5))
+        self.get_logger().info(f"played {self.published} messages from {p['input']}")
+        self._stop.wait(p["linger_s"])   # the consumers' last outputs (e.g. the Hampel window)
+        self.finished.set()
+
+    def close(self) -> None:
+        """Stop publishing (the graph is shutting down)."""
+        self._stop.set()
+        with self._acks:
+            self._acks.notify_all()
+
+
+def main(args: list[str] | None = None) -> None:
+    """Run the node alone in this process."""
+    from sds_bringup.node_host import run_nodes
+
+    raise SystemExit(run_nodes([(PlayerNode, "player", True)], args))

@@ -1,0 +1,131 @@
+"""ROS 2 node: record the graph's topics (all, or a chosen set) to an MCAP file."""
+
+from __future__ import annotations
+
+import importlib
+import threading
+from datetime import datetime
+from pathlib import Path
+
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.time import Time
+from std_msgs.msg import Header
+
+from sds_record.mcap_files import McapRecorder, header_stamp_ns
+from sds_record.schemas import SchemaError
+
+EXIT_CONFIG_ERROR = 2
+SKIPPED_TOPICS = ("/rosout", "/parameter_events")
+
+
+def message_class(type_name: str) -> type:
+    """The Python message class of 'package/msg/Type'."""
+    package, kind, name = type_name.split("/")
+    return getattr(importlib.import_module(f"{package}.{kind}"), name)
+
+
+class RecorderNode(Node):
+    """Subscribe (reliably, serialized) to every topic it discovers, or to `topics`; write MCAP.
+
+    Messages of the `ack_for` topics are acknowledged on frame_ack once written (the frame
+    source's flood pacing then waits for the recorder too, so no frame is dropped).
+    Latched topics (all publishers transient-local, e.g. the camera model) are subscribed
+    transient-local so their last message is recorded even if it was sent before the recorder
+    started. The log time is the recorder's ROS clock at reception (simulated time with
+    use_sim_time); the publish time is the DDS source timestamp.
+    """
+
+    def __init__(self, node_name: str = "recorder", **node_kwargs) -> None:
+        super().__init__(node_name, **node_kwargs)
+        self.finished = threading.Event()
+        self.exit_code = 0
+        self.declare_parameter("output", "")
+        self.declare_parameter("topics", [""])
+        self.declare_parameter("exclude", [""])
+        self.declare_parameter("compression", "zstd")
+        self.declare_parameter("flush_period_s", 0.5)
+        self.declare_parameter("discovery_period_s", 0.5)
+        self.declare_parameter("queue_depth", 100)
+        self.declare_parameter("ack_for", [""])
+        output = self.get_parameter("output").value or \
+            f"recordings/sds_{datetime.now():%Y%m%d_%H%M%S}.mcap"
+        self._wanted = {t for t in self.get_parameter("topics").value if t}
+        self._excluded = {t for t in self.get_parameter("exclude").value if t}
+        self._depth = int(self.get_parameter("queue_depth").value)
+        self._ack_for = {t for t in self.get_parameter("ack_for").value if t}
+        try:
+            self._recorder = McapRecorder(output, self.get_parameter("compression").value,
+                                          flush_period_s=self.get_parameter("flush_period_s").value)
+        except (ValueError, OSError) as error:
+            self.get_logger().error(f"cannot record to {output}: {error}")
+            self.exit_code = EXIT_CONFIG_ERROR
+            self.finished.set()
+            return
+        self._recorded: dict[str, object] = {}
+        self._ack_pub = self.create_publisher(
+            Header, "frame_ack", QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        self._failed: set[str] = set()
+        self.output = Path(output)
+        self.get_logger().info(f"recording to {self.output}")
+        self._discover()
+        self.create_timer(float(self.get_parameter("discovery_period_s").value), self._discover)
+        self.create_timer(0.1, self._recorder.flush_if_due)
+
+    def _discover(self) -> None:
+        """Subscribe to new topics that match the selection."""
+        for topic, types in self.get_topic_names_and_types():
+            if topic in self._recorded or topic in self._failed or topic in SKIPPED_TOPICS \
+                    or topic in self._excluded or (self._wanted and topic not in self._wanted):
+                continue
+            type_name = types[0]
+            qos = self._qos_for(topic)
+            try:
+                self._recorder.add_topic(topic, type_name,
+                                         qos.durability == DurabilityPolicy.TRANSIENT_LOCAL)
+                msg_type = message_class(type_name)
+            except (SchemaError, ImportError, AttributeError, ValueError) as error:
+                self.get_logger().error(f"cannot record {topic} ({type_name}): {error}")
+                self._failed.add(topic)
+                continue
+            self._recorded[topic] = self.create_subscription(
+                msg_type, topic, self._writer_for(topic), qos, raw=True)
+            self.get_logger().info(f"recording {topic} ({type_name})")
+
+    def _qos_for(self, topic: str) -> QoSProfile:
+        """Reliable, keep-last `queue_depth`; transient-local when every publisher latches."""
+        publishers = self.get_publishers_info_by_topic(topic)
+        latched = bool(publishers) and all(
+            p.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in publishers)
+        best_effort = any(p.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT
+                          for p in publishers)
+        return QoSProfile(
+            depth=self._depth, history=HistoryPolicy.KEEP_LAST,
+            reliability=ReliabilityPolicy.BEST_EFFORT if best_effort
+            else ReliabilityPolicy.RELIABLE,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
+
+    def _writer_for(self, topic: str):
+        acks = topic in self._ack_for
+
+        def write(data: bytes, info) -> None:
+            now_ns = self.get_clock().now().nanoseconds
+            self._recorder.write(topic, data, now_ns, int(info["source_timestamp"]))
+            if acks:
+                stamp = Time(nanoseconds=header_stamp_ns(data)).to_msg()
+                self._ack_pub.publish(Header(stamp=stamp))
+        return write
+
+    def close(self) -> None:
+        """Finish the file (summary section) when the graph stops."""
+        if hasattr(self, "_recorder"):
+            self._recorder.close()
+            self.get_logger().info(f"wrote {self._recorder.message_count} messages to "
+                                   f"{self.output}")
+
+
+def main(args: list[str] | None = None) -> None:
+    """Run the node alone in this process."""
+    from sds_bringup.node_host import run_nodes
+
+    raise SystemExit(run_nodes([(RecorderNode, "recorder", False)], args))
