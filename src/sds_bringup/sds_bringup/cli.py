@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from sds_bringup import analyze
+from sds_bringup import analyze, recording
 from sds_bringup.graph import GraphFileError, apply_overrides, composed, load_graph
 from sds_bringup.launcher import Launcher
 from sds_bringup.paths import CONFIG
@@ -287,6 +287,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_simulate(commands)
     _add_resolution(commands)
     analyze.add_parser(commands)
+    recording.add_parser(commands)
     return parser
 
 

@@ -153,6 +153,24 @@ def read_messages(path: str | Path, topics: Iterable[str] | None = None
                               channel.metadata.get(DURABILITY_KEY) == "transient_local")
 
 
+def recorded_topics(path: str | Path) -> dict[str, tuple[str, bool]]:
+    """Topic → (type name, latched) of every channel in the file (summary, else a scan)."""
+    path = Path(path)
+    with path.open("rb") as stream:
+        try:
+            summary = make_reader(stream).get_summary()
+        except (McapError, OSError, ValueError, StopIteration):
+            summary = None
+    if summary is not None:
+        schemas, channels = summary.schemas, summary.channels.values()
+    else:
+        records = list(r for r in _linear_records(path) if not isinstance(r, Message))
+        schemas = {r.id: r for r in records if isinstance(r, Schema)}
+        channels = [r for r in records if isinstance(r, Channel)]
+    return {c.topic: (schemas[c.schema_id].name if c.schema_id in schemas else "",
+                      c.metadata.get(DURABILITY_KEY) == "transient_local") for c in channels}
+
+
 @dataclass(frozen=True)
 class RepairReport:
     """What `repair` copied."""

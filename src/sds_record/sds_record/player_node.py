@@ -13,7 +13,7 @@ from rclpy.time import Time
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Header
 
-from sds_record.mcap_files import RecordedMessage, header_stamp_ns, read_messages
+from sds_record.mcap_files import header_stamp_ns, read_messages, recorded_topics
 from sds_record.recorder_node import message_class
 
 EXIT_INPUT_ERROR = 2
@@ -46,24 +46,25 @@ class PlayerNode(Node):
         self.published = 0
         for name, default in (("input", ""), ("topics", [""]), ("remap", [""]), ("rate", 1.0),
                               ("pacing", "recorded"), ("start_s", 0.0), ("stop_s", 0.0),
-                              ("clock", True), ("wait_topic", ""), ("wait_for_subscribers", 1),
+                              ("clock", True), ("wait_for_subscribers", 1),
                               ("ack_topic_for", ""), ("ack_consumers", 1),
                               ("max_in_flight", 2), ("linger_s", 2.0)):
             self.declare_parameter(name, default)
         self._p = {name: self.get_parameter(name).value for name in
                    ("input", "topics", "rate", "pacing", "start_s", "stop_s", "clock",
-                    "wait_topic", "wait_for_subscribers", "ack_topic_for", "ack_consumers",
-                    "max_in_flight", "linger_s")}
+                    "wait_for_subscribers", "ack_topic_for", "ack_consumers", "max_in_flight",
+                    "linger_s")}
         self._stop = threading.Event()
         self._pending: dict[int, int] = {}   # stamp [ns] -> acks still awaited
         self._acks = threading.Condition()
+        self._outputs: dict[str, object] = {}
         try:
             self._remaps = parse_remaps(self.get_parameter("remap").value)
             self._check_parameters()
-        except (ValueError, OSError) as error:
+            self._create_publishers()
+        except (ValueError, OSError, ImportError, AttributeError) as error:
             self._fail(str(error))
             return
-        self._outputs: dict[str, object] = {}
         self._clock_pub = self.create_publisher(Clock, "/clock", 10)
         reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         self.create_subscription(Header, "frame_ack", self._on_ack, reliable)
@@ -84,20 +85,26 @@ class PlayerNode(Node):
         self.exit_code = EXIT_INPUT_ERROR
         self.finished.set()
 
-    def _publisher(self, message: RecordedMessage):
-        topic = self._remaps.get(message.topic, message.topic)
-        if topic not in self._outputs:
-            durability = DurabilityPolicy.TRANSIENT_LOCAL if message.latched \
+    def _create_publishers(self) -> None:
+        """One publisher per played topic before anything is sent, latched ones transient-local,
+        so that subscribers (a recorder's discovery) can find them all first."""
+        selected = {t for t in self._p["topics"] if t}
+        for topic, (type_name, latched) in recorded_topics(self._p["input"]).items():
+            if selected and topic not in selected:
+                continue
+            durability = DurabilityPolicy.TRANSIENT_LOCAL if latched \
                 else DurabilityPolicy.VOLATILE
             qos = QoSProfile(depth=100, history=HistoryPolicy.KEEP_LAST,
                              reliability=ReliabilityPolicy.RELIABLE, durability=durability)
             self._outputs[topic] = self.create_publisher(
-                message_class(message.type_name), topic, qos)
-        return self._outputs[topic]
+                message_class(type_name), self._remaps.get(topic, topic), qos)
 
-    def _wait_for_subscribers(self, topic: str) -> bool:
+    def _wait_for_subscribers(self) -> bool:
+        """Wait until every played topic has `wait_for_subscribers` subscribers."""
         wanted = self._p["wait_for_subscribers"]
-        while self.count_subscribers(topic) < wanted and not self._stop.is_set():
+        while not self._stop.is_set() and any(
+                publisher.get_subscription_count() < wanted
+                for publisher in self._outputs.values()):
             time.sleep(0.02)
         return not self._stop.is_set()
 
@@ -135,9 +142,9 @@ class PlayerNode(Node):
                     continue
                 if p["stop_s"] > 0 and offset_s > p["stop_s"]:
                     break
-                publisher = self._publisher(message)
+                publisher = self._outputs[message.topic]
                 if not wall_start:
-                    if p["wait_topic"] and not self._wait_for_subscribers(p["wait_topic"]):
+                    if not self._wait_for_subscribers():
                         return
                     wall_start = time.monotonic() - (offset_s - p["start_s"]) / p["rate"]
                 if p["pacing"] == "recorded":
