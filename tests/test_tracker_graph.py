@@ -4,13 +4,17 @@ then the recording replayed through tracker and reconstruction gives the same re
 from __future__ import annotations
 
 import csv
+import subprocess
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
 from mcap_ros2.reader import read_ros2_messages
 from ros_helpers import Probe, SdsGraphRun
 from rosbags.highlevel import AnyReader
+from rrd_helpers import rrd_entities
 from sds_recon.rig import load_rig
 from sds_record.mcap_files import read_messages
 from sds_sim.scenario import load_scenario
@@ -118,3 +122,12 @@ def check_recording(recording, rig_file, tmp_path) -> None:
     for topic in ("/tracker/spots", "/tracker/line", "/recon/points", "/recon/line_points",
                   "/recon/surface_fit"):
         assert again[topic] == recorded[topic], topic
+
+    view = subprocess.run([str(Path(sys.executable).with_name("sds")), "view", str(recording),
+                           "--rig", str(rig_file), "--image-every", "10"],
+                          capture_output=True, text=True, timeout=300)
+    assert view.returncode == 0, view.stderr
+    entities = rrd_entities(recording.with_suffix(".rrd"))
+    for entity in ("/camera/image", "/camera/image/spots", "/camera/image/line",
+                   "/world/points", "/world/line_points", "/world/fitted_plane"):
+        assert entity in entities, sorted(entities)

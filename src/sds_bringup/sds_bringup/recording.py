@@ -1,4 +1,4 @@
-"""`sds mcap-repair`: a recording left without its summary (a crash) made whole again."""
+"""`sds mcap-repair` (a recording left without its summary made whole) and `sds view`."""
 
 from __future__ import annotations
 
@@ -6,11 +6,15 @@ import argparse
 import sys
 from pathlib import Path
 
+from sds_recon.rig import RigError, load_rig
 from sds_record.mcap_files import repair
+from sds_viz.from_mcap import mcap_to_rrd
+
+from sds_bringup.paths import CONFIG
 
 
 def add_parser(commands: argparse._SubParsersAction) -> None:
-    """Register `sds mcap-repair`."""
+    """Register `sds mcap-repair` and `sds view`."""
     parser = commands.add_parser(
         "mcap-repair", help="rewrite an MCAP left without its summary (e.g. after a crash)",
         description="Copy every complete message of an MCAP file (one whose recorder was killed "
@@ -18,6 +22,7 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
     parser.add_argument("source", type=Path)
     parser.add_argument("target", type=Path)
     parser.set_defaults(run=run)
+    add_view_parser(commands)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -30,4 +35,36 @@ def run(args: argparse.Namespace) -> int:
     state = "had a summary" if report.had_summary else "had no summary"
     print(f"sds mcap-repair: {args.source} ({state}): {report.messages} messages on "
           f"{report.topics} topics written to {args.target}")
+    return 0
+
+
+def add_view_parser(commands: argparse._SubParsersAction) -> None:
+    """Register `sds view`."""
+    parser = commands.add_parser(
+        "view", help="a recording (MCAP) as a Rerun .rrd file",
+        description="Log a recording's camera frames, spots, beam paths, line, surface points, "
+                    "fitted plane, container and time series to a Rerun .rrd file (open it "
+                    "with `rerun FILE.rrd`).")
+    parser.add_argument("recording", type=Path)
+    parser.add_argument("--out", type=Path, help="the .rrd file (default: beside the MCAP)")
+    parser.add_argument("--rig", type=Path, default=CONFIG / "rigs" / "stelium.yaml",
+                        help="rig file for the container, beams and beam paths")
+    parser.add_argument("--image-scale", type=float, default=0.25)
+    parser.add_argument("--image-every", type=int, default=1, help="log every Nth frame")
+    parser.set_defaults(run=run_view)
+
+
+def run_view(args: argparse.Namespace) -> int:
+    """Convert; a one-line error and exit code 2 on bad input."""
+    output = args.out or args.recording.with_suffix(".rrd")
+    try:
+        if not args.recording.is_file():
+            raise ValueError(f"{args.recording}: no such recording")
+        conversion = mcap_to_rrd(args.recording, output, load_rig(args.rig), args.image_scale,
+                                 args.image_every)
+    except (OSError, ValueError, RigError) as error:
+        print(f"sds view: {error}", file=sys.stderr)
+        return 2
+    print(f"sds view: {conversion.shown} messages shown ({conversion.skipped} of types the "
+          f"scene does not show) in {output}")
     return 0

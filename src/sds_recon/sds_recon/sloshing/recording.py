@@ -76,7 +76,7 @@ def read_points_csv(path: str | Path) -> SurfaceRecording:
     return recording_from_rows(times, ids, points, str(path))
 
 
-def _cloud_points(msg) -> tuple[np.ndarray, np.ndarray] | None:
+def cloud_points(msg) -> tuple[np.ndarray, np.ndarray] | None:
     """(laser ids, X Y Z) of a decoded PointCloud2 with a laser_id field, else None."""
     names = [f.name for f in msg.fields]
     if "laser_id" not in names or msg.is_bigendian:
@@ -107,7 +107,7 @@ def read_mcap(path: str | Path) -> SurfaceRecording:
             reader = make_reader(stream, decoder_factories=[DecoderFactory()])
             for schema, _, _, msg in reader.iter_decoded_messages():
                 if schema.name == "sensor_msgs/msg/PointCloud2":
-                    cloud = _cloud_points(msg)
+                    cloud = cloud_points(msg)
                     if cloud is not None and len(cloud[0]):
                         rows["time"].append(np.full(len(cloud[0]), _stamp_s(msg)))
                         rows["id"].append(cloud[0])

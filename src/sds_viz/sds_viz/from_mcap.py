@@ -1,0 +1,48 @@
+"""A recording (MCAP) into a Rerun .rrd file: the same scene the viewer node shows live."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import rerun as rr
+from mcap.exceptions import McapError
+from mcap_ros2.reader import read_ros2_messages
+from sds_recon.rig import Rig
+
+from sds_viz.messages import log_message
+from sds_viz.scene import RerunScene
+
+
+@dataclass(frozen=True)
+class Conversion:
+    """How many messages were shown and how many of a type the scene does not show."""
+
+    shown: int
+    skipped: int
+
+
+def mcap_to_rrd(recording: str | Path, output: str | Path, rig: Rig | None = None,
+                image_scale: float = 0.25, image_every: int = 1) -> Conversion:
+    """Log every message of `recording` to a new .rrd file, in log-time order."""
+    stream = rr.RecordingStream("sds", recording_id=Path(recording).stem)
+    stream.save(str(output))
+    scene = RerunScene(stream, rig, image_scale)
+    shown = skipped = images = 0
+    try:
+        for message in read_ros2_messages(str(recording)):
+            type_name = message.schema.name if message.schema else ""
+            if type_name == "sensor_msgs/msg/Image":
+                images += 1
+                if (images - 1) % max(1, image_every):
+                    continue
+            if log_message(scene, type_name, message.ros_msg):
+                shown += 1
+            else:
+                skipped += 1
+    except McapError as error:
+        raise ValueError(f"{recording}: {error}") from None
+    finally:
+        stream.flush()
+        stream.disconnect()
+    return Conversion(shown, skipped)

@@ -1,0 +1,105 @@
+"""Rerun: `sds view` on a recording and the viewer node in a graph write .rrd files that
+Rerun's own CLI (`rerun rrd print`) reads back with the expected entities."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from builtin_interfaces.msg import Time
+from rclpy.serialization import serialize_message
+from ros_helpers import LATCHED, RELIABLE, Probe, SdsGraphRun
+from rrd_helpers import rrd_entities
+from sds_camera.image_msg import image_to_msg
+from sds_recon.recon_node import cloud_dtype, points_to_cloud
+from sds_recon.rig import load_rig
+from sds_record.mcap_files import McapRecorder
+
+from sds_msgs.msg import CameraModel, LaserSpot, LaserSpotArray, SurfaceFit
+
+SDS = str(Path(sys.executable).with_name("sds"))
+EXPECTED = {"/camera/image": "Image", "/camera/image/spots": "Points2D",
+            "/camera/image/beam_paths": "LineStrips2D", "/world/container": "LineStrips3D",
+            "/world/beams": "LineStrips3D", "/world/points": "Points3D",
+            "/world/fitted_plane": "Mesh3D", "/series/height/0": "Scalars",
+            "/series/modal/lateral_1_cos": "Scalars", "/series/plane/tilt_x_deg": "Scalars"}
+
+
+def frame_messages(rig, index: int) -> list[tuple[str, str, object]]:
+    """One frame's image, spots, cloud and fit as the graph publishes them."""
+    stamp = Time(sec=100, nanosec=index * 33_000_000)
+    image = np.zeros((540, 960), np.uint8)
+    spots = LaserSpotArray(frame_index=index)
+    spots.header.stamp = stamp
+    spots.spots = [LaserSpot(laser_id=d.laser_id, x_px=1900.0 + d.laser_id, y_px=1080.0,
+                             sigma_px=0.05) for d in rig.diodes]
+    cloud = np.zeros(len(rig.diodes), cloud_dtype())
+    cloud["x"] = [d.emitter_mm[0] for d in rig.diodes]
+    cloud["y"] = [d.emitter_mm[1] for d in rig.diodes]
+    cloud["z"] = 0.1 * index
+    cloud["laser_id"] = [d.laser_id for d in rig.diodes]
+    fit = SurfaceFit(frame_index=index, p00_mm=0.1 * index, p10=0.01, p01=0.0,
+                     tilt_x_rad=-0.01, tilt_y_rad=0.0, rmse_mm=0.02,
+                     mode_names=["mean", "lateral_1_cos"], modal_amplitudes_mm=[0.0, 1.0])
+    fit.header.stamp = stamp
+    return [("/camera/image", "sensor_msgs/msg/Image", image_to_msg(image, stamp, "camera")),
+            ("/tracker/spots", "sds_msgs/msg/LaserSpotArray", spots),
+            ("/recon/points", "sensor_msgs/msg/PointCloud2",
+             points_to_cloud(spots.header, cloud)),
+            ("/recon/surface_fit", "sds_msgs/msg/SurfaceFit", fit)]
+
+
+def test_sds_view_turns_a_recording_into_rerun_entities(repo: Path, tmp_path: Path) -> None:
+    rig = load_rig(repo / "config" / "rigs" / "stelium.yaml")
+    recording = McapRecorder(tmp_path / "run.mcap")
+    model = CameraModel(full_width=3840, full_height=2160)
+    model.roi.x_offset, model.roi.y_offset = 1365, 519
+    recording.add_topic("/camera/camera_model", "sds_msgs/msg/CameraModel", latched=True)
+    recording.write("/camera/camera_model", serialize_message(model), 0, 0)
+    for index in range(3):
+        for topic, type_name, msg in frame_messages(rig, index):
+            recording.add_topic(topic, type_name)
+            recording.write(topic, serialize_message(msg), index + 1, index + 1)
+    recording.close()
+    done = subprocess.run([SDS, "view", str(tmp_path / "run.mcap"), "--out",
+                           str(tmp_path / "run.rrd")], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert "13 messages shown" in done.stdout
+    entities = rrd_entities(tmp_path / "run.rrd")
+    for entity, archetype in EXPECTED.items():
+        assert archetype in entities.get(entity, set()), (entity, sorted(entities))
+
+
+@pytest.mark.ros
+def test_viewer_node_saves_what_the_graph_publishes(repo: Path, tmp_path: Path) -> None:
+    rig_file = repo / "config" / "rigs" / "stelium.yaml"
+    rig = load_rig(rig_file)
+    output = tmp_path / "live.rrd"
+    graph = SdsGraphRun("view.yaml", "--set", f"viewer.output={output}",
+                        "--set", f"viewer.rig={rig_file}")
+    probe = Probe("viewer_probe")
+    try:
+        publishers = {topic: probe.node.create_publisher(type(msg), topic, RELIABLE)
+                      for topic, _, msg in frame_messages(rig, 0)}
+        model_pub = probe.node.create_publisher(CameraModel, "/camera/camera_model", LATCHED)
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and not all(
+                p.get_subscription_count() for p in (*publishers.values(), model_pub)):
+            time.sleep(0.05)
+        model_pub.publish(CameraModel(full_width=3840, full_height=2160))
+        for index in range(5):
+            for topic, _, msg in frame_messages(rig, index):
+                publishers[topic].publish(msg)
+            time.sleep(0.1)
+        time.sleep(1.0)
+    finally:
+        probe.close()
+        graph.stop()
+    entities = rrd_entities(output)
+    for entity, archetype in EXPECTED.items():
+        assert archetype in entities.get(entity, set()), (entity, sorted(entities), graph.output())
