@@ -22,6 +22,16 @@ LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
+def wait_until(condition: Callable[[], object], timeout: float = 30.0) -> bool:
+    """Poll `condition` every 50 ms until it holds or `timeout` [s] passes."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if condition():
+            return True
+        time.sleep(0.05)
+    return False
+
+
 class Probe:
     """An rclpy node in this test process, spun in a background thread."""
 

@@ -6,7 +6,7 @@ import time
 
 import numpy as np
 import pytest
-from ros_helpers import RELIABLE, Probe, SdsGraphRun
+from ros_helpers import RELIABLE, Probe, SdsGraphRun, wait_until
 from sds_recon.recon_node import LINE_LASER_ID, cloud_dtype
 from sds_recon.rig import load_rig
 from sds_recon.sloshing.theory import ModeShape
@@ -26,14 +26,6 @@ pytestmark = pytest.mark.ros
 
 TILT_DEG = 12.0
 
-
-def wait_until(condition, timeout: float = 30.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(0.05)
-    return False
 
 
 def cloud_points(msg: PointCloud2) -> np.ndarray:

@@ -11,8 +11,7 @@ from pathlib import Path
 
 import pytest
 from mcap_ros2.reader import read_ros2_messages
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from ros_helpers import RELIABLE, Probe, SdsGraphRun
+from ros_helpers import LATCHED, RELIABLE, Probe, SdsGraphRun, wait_until
 from rosbags.highlevel import AnyReader
 from sds_record.mcap_files import read_messages, recorded_topics
 from std_msgs.msg import Header
@@ -21,18 +20,8 @@ from sds_msgs.msg import CameraModel, SyncEvent
 
 pytestmark = pytest.mark.ros
 
-LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
 TOPICS = ("/test/header", "/test/sync", "/test/model")
 
-
-def wait_until(condition, timeout: float = 30.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(0.05)
-    return False
 
 
 def publish_stream(probe: Probe, seconds: float, rate_hz: float) -> list[float]:

@@ -67,6 +67,7 @@ class ReconstructionNode(Node):
         self.declare_parameter("default_sigma_px", 0.1)
         self.declare_parameter("frame_id", "world")
         self.declare_parameter("estimate_period_s", 1.0)
+        self.declare_parameter("wait_for_consumers", 0)
         self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sloshing")
         self._estimating: Future | None = None
         try:
@@ -87,10 +88,25 @@ class ReconstructionNode(Node):
         self._estimate_pub = self.create_publisher(SloshingEstimate, "sloshing", qos)
         period = float(self.get_parameter("estimate_period_s").value)
         self._running = RunningAnalysis(period) if period > 0 else None
-        self.create_subscription(LaserSpotArray, "spots", self._on_spots, qos)
-        self.create_subscription(LaserLineProfile, "line", self._on_line, qos)
+        self._qos = qos
+        self._consumers = int(self.get_parameter("wait_for_consumers").value)
+        if self._consumers > 0:
+            # No input is taken before every output has its consumers (e.g. the recorder).
+            self._wait_timer = self.create_timer(0.05, self._subscribe_when_consumed)
+        else:
+            self._subscribe_inputs()
         self.get_logger().info(f"rig {self.get_parameter('rig').value}: "
                                f"{len(self._rig.diodes)} diodes")
+
+    def _subscribe_when_consumed(self) -> None:
+        outputs = (self._points_pub, self._line_pub, self._fit_pub, self._estimate_pub)
+        if all(p.get_subscription_count() >= self._consumers for p in outputs):
+            self._wait_timer.cancel()
+            self._subscribe_inputs()
+
+    def _subscribe_inputs(self) -> None:
+        self.create_subscription(LaserSpotArray, "spots", self._on_spots, self._qos)
+        self.create_subscription(LaserLineProfile, "line", self._on_line, self._qos)
 
     def _on_spots(self, msg: LaserSpotArray) -> None:
         valid = [s for s in msg.spots if not s.flags & LaserSpot.FLAG_LOST
