@@ -7,7 +7,8 @@ import time
 import numpy as np
 import pytest
 from ros_helpers import RELIABLE, Probe, SdsGraphRun, wait_until
-from sds_recon.recon_node import LINE_LASER_ID, cloud_dtype
+from sds_recon.recon_node import cloud_dtype
+from sds_recon.reconstruction import LINE_LASER_ID
 from sds_recon.rig import load_rig
 from sds_recon.sloshing.theory import ModeShape
 from sds_sim.optics import line_laser_rays, ray_surface_points

@@ -17,30 +17,37 @@ from sds_msgs.msg import (
     SloshingEstimate,
     SurfaceFit,
 )
+from sds_recon.reconstruction import (
+    SurfacePoints,
+    fit_surface,
+    reconstruct_line,
+    reconstruct_spots,
+)
 from sds_recon.rig import Rig, RigError, load_rig
 from sds_recon.sloshing.modal import ModalSeries
 from sds_recon.sloshing.running import RunningAnalysis
-from sds_recon.surface_fit import fit_modes, fit_plane
-from sds_recon.triangulation import (
-    beam_height_sigma,
-    plane_height_sigma,
-    triangulate_beams,
-    triangulate_plane,
-)
 
-LINE_LASER_ID = 65535
-"""laser_id of the line laser's points in the cloud."""
 CLOUD_FIELDS = (("x", np.float32), ("y", np.float32), ("z", np.float32),
                 ("laser_id", np.uint16), ("height_sigma_mm", np.float32),
                 ("miss_distance_mm", np.float32))
 DATATYPES = {np.float32: PointField.FLOAT32, np.uint16: PointField.UINT16}
-MIN_PLANE_POINTS = 3
 EXIT_CONFIG_ERROR = 2
 
 
 def cloud_dtype() -> np.dtype:
     """Packed layout of one cloud point."""
     return np.dtype([(name, kind) for name, kind in CLOUD_FIELDS])
+
+
+def cloud_of(points: SurfacePoints) -> np.ndarray:
+    """The cloud rows (`cloud_dtype`) of reconstructed points."""
+    cloud = np.zeros(len(points.laser_ids), cloud_dtype())
+    for axis, name in enumerate("xyz"):
+        cloud[name] = points.points_mm[:, axis]
+    cloud["laser_id"] = points.laser_ids
+    cloud["height_sigma_mm"] = points.height_sigma_mm
+    cloud["miss_distance_mm"] = points.miss_distance_mm
+    return cloud
 
 
 def points_to_cloud(header, points: np.ndarray) -> PointCloud2:
@@ -109,41 +116,29 @@ class ReconstructionNode(Node):
         self.create_subscription(LaserLineProfile, "line", self._on_line, self._qos)
 
     def _on_spots(self, msg: LaserSpotArray) -> None:
-        valid = [s for s in msg.spots if not s.flags & LaserSpot.FLAG_LOST
-                 and np.isfinite(s.x_px) and np.isfinite(s.y_px)]
-        pixels = np.array([[s.x_px, s.y_px] for s in valid]).reshape(-1, 2)
-        ids = np.array([s.laser_id for s in valid], dtype=int)
-        sigma = np.array([s.sigma_px if s.sigma_px > 0 else self._default_sigma for s in valid])
-        result = triangulate_beams(self._rig, pixels, ids, self._beam_weight)
-        heights_sigma = beam_height_sigma(self._rig, pixels, ids, sigma)
-        keep = np.isfinite(result.points_mm).all(axis=1)
-        cloud = np.zeros(int(keep.sum()), cloud_dtype())
-        for axis, name in enumerate("xyz"):
-            cloud[name] = result.points_mm[keep, axis]
-        cloud["laser_id"] = ids[keep]
-        cloud["height_sigma_mm"] = heights_sigma[keep]
-        cloud["miss_distance_mm"] = result.miss_distance_mm[keep]
+        spots = [s for s in msg.spots if not s.flags & LaserSpot.FLAG_LOST]
+        result = reconstruct_spots(
+            self._rig, [s.laser_id for s in spots], [[s.x_px, s.y_px] for s in spots],
+            [s.sigma_px for s in spots], self._beam_weight, self._default_sigma)
         header = msg.header
         header.frame_id = self._frame_id
-        self._points_pub.publish(points_to_cloud(header, cloud))
-        self._publish_fit(msg, result.points_mm[keep])
+        self._points_pub.publish(points_to_cloud(header, cloud_of(result)))
+        self._publish_fit(msg, result.points_mm)
 
     def _publish_fit(self, msg: LaserSpotArray, points: np.ndarray) -> None:
         fit = SurfaceFit(header=msg.header, frame_index=msg.frame_index, point_count=len(points))
         nan = float("nan")
         fit.p00_mm = fit.p10 = fit.p01 = fit.tilt_x_rad = fit.tilt_y_rad = nan
         fit.r_squared = fit.rmse_mm = fit.sse_mm2 = nan
-        if len(points) >= MIN_PLANE_POINTS:
-            plane = fit_plane(points)
+        fits = fit_surface(points, self._rig.container.radius_mm)
+        if fits.plane is not None:
+            plane = fits.plane
             fit.p00_mm, fit.p10, fit.p01 = plane.p00_mm, plane.p10, plane.p01
             fit.tilt_x_rad, fit.tilt_y_rad = plane.tilt_x_rad, plane.tilt_y_rad
             fit.r_squared, fit.rmse_mm, fit.sse_mm2 = plane.r_squared, plane.rmse_mm, plane.sse_mm2
-        try:
-            modal = fit_modes(points, self._rig.container.radius_mm)
-            fit.mode_names = list(modal.names)
-            fit.modal_amplitudes_mm = [float(a) for a in modal.amplitudes_mm]
-        except ValueError:
-            pass  # too few points this frame: no modal amplitudes rather than invented ones
+        if fits.modal is not None:
+            fit.mode_names = list(fits.modal.names)
+            fit.modal_amplitudes_mm = [float(a) for a in fits.modal.amplitudes_mm]
         self._fit_pub.publish(fit)
         if self._running is not None and fit.mode_names:
             stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
@@ -177,24 +172,11 @@ class ReconstructionNode(Node):
         super().destroy_node()
 
     def _on_line(self, msg: LaserLineProfile) -> None:
-        pixels = np.column_stack([msg.x_px, msg.y_px]).reshape(-1, 2)
-        finite = np.isfinite(pixels).all(axis=1)
-        sigma = np.asarray(msg.sigma_px, dtype=float)
-        sigma = np.where(sigma > 0, sigma, self._default_sigma)
-        points = np.full((len(pixels), 3), np.nan)
-        heights_sigma = np.full(len(pixels), np.nan)
-        if finite.any():
-            points[finite] = triangulate_plane(self._rig, pixels[finite])
-            heights_sigma[finite] = plane_height_sigma(self._rig, pixels[finite], sigma[finite])
-        keep = np.isfinite(points).all(axis=1)
-        cloud = np.zeros(int(keep.sum()), cloud_dtype())
-        for axis, name in enumerate("xyz"):
-            cloud[name] = points[keep, axis]
-        cloud["laser_id"] = LINE_LASER_ID
-        cloud["height_sigma_mm"] = heights_sigma[keep]
+        result = reconstruct_line(self._rig, np.column_stack([msg.x_px, msg.y_px]),
+                                  msg.sigma_px, self._default_sigma)
         header = msg.header
         header.frame_id = self._frame_id
-        self._line_pub.publish(points_to_cloud(header, cloud))
+        self._line_pub.publish(points_to_cloud(header, cloud_of(result)))
 
 
 def main(args: list[str] | None = None) -> None:

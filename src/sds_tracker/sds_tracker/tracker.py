@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from sds_recon.rig import Rig
@@ -38,6 +40,36 @@ class TrackerConfig:
     hampel_k: float = 3.0
     hampel_floor_px: float = 0.5
     path_heights_mm: tuple[float, float] = (-30.0, 40.0)   # surface heights the paths span
+
+
+TRACKING_PARAMETERS: dict[str, Any] = {
+    "hampel_window": 5, "window_px": 24, "threshold": 30.0, "prior_sigma_px": 8.0,
+    "path_tolerance_px": 4.0, "line_band_px": 30, "path_heights_mm": [-30.0, 40.0],
+    "seeds": [0.0]}
+"""The tracking parameters (config/params/tracker.yaml documents them) and their defaults."""
+
+
+def tracker_config(values: Mapping[str, Any]) -> TrackerConfig:
+    """A TrackerConfig from tracking parameters (missing ones take their defaults)."""
+    p = {**TRACKING_PARAMETERS, **values}
+    return TrackerConfig(
+        spots=SpotSettings(window_px=int(p["window_px"]),
+                           prior_sigma_px=float(p["prior_sigma_px"]),
+                           threshold=float(p["threshold"]),
+                           path_tolerance_px=float(p["path_tolerance_px"])),
+        line=LineSettings(band_px=int(p["line_band_px"]), threshold=float(p["threshold"])),
+        hampel_window=int(p["hampel_window"]),
+        path_heights_mm=tuple(float(v) for v in p["path_heights_mm"]))
+
+
+def parse_seeds(values: list[float]) -> dict[int, tuple[float, float]]:
+    """Manual starting positions: [id, x, y, id, x, y, ...] (full-frame px); [0.0]: none."""
+    if len(values) <= 1:
+        return {}
+    if len(values) % 3:
+        raise ValueError(f"seeds must be triples id, x, y; got {len(values)} numbers")
+    return {int(values[i]): (float(values[i + 1]), float(values[i + 2]))
+            for i in range(0, len(values), 3)}
 
 
 class FrameTracker:

@@ -13,9 +13,8 @@ from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 
 from sds_msgs.msg import CameraModel, LaserLineProfile, LaserSpot, LaserSpotArray
-from sds_tracker.line import LineSettings
-from sds_tracker.spots import LOST, SpotSettings
-from sds_tracker.tracker import FrameTracker, TrackerConfig
+from sds_tracker.spots import LOST
+from sds_tracker.tracker import TRACKING_PARAMETERS, FrameTracker, parse_seeds, tracker_config
 
 EXIT_CONFIG_ERROR = 2
 IDLE_FLUSH_S = 1.0
@@ -32,24 +31,13 @@ class TrackerNode(Node):
         super().__init__(node_name, **node_kwargs)
         self.finished = threading.Event()
         self.exit_code = 0
-        for name, value in (("rig", ""), ("ack", True), ("hampel_window", 5),
-                            ("window_px", 24), ("threshold", 30.0), ("prior_sigma_px", 8.0),
-                            ("path_tolerance_px", 4.0), ("line_band_px", 30),
-                            ("path_heights_mm", [-30.0, 40.0]), ("seeds", [0.0]),
+        for name, value in (("rig", ""), ("ack", True), *TRACKING_PARAMETERS.items(),
                             ("lost_report_frames", 15), ("wait_for_consumers", 0)):
             self.declare_parameter(name, value)
         try:
             rig = load_rig(self.get_parameter("rig").value)
-            config = TrackerConfig(
-                spots=SpotSettings(window_px=int(self._value("window_px")),
-                                   prior_sigma_px=float(self._value("prior_sigma_px")),
-                                   threshold=float(self._value("threshold")),
-                                   path_tolerance_px=float(self._value("path_tolerance_px"))),
-                line=LineSettings(band_px=int(self._value("line_band_px")),
-                                  threshold=float(self._value("threshold"))),
-                hampel_window=int(self._value("hampel_window")),
-                path_heights_mm=tuple(float(v) for v in self._value("path_heights_mm")))
-            self._tracker = FrameTracker(rig, config, self._seeds(self._value("seeds")))
+            values = {name: self._value(name) for name in TRACKING_PARAMETERS}
+            self._tracker = FrameTracker(rig, tracker_config(values), parse_seeds(values["seeds"]))
         except (OSError, ValueError) as error:  # RigError is a ValueError
             self.get_logger().error(f"cannot start the tracker: {error}")
             self.exit_code = EXIT_CONFIG_ERROR
@@ -92,16 +80,6 @@ class TrackerNode(Node):
 
     def _value(self, name: str):
         return self.get_parameter(name).value
-
-    @staticmethod
-    def _seeds(values: list[float]) -> dict[int, tuple[float, float]]:
-        """Manual starting positions: [id, x, y, id, x, y, ...] (full-frame px); [0.0]: none."""
-        if len(values) <= 1:
-            return {}
-        if len(values) % 3:
-            raise ValueError(f"seeds must be triples id, x, y; got {len(values)} numbers")
-        return {int(values[i]): (float(values[i + 1]), float(values[i + 2]))
-                for i in range(0, len(values), 3)}
 
     def _report_lost(self, frame: int, spots) -> None:
         """Say which lasers are not found: at the first frame, and after a long loss."""

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 from sds_camera.image_msg import msg_to_image
-from sds_recon.sloshing.recording import LINE_LASER_ID, cloud_points
+from sds_recon.reconstruction import LINE_LASER_ID
+from sds_recon.sloshing.recording import cloud_points
 
 from sds_viz.scene import RerunScene
 

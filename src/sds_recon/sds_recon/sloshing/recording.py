@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-LINE_LASER_ID = 65535
-"""laser_id of the line laser's points (as in the reconstruction node's clouds)."""
+from sds_recon.reconstruction import LINE_LASER_ID
+
 POINT_FIELD_TYPES = {1: "i1", 2: "u1", 3: "<i2", 4: "<u2", 5: "<i4", 6: "<u4", 7: "<f4", 8: "<f8"}
 """sensor_msgs/PointField datatype → numpy type (little-endian clouds)."""
 POINTS_COLUMNS = ("frame", "t_s", "laser_id", "X_mm", "Y_mm", "Z_mm")

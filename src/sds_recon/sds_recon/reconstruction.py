@@ -1,0 +1,87 @@
+"""One frame's surface: tracked pixels to world points (Eqs. 9–11) and their fits (Eq. 12).
+
+The reconstruction node and the offline pipeline (`sds process`) both call these, so a graph
+run and an offline run of the same frames give the same points.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from sds_recon.rig import Rig
+from sds_recon.surface_fit import ModalFit, PlaneFit, fit_modes, fit_plane
+from sds_recon.triangulation import (
+    beam_height_sigma,
+    plane_height_sigma,
+    triangulate_beams,
+    triangulate_plane,
+)
+
+LINE_LASER_ID = 65535
+"""laser_id of the line laser's points."""
+MIN_PLANE_POINTS = 3
+
+
+@dataclass(frozen=True)
+class SurfacePoints:
+    """Triangulated points [mm, world], each with its laser, height σ and miss distance [mm]."""
+
+    laser_ids: np.ndarray          # (N,)
+    points_mm: np.ndarray          # (N, 3)
+    height_sigma_mm: np.ndarray    # (N,)
+    miss_distance_mm: np.ndarray   # (N,), NaN for the line laser
+
+
+@dataclass(frozen=True)
+class SurfaceFits:
+    """The plane of Eq. 12 and the modal fit of one frame (None where too few points)."""
+
+    plane: PlaneFit | None
+    modal: ModalFit | None
+
+
+def _sigmas(sigma_px: ArrayLike, default_sigma_px: float) -> np.ndarray:
+    sigma = np.asarray(sigma_px, dtype=float)
+    return np.where(sigma > 0, sigma, default_sigma_px)
+
+
+def reconstruct_spots(rig: Rig, laser_ids: ArrayLike, pixels: ArrayLike, sigma_px: ArrayLike,
+                      beam_weight: float = 0.5, default_sigma_px: float = 0.1) -> SurfacePoints:
+    """Eq. 9 for the found spots (finite pixels); unsolvable ones (parallel rays) are left out."""
+    ids = np.asarray(laser_ids, dtype=int)
+    pixels = np.asarray(pixels, dtype=float).reshape(-1, 2)
+    found = np.isfinite(pixels).all(axis=1)
+    ids, pixels = ids[found], pixels[found]
+    sigma = _sigmas(np.asarray(sigma_px, dtype=float)[found], default_sigma_px)
+    result = triangulate_beams(rig, pixels, ids, beam_weight)
+    heights_sigma = beam_height_sigma(rig, pixels, ids, sigma)
+    keep = np.isfinite(result.points_mm).all(axis=1)
+    return SurfacePoints(ids[keep], result.points_mm[keep], heights_sigma[keep],
+                         result.miss_distance_mm[keep])
+
+
+def reconstruct_line(rig: Rig, pixels: ArrayLike, sigma_px: ArrayLike,
+                     default_sigma_px: float = 0.1) -> SurfacePoints:
+    """Eqs. 10–11 for the line's samples (finite pixels)."""
+    pixels = np.asarray(pixels, dtype=float).reshape(-1, 2)
+    found = np.isfinite(pixels).all(axis=1)
+    pixels = pixels[found]
+    sigma = _sigmas(np.asarray(sigma_px, dtype=float)[found], default_sigma_px)
+    points = triangulate_plane(rig, pixels) if len(pixels) else np.empty((0, 3))
+    heights_sigma = plane_height_sigma(rig, pixels, sigma) if len(pixels) else np.empty(0)
+    keep = np.isfinite(points).all(axis=1)
+    return SurfacePoints(np.full(int(keep.sum()), LINE_LASER_ID), points[keep],
+                         heights_sigma[keep], np.full(int(keep.sum()), np.nan))
+
+
+def fit_surface(points_mm: np.ndarray, radius_mm: float) -> SurfaceFits:
+    """Plane (three or more points) and modes (as many points as terms) of one frame."""
+    plane = fit_plane(points_mm) if len(points_mm) >= MIN_PLANE_POINTS else None
+    try:
+        modal = fit_modes(points_mm, radius_mm)
+    except ValueError:
+        modal = None   # too few points: no amplitudes rather than invented ones
+    return SurfaceFits(plane, modal)
