@@ -7,6 +7,7 @@ import csv
 import subprocess
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -15,10 +16,11 @@ from mcap_ros2.reader import read_ros2_messages
 from ros_helpers import Probe, SdsGraphRun
 from rosbags.highlevel import AnyReader
 from rrd_helpers import rrd_entities
+from sds_recon.results import load_results
 from sds_recon.rig import load_rig
 from sds_record.mcap_files import read_messages
 from sds_sim.scenario import load_scenario
-from sds_sim.simulate import simulate
+from sds_sim.simulate import SimulationOutput, simulate
 from sensor_msgs.msg import Image, PointCloud2
 
 from sds_msgs.msg import LaserLineProfile, LaserSpot, LaserSpotArray, SurfaceFit
@@ -26,7 +28,24 @@ from sds_msgs.msg import LaserLineProfile, LaserSpot, LaserSpotArray, SurfaceFit
 pytestmark = pytest.mark.ros
 
 
-def test_simulated_drop_is_tracked_and_reconstructed(repo, tmp_path):
+@dataclass
+class DropRun:
+    """A simulated 1 s drop through the graph: what the probe received, the recording."""
+
+    output: SimulationOutput
+    rig_file: Path
+    recording: Path
+    folder: Path
+    spots: list
+    lines: list
+    clouds: list
+    fits: list
+    log: str
+
+
+@pytest.fixture(scope="module")
+def drop_run(repo, tmp_path_factory) -> DropRun:
+    tmp_path = tmp_path_factory.mktemp("drop")
     scenario = load_scenario(repo / "config" / "scenarios" / "ground_kick.yaml",
                              {"duration_s": 1.0})
     output = simulate(scenario, tmp_path / "sim", progress=False)
@@ -62,7 +81,14 @@ def test_simulated_drop_is_tracked_and_reconstructed(repo, tmp_path):
     finally:
         graph.stop()
         probe.close()
-    assert sorted(m.frame_index for m in spots) == list(range(30)), graph.output()
+    return DropRun(output, rig_file, recording, tmp_path, spots, lines, clouds, fits,
+                   graph.output())
+
+
+def test_simulated_drop_is_tracked_and_reconstructed(drop_run: DropRun) -> None:
+    output, spots, lines, clouds, fits = (drop_run.output, drop_run.spots, drop_run.lines,
+                                          drop_run.clouds, drop_run.fits)
+    assert sorted(m.frame_index for m in spots) == list(range(30)), drop_run.log
     assert len(lines) == 30 and len(clouds) == 30 and len(fits) == 30
     with output.spots.open() as file:
         truth = {(int(r["frame"]), int(r["laser_id"])): r for r in csv.DictReader(file)}
@@ -82,8 +108,6 @@ def test_simulated_drop_is_tracked_and_reconstructed(repo, tmp_path):
     heights = [f.p00_mm for f in fits]
     assert np.all(np.abs(heights) < 1.0)
 
-    check_recording(recording, rig_file, tmp_path)
-
 
 def topic_data(path) -> dict[str, list[bytes]]:
     """Every message's serialized content, per topic, in log-time order."""
@@ -93,8 +117,9 @@ def topic_data(path) -> dict[str, list[bytes]]:
     return messages
 
 
-def check_recording(recording, rig_file, tmp_path) -> None:
+def test_recording_reads_back_and_replays_identically(drop_run: DropRun) -> None:
     """The drop's MCAP holds every message, reads in both readers, and replays identically."""
+    recording, rig_file, tmp_path = drop_run.recording, drop_run.rig_file, drop_run.folder
     recorded = topic_data(recording)
     assert {topic: len(data) for topic, data in recorded.items()
             if topic in ("/camera/image", "/camera/camera_model", "/tracker/spots",
@@ -131,3 +156,68 @@ def check_recording(recording, rig_file, tmp_path) -> None:
     for entity in ("/camera/image", "/camera/image/spots", "/camera/image/line",
                    "/world/points", "/world/line_points", "/world/fitted_plane"):
         assert entity in entities, sorted(entities)
+
+
+def sds(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([str(Path(sys.executable).with_name("sds")), *args],
+                          capture_output=True, text=True, timeout=600)
+
+
+def by_key(table: np.ndarray, *keys: str) -> dict:
+    return {tuple(int(row[k]) for k in keys): row for row in table}
+
+
+def test_sds_process_gives_the_graphs_spots_points_and_fits(drop_run: DropRun) -> None:
+    """The same video offline: spots and fits as the graph's to 1e-9, points to float32."""
+    processed, exported = drop_run.folder / "processed", drop_run.folder / "exported"
+    done = sds("process", "--video", str(drop_run.output.video), "--rig", str(drop_run.rig_file),
+               "--out", str(processed), "--no-progress")
+    assert done.returncode == 0, done.stderr
+    done = sds("export", str(drop_run.recording), "--rig", str(drop_run.rig_file),
+               "--out", str(exported))
+    assert done.returncode == 0, done.stderr
+    offline, graph = load_results(processed), load_results(exported)
+    assert len(offline.spots) == len(graph.spots) == 30 * 20
+    graph_spots = by_key(graph.spots, "frame", "laser_id")
+    for row in offline.spots:
+        other = graph_spots[(int(row["frame"]), int(row["laser_id"]))]
+        for column in ("x_px", "y_px", "x_raw_px", "y_raw_px", "sigma_px", "t_s"):
+            assert row[column] == pytest.approx(other[column], abs=1e-6, nan_ok=True), column
+        assert row["flags"] == other["flags"] and row["valid"] == other["valid"]
+    spots_only = offline.points[offline.points["laser_id"] != 65535]
+    graph_points = by_key(graph.points[graph.points["laser_id"] != 65535], "frame", "laser_id")
+    assert len(spots_only) == len(graph_points)
+    for row in spots_only:
+        other = graph_points[(int(row["frame"]), int(row["laser_id"]))]
+        for column in ("X_mm", "Y_mm", "Z_mm", "sigma_Z_mm", "miss_mm"):
+            # the graph's PointCloud2 carries float32
+            assert row[column] == pytest.approx(other[column], rel=1e-6, abs=1e-6), column
+    line = offline.points[offline.points["laser_id"] == 65535]
+    assert len(line) == np.sum(graph.points["laser_id"] == 65535) > 1000
+    assert np.allclose(offline.fits["p00_mm"], graph.fits["p00_mm"], atol=1e-9)
+    assert np.allclose(offline.fits["lateral_1_cos_mm"], graph.fits["lateral_1_cos_mm"],
+                       atol=1e-9)
+    assert offline.analysis["modes"][0]["mode"] == "lateral_1"
+    assert (processed / "report.html").is_file()
+
+
+def test_export_round_trip_equals_the_graphs_messages(drop_run: DropRun) -> None:
+    """export -> load_results gives back what the graph published."""
+    folder = drop_run.folder / "exported_again"
+    assert sds("export", str(drop_run.recording), "--out", str(folder)).returncode == 0
+    results = load_results(folder)
+    spots = by_key(results.spots, "frame", "laser_id")
+    for message in drop_run.spots:
+        for spot in message.spots:
+            row = spots[(message.frame_index, spot.laser_id)]
+            assert [row["x_px"], row["y_px"], row["sigma_px"], row["intensity"]] == \
+                pytest.approx([spot.x_px, spot.y_px, spot.sigma_px, spot.peak_intensity],
+                              nan_ok=True)
+            assert row["flags"] == spot.flags
+    fits = by_key(results.fits, "frame")
+    for fit in drop_run.fits:
+        row = fits[(fit.frame_index,)]
+        assert [row["p00_mm"], row["tilt_x_deg"], row["rmse_mm"]] == pytest.approx(
+            [fit.p00_mm, np.degrees(fit.tilt_x_rad), fit.rmse_mm])
+    assert set(results.columns) == {"spots", "points", "line", "fits"}
+    assert all(column in results.columns["points"] for column in results.points.dtype.names)

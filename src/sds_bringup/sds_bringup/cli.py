@@ -3,10 +3,15 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
-from sds_bringup import analyze, recording
+# FFmpeg and OpenCV print their own lines for a corrupt video; the commands say it in one.
+os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
+os.environ.setdefault("OPENCV_LOG_LEVEL", "ERROR")
+
+from sds_bringup import analyze, offline, recording
 from sds_bringup.graph import GraphFileError, apply_overrides, composed, load_graph
 from sds_bringup.launcher import Launcher
 from sds_bringup.paths import CONFIG
@@ -288,6 +293,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_resolution(commands)
     analyze.add_parser(commands)
     recording.add_parser(commands)
+    offline.add_parsers(commands)
     return parser
 
 

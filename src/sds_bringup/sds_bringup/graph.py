@@ -111,3 +111,18 @@ def apply_overrides(entries: list[NodeEntry], overrides: list[str]) -> list[Node
 def composed(entries: list[NodeEntry]) -> list[NodeEntry]:
     """The same graph with every node hosted in one process."""
     return [replace(entry, process="graph") for entry in entries]
+
+
+def node_parameters(graph_file: str | Path, node_name: str) -> dict[str, Any]:
+    """The parameters a graph gives one node: its parameter files ('/**' and its own name's
+    section, in order), then the graph's `parameters`."""
+    entry = next((e for e in load_graph(graph_file) if e.name == node_name), None)
+    if entry is None:
+        raise GraphFileError(f"{graph_file}: no node named {node_name!r}")
+    values: dict[str, Any] = {}
+    for file in entry.params_files:
+        document = yaml.safe_load(file.read_text()) or {}
+        for section in ("/**", node_name, f"/{node_name}"):
+            values.update((document.get(section) or {}).get("ros__parameters", {}))
+    values.update(entry.parameters)
+    return values

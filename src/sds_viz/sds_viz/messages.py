@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from sds_camera.image_msg import msg_to_image
 from sds_recon.reconstruction import LINE_LASER_ID
-from sds_recon.sloshing.recording import cloud_points
+from sds_recon.sloshing.recording import cloud_points, cloud_xyz
 
 from sds_viz.scene import RerunScene
 
@@ -50,7 +50,7 @@ def _cloud(scene: RerunScene, msg) -> None:
     cloud = cloud_points(msg)
     if cloud is None:
         return
-    ids, points = cloud
+    ids, points = cloud["laser_id"].astype(int), cloud_xyz(cloud)
     line = ids == LINE_LASER_ID
     if line.any():
         scene.log_line_points(points[line])

@@ -76,17 +76,21 @@ def read_points_csv(path: str | Path) -> SurfaceRecording:
     return recording_from_rows(times, ids, points, str(path))
 
 
-def cloud_points(msg) -> tuple[np.ndarray, np.ndarray] | None:
-    """(laser ids, X Y Z) of a decoded PointCloud2 with a laser_id field, else None."""
+def cloud_points(msg) -> np.ndarray | None:
+    """The points of a decoded PointCloud2 with a laser_id field (structured: x, y, z,
+    laser_id and whatever else it carries), else None."""
     names = [f.name for f in msg.fields]
     if "laser_id" not in names or msg.is_bigendian:
         return None
     dtype = np.dtype({"names": names, "offsets": [f.offset for f in msg.fields],
                       "formats": [POINT_FIELD_TYPES[f.datatype] for f in msg.fields],
                       "itemsize": msg.point_step})
-    cloud = np.frombuffer(bytes(msg.data), dtype, count=msg.width * msg.height)
-    return (cloud["laser_id"].astype(int),
-            np.column_stack([cloud["x"], cloud["y"], cloud["z"]]).astype(float))
+    return np.frombuffer(bytes(msg.data), dtype, count=msg.width * msg.height)
+
+
+def cloud_xyz(cloud: np.ndarray) -> np.ndarray:
+    """A cloud's points as N×3 float [mm]."""
+    return np.column_stack([cloud["x"], cloud["y"], cloud["z"]]).astype(float)
 
 
 def _stamp_s(msg) -> float:
@@ -108,10 +112,10 @@ def read_mcap(path: str | Path) -> SurfaceRecording:
             for schema, _, _, msg in reader.iter_decoded_messages():
                 if schema.name == "sensor_msgs/msg/PointCloud2":
                     cloud = cloud_points(msg)
-                    if cloud is not None and len(cloud[0]):
-                        rows["time"].append(np.full(len(cloud[0]), _stamp_s(msg)))
-                        rows["id"].append(cloud[0])
-                        rows["xyz"].append(cloud[1])
+                    if cloud is not None and len(cloud):
+                        rows["time"].append(np.full(len(cloud), _stamp_s(msg)))
+                        rows["id"].append(cloud["laser_id"].astype(int))
+                        rows["xyz"].append(cloud_xyz(cloud))
                 elif schema.name == "sensor_msgs/msg/Range" and np.isfinite(msg.range):
                     tof_time.append(_stamp_s(msg))
                     tof_range.append(msg.range * 1e3)

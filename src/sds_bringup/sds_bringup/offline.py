@@ -1,0 +1,322 @@
+"""`sds process` and `sds export`: a run's results as plain files, without a ROS graph.
+
+`process` runs the graph's own code in one process (frame selection, FrameTracker,
+reconstruct_spots/line, fit_surface, the analysis) with the parameters of
+config/graphs/drop.yaml, so its results equal the graph's on the same input. `export` writes
+the same files from a recording of the graph.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from mcap.exceptions import McapError
+from mcap_ros2.reader import read_ros2_messages
+from sds_camera.frame_source import FrameSource, FrameSourceError, Region, open_source, select
+from sds_camera.image_msg import msg_to_image
+from sds_recon.reconstruction import (
+    SurfaceFits,
+    SurfacePoints,
+    fit_surface,
+    reconstruct_line,
+    reconstruct_spots,
+)
+from sds_recon.results import ResultsWriter
+from sds_recon.rig import Rig, RigError, load_rig
+from sds_recon.sloshing.analysis import AnalysisOptions, analyze
+from sds_recon.sloshing.estimators import DecayError
+from sds_recon.sloshing.recording import (
+    RecordingError,
+    cloud_points,
+    cloud_xyz,
+    recording_from_rows,
+)
+from sds_recon.sloshing.report import write_report
+from sds_record.mcap_files import recorded_topics
+from sds_tracker.spots import LOST
+from sds_tracker.tracker import FrameTracker, TrackedSpot, parse_seeds, tracker_config
+from tqdm import tqdm
+
+from sds_bringup.graph import GraphFileError, node_parameters
+from sds_bringup.paths import CONFIG
+
+GRAPH = CONFIG / "graphs" / "drop.yaml"
+"""The graph whose tracker and reconstruction parameters the offline pipeline uses."""
+FLAG_LOST = 1
+
+
+@dataclass(frozen=True)
+class RedFrame:
+    """A frame's red channel (the region only), its region offset [px] and time [s]."""
+
+    index: int
+    time_s: float
+    red: np.ndarray
+    offset: tuple[int, int]
+
+
+def video_frames(path: Path, rig: Rig) -> Iterator[RedFrame]:
+    """A video's frames, the container's region (Rig.container_region_px) in red; the video
+    is opened and checked here, before the first frame is asked for."""
+    source = open_source(str(path))
+    region = Region(*rig.container_region_px(rig.camera))
+    try:
+        region.check_inside(source.width, source.height)
+    except FrameSourceError:
+        source.close()
+        raise
+    return _red_frames(source, region)
+
+
+def _red_frames(source: FrameSource, region: Region) -> Iterator[RedFrame]:
+    try:
+        for frame in source.frames():
+            yield RedFrame(frame.index, frame.time_ns * 1e-9, select(frame.image, region, "red"),
+                           (region.x, region.y))
+    finally:
+        source.close()
+
+
+def mcap_frames(path: Path) -> Iterator[RedFrame]:
+    """A recording's camera frames (sensor_msgs/Image) and the region its camera model gives;
+    a recording without frames is refused here, before the first frame is asked for."""
+    types = {type_name for type_name, _ in recorded_topics(path).values()}
+    if "sensor_msgs/msg/Image" not in types:
+        raise RecordingError(f"{path}: the recording has no camera frames (sensor_msgs/Image)")
+    return _recorded_frames(path)
+
+
+def _recorded_frames(path: Path) -> Iterator[RedFrame]:
+    offset, first, index = None, None, 0
+    for message in read_ros2_messages(str(path)):
+        name = message.schema.name if message.schema else ""
+        if name == "sds_msgs/msg/CameraModel":
+            offset = (int(message.ros_msg.roi.x_offset), int(message.ros_msg.roi.y_offset))
+        elif name == "sensor_msgs/msg/Image":
+            if offset is None:
+                raise RecordingError(f"{path}: a camera frame before any camera model "
+                                     "(the region offset is unknown)")
+            stamp = _stamp_s(message.ros_msg)
+            first = stamp if first is None else first
+            image = msg_to_image(message.ros_msg)
+            yield RedFrame(index, stamp - first, image[..., 2] if image.ndim == 3 else image,
+                           offset)
+            index += 1
+
+
+def _stamp_s(msg) -> float:
+    return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+
+
+class RunTables:
+    """The rows of one run, written as they come, kept for the analysis."""
+
+    def __init__(self, writer: ResultsWriter, rig: Rig) -> None:
+        self.writer = writer
+        self.rig = rig
+        self.point_rows: list[tuple] = []
+
+    def add_spots(self, frame: int, time_s: float, rows: list[tuple]) -> None:
+        """Spot rows (laser_id, x, y, x_raw, y_raw, sigma, intensity, flags) of a frame."""
+        self.writer.add("spots", [(frame, time_s, i, x, y, xr, yr, s, p, int(not f & FLAG_LOST),
+                                   f) for i, x, y, xr, yr, s, p, f in rows])
+
+    def add_points(self, frame: int, time_s: float, points: SurfacePoints) -> None:
+        rows = [(frame, time_s, int(i), *p, s, m) for i, p, s, m in zip(
+            points.laser_ids, points.points_mm, points.height_sigma_mm,
+            points.miss_distance_mm, strict=True)]
+        self.writer.add("points", rows)
+        self.point_rows += rows
+
+    def add_line(self, frame: int, time_s: float, x, y, sigma, peak, flags) -> None:
+        self.writer.add("line", [(frame, time_s, *row) for row in zip(
+            x, y, sigma, peak, flags, strict=True)])
+
+    def add_fit(self, frame: int, time_s: float, fits: SurfaceFits, count: int) -> None:
+        plane = fits.plane
+        values = (np.nan,) * 8 if plane is None else (
+            plane.p00_mm, plane.p10, plane.p01, np.degrees(plane.tilt_x_rad),
+            np.degrees(plane.tilt_y_rad), plane.r_squared, plane.rmse_mm, plane.sse_mm2)
+        names = fits.modal.names if fits.modal is not None else ()
+        amplitudes = list(fits.modal.amplitudes_mm) if fits.modal is not None else []
+        self.writer.add_fit((frame, time_s, *values, count), names, amplitudes)
+
+    def recording(self, source: str):
+        """The points as the analysis reads them."""
+        if not self.point_rows:
+            raise RecordingError(f"{source}: no surface point was reconstructed")
+        rows = np.array([(r[1], r[2], r[3], r[4], r[5]) for r in self.point_rows])
+        return recording_from_rows(rows[:, 0], rows[:, 1].astype(int), rows[:, 2:5], source)
+
+
+def process_frames(frames: Iterator[RedFrame], rig: Rig, tables: RunTables,
+                   progress: bool = True) -> int:
+    """Track, reconstruct and fit every frame, as the tracker and reconstruction nodes do."""
+    tracker_values = node_parameters(GRAPH, "tracker")
+    recon_values = node_parameters(GRAPH, "recon")
+    tracker = FrameTracker(rig, tracker_config(tracker_values),
+                           parse_seeds(tracker_values["seeds"]))
+    beam_weight = float(recon_values["beam_weight"])
+    default_sigma = float(recon_values["default_sigma_px"])
+    times: dict[int, float] = {}
+
+    def spots_done(ready: list[tuple[int, list[TrackedSpot]]]) -> None:
+        for frame, spots in ready:
+            time_s = times.pop(frame)
+            tables.add_spots(frame, time_s, [(s.laser_id, s.x_px, s.y_px, s.x_raw_px, s.y_raw_px,
+                                              s.sigma_px, s.peak, s.flags) for s in spots])
+            found = [s for s in spots if not s.flags & LOST]
+            points = reconstruct_spots(rig, [s.laser_id for s in found],
+                                       [[s.x_px, s.y_px] for s in found],
+                                       [s.sigma_px for s in found], beam_weight, default_sigma)
+            tables.add_points(frame, time_s, points)
+            tables.add_fit(frame, time_s, fit_surface(points.points_mm,
+                                                      rig.container.radius_mm),
+                           len(points.laser_ids))
+
+    count = 0
+    for frame in tqdm(frames, desc="frames", unit="frame", disable=not progress):
+        times[frame.index] = frame.time_s
+        ready, line = tracker.process(frame.index, frame.red, frame.offset)
+        spots_done(ready)
+        tables.add_line(frame.index, frame.time_s, line.x_px, line.y_px, line.sigma_px,
+                        line.peak, line.flags)
+        tables.add_points(frame.index, frame.time_s, reconstruct_line(
+            rig, np.column_stack([line.x_px, line.y_px]), line.sigma_px, default_sigma))
+        count += 1
+    spots_done(tracker.flush())
+    return count
+
+
+def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:
+    """The tables from a recording of the graph (spots, line, points, fits, IMU, ToF)."""
+    first: float | None = None
+    frames = 0
+    frame_of: dict[float, int] = {}   # header stamp [s] -> frame index (clouds carry none)
+    for message in read_ros2_messages(str(path)):
+        name, msg = (message.schema.name if message.schema else ""), message.ros_msg
+        if not hasattr(msg, "header"):
+            continue
+        stamp = _stamp_s(msg)
+        if first is None and name in ("sensor_msgs/msg/Image", "sds_msgs/msg/LaserSpotArray",
+                                      "sds_msgs/msg/LaserLineProfile"):
+            first = stamp
+        time_s = stamp - (first if first is not None else stamp)
+        if name in ("sds_msgs/msg/LaserSpotArray", "sds_msgs/msg/LaserLineProfile"):
+            frame_of[stamp] = msg.frame_index
+        if name == "sds_msgs/msg/LaserSpotArray":
+            tables.add_spots(msg.frame_index, time_s, [
+                (s.laser_id, s.x_px, s.y_px, s.x_raw_px, s.y_raw_px, s.sigma_px,
+                 s.peak_intensity, s.flags) for s in msg.spots])
+            frames += 1
+        elif name == "sds_msgs/msg/LaserLineProfile":
+            tables.add_line(msg.frame_index, time_s, msg.x_px, msg.y_px, msg.sigma_px,
+                            msg.peak_intensity, msg.flags)
+        elif name == "sensor_msgs/msg/PointCloud2":
+            cloud = cloud_points(msg)
+            if cloud is not None:
+                tables.add_points(frame_of.get(stamp, -1), time_s, SurfacePoints(
+                    cloud["laser_id"].astype(int), cloud_xyz(cloud),
+                    cloud["height_sigma_mm"].astype(float),
+                    cloud["miss_distance_mm"].astype(float)))
+        elif name == "sds_msgs/msg/SurfaceFit":
+            _add_fit_message(tables, msg, time_s)
+        elif name == "sensor_msgs/msg/Imu":
+            a = msg.linear_acceleration
+            tables.writer.add("imu", [(time_s, a.x, a.y, a.z)])
+        elif name == "sensor_msgs/msg/Range":
+            tables.writer.add("tof", [(time_s, msg.range * 1e3)])
+    if frames == 0:
+        raise RecordingError(f"{path}: no laser spots (sds_msgs/LaserSpotArray) recorded")
+    return frames
+
+
+def _add_fit_message(tables: RunTables, msg, time_s: float) -> None:
+    """A recorded SurfaceFit as a fits row."""
+    tables.writer.add_fit((msg.frame_index, time_s, msg.p00_mm, msg.p10, msg.p01,
+                           np.degrees(msg.tilt_x_rad), np.degrees(msg.tilt_y_rad),
+                           msg.r_squared, msg.rmse_mm, msg.sse_mm2, msg.point_count),
+                          tuple(msg.mode_names), list(msg.modal_amplitudes_mm))
+
+
+def _finish(tables: RunTables, source: str, out: Path, options: AnalysisOptions) -> str:
+    """The analysis of the run's points (report, analysis.json), the tables closed."""
+    note = ""
+    try:
+        analysis = analyze(tables.recording(source), tables.rig, options)
+        write_report(analysis, out)
+    except (RecordingError, DecayError, ValueError) as error:
+        note = f"no analysis: {error}"
+    tables.writer.close()
+    return note
+
+
+def add_parsers(commands: argparse._SubParsersAction) -> None:
+    """Register `sds process` and `sds export`."""
+    process = commands.add_parser(
+        "process", help="track, reconstruct and analyse a video or recording, no ROS graph",
+        description="Run the graph's tracker, reconstruction and analysis in one process (the "
+                    "parameters of config/graphs/drop.yaml) and write the result files.")
+    inputs = process.add_mutually_exclusive_group(required=True)
+    inputs.add_argument("--video", type=Path, help="video file (or image folder)")
+    inputs.add_argument("--mcap", type=Path, help="recording with camera frames")
+    process.add_argument("--rig", type=Path, required=True)
+    process.add_argument("--out", type=Path, required=True)
+    process.add_argument("--gravity", type=float, help="gravity for the theory [m/s²]")
+    process.add_argument("--no-progress", action="store_true")
+    process.set_defaults(run=run_process)
+    export = commands.add_parser(
+        "export", help="a recording's spots, points, line, fits, IMU, ToF and analysis as files",
+        description="Write the result files of a recording of the graph (see README, "
+                    "'Result files').")
+    export.add_argument("recording", type=Path)
+    export.add_argument("--rig", type=Path, default=CONFIG / "rigs" / "stelium.yaml")
+    export.add_argument("--out", type=Path, required=True)
+    export.add_argument("--gravity", type=float, help="gravity for the theory [m/s²]")
+    export.set_defaults(run=run_export)
+
+
+def _fail(command: str, error: Exception) -> int:
+    print(f"sds {command}: {error}", file=sys.stderr)
+    return 2
+
+
+def run_process(args: argparse.Namespace) -> int:
+    """Process; one-line errors with exit code 2."""
+    source = args.video or args.mcap
+    try:
+        if not source.exists():
+            raise RecordingError(f"{source}: no such file")
+        rig = load_rig(args.rig)
+        frames = video_frames(source, rig) if args.video else mcap_frames(source)
+        tables = RunTables(ResultsWriter(args.out), rig)
+        count = process_frames(frames, rig, tables, progress=not args.no_progress)
+    except (RigError, RecordingError, FrameSourceError, GraphFileError, McapError, OSError,
+            ValueError) as error:
+        return _fail("process", error)
+    note = _finish(tables, str(source), args.out, AnalysisOptions(gravity_m_s2=args.gravity))
+    print(f"sds process: {count} frames of {source} -> {args.out}" + (f" ({note})" if note
+                                                                       else ""))
+    return 0
+
+
+def run_export(args: argparse.Namespace) -> int:
+    """Export; one-line errors with exit code 2."""
+    try:
+        if not args.recording.is_file():
+            raise RecordingError(f"{args.recording}: no such recording")
+        rig = load_rig(args.rig)
+        tables = RunTables(ResultsWriter(args.out), rig)
+        frames = export_recording(args.recording, rig, tables)
+    except (RigError, RecordingError, McapError, OSError, ValueError) as error:
+        return _fail("export", error)
+    note = _finish(tables, str(args.recording), args.out,
+                   AnalysisOptions(gravity_m_s2=args.gravity))
+    print(f"sds export: {frames} frames of {args.recording} -> {args.out}" + (
+        f" ({note})" if note else ""))
+    return 0

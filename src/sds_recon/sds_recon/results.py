@@ -1,0 +1,179 @@
+"""A run's result files (`sds process`, `sds export`) and `load_results` for notebooks.
+
+One CSV per table, comma-separated, a header row of column names, one row per frame and laser
+(spots, points), per line sample (line), per frame (fits) or per reading (imu, tof);
+`columns.json` describes every column; `analysis.json` holds the sloshing estimates. The names
+and units are the public interface (README, "Result files") and stay stable.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+FLAGS_DOC = ("bit flags: 1 lost, 2 saturated, 4 reflection suspected, 8 off its image path, "
+             "16 replaced by the Hampel filter")
+COLUMNS: dict[str, dict[str, str]] = {
+    "spots": {
+        "frame": "frame index, from 0",
+        "t_s": "time since the first frame [s]",
+        "laser_id": "diode id (rig file)",
+        "x_px": "Hampel-filtered spot centre, image column, full frame [px]",
+        "y_px": "Hampel-filtered spot centre, image row, full frame [px]",
+        "x_raw_px": "spot centre before the Hampel filter, column [px]",
+        "y_raw_px": "spot centre before the Hampel filter, row [px]",
+        "sigma_px": "one-sigma uncertainty of the centre [px]",
+        "intensity": "peak intensity of the spot [0-255]",
+        "valid": "1 found, 0 lost",
+        "flags": FLAGS_DOC,
+    },
+    "points": {
+        "frame": "frame index, from 0",
+        "t_s": "time since the first frame [s]",
+        "laser_id": "diode id, or 65535 for the line laser",
+        "X_mm": "surface point, world frame of the rig file [mm]",
+        "Y_mm": "surface point, world frame [mm]",
+        "Z_mm": "surface height above the flat fill level [mm]",
+        "sigma_Z_mm": "one-sigma height uncertainty from the pixel uncertainty [mm]",
+        "miss_mm": "distance between camera ray and beam (Eq. 9); empty for the line [mm]",
+    },
+    "line": {
+        "frame": "frame index, from 0",
+        "t_s": "time since the first frame [s]",
+        "x_px": "line centre, image column, full frame [px]",
+        "y_px": "image row of the sample [px]",
+        "sigma_px": "one-sigma uncertainty of the centre [px]",
+        "intensity": "peak intensity [0-255]",
+        "flags": "bit flags: 1 interpolated over a gap, 2 saturated, 4 low signal",
+    },
+    "fits": {
+        "frame": "frame index, from 0",
+        "t_s": "time since the first frame [s]",
+        "p00_mm": "plane g = p00 + p10 X + p01 Y (seed Eq. 12): height at the axis [mm]",
+        "p10": "plane slope along X [mm/mm]",
+        "p01": "plane slope along Y [mm/mm]",
+        "tilt_x_deg": "tilt -atan(p10) [deg]",
+        "tilt_y_deg": "tilt -atan(p01) [deg]",
+        "r_squared": "coefficient of determination of the plane",
+        "rmse_mm": "root mean square residual of the plane [mm]",
+        "sse_mm2": "sum of squared residuals of the plane [mm²]",
+        "point_count": "laser-spot points in the fit",
+        "<mode>_mm": "modal amplitude (mean level, lateral_n_cos/sin, axisymmetric_n) [mm]",
+    },
+    "imu": {
+        "t_s": "time since the first frame [s]",
+        "ax_m_s2": "acceleration along X (the excitation) [m/s²]",
+        "ay_m_s2": "acceleration along Y [m/s²]",
+        "az_m_s2": "acceleration along Z [m/s²]",
+    },
+    "tof": {
+        "t_s": "time since the first frame [s]",
+        "range_mm": "time-of-flight distance to the liquid [mm]",
+    },
+}
+"""Every table's columns and what they mean (written as columns.json)."""
+
+
+class ResultsWriter:
+    """Streams rows into the tables' CSV files (opened at their first row)."""
+
+    def __init__(self, directory: str | Path) -> None:
+        self.directory = Path(directory)
+        self.directory.mkdir(parents=True, exist_ok=True)
+        self._files: dict[str, IO[str]] = {}
+        self._writers: dict[str, Any] = {}
+        self._modal_names: tuple[str, ...] | None = None
+
+    def _writer(self, table: str, header: list[str]):
+        if table not in self._writers:
+            stream = (self.directory / f"{table}.csv").open("w", newline="")
+            self._files[table] = stream
+            self._writers[table] = csv.writer(stream)
+            self._writers[table].writerow(header)
+        return self._writers[table]
+
+    def add(self, table: str, rows: list[tuple]) -> None:
+        """Rows of a table (values in the order of COLUMNS[table]); NaN is written empty."""
+        writer = self._writer(table, list(COLUMNS[table]))
+        writer.writerows(tuple(_cell(v) for v in row) for row in rows)
+
+    def add_fit(self, row: tuple, modal_names: tuple[str, ...], amplitudes: list[float]) -> None:
+        """One frame's fit; the modal columns are fixed by the first frame that has them."""
+        if self._modal_names is None and modal_names:
+            self._modal_names = modal_names
+        names = self._modal_names or ()
+        header = [c for c in COLUMNS["fits"] if c != "<mode>_mm"] + [f"{n}_mm" for n in names]
+        values = dict(zip(modal_names, amplitudes, strict=True))
+        self._writer("fits", header).writerow(
+            [_cell(v) for v in row] + [_cell(values.get(n, float("nan"))) for n in names])
+
+    def close(self, analysis: dict | None = None) -> list[Path]:
+        """Close the tables, write columns.json (and analysis.json); the files written."""
+        for stream in self._files.values():
+            stream.close()
+        written = [self.directory / f"{table}.csv" for table in self._files]
+        described = {table: COLUMNS[table] for table in self._files}
+        (self.directory / "columns.json").write_text(json.dumps(described, indent=2,
+                                                                ensure_ascii=False) + "\n")
+        written.append(self.directory / "columns.json")
+        if analysis is not None:
+            (self.directory / "analysis.json").write_text(json.dumps(analysis, indent=2) + "\n")
+            written.append(self.directory / "analysis.json")
+        return written
+
+
+def _cell(value: Any) -> Any:
+    if isinstance(value, float | np.floating):
+        return "" if not np.isfinite(value) else repr(float(value))
+    return value
+
+
+@dataclass(frozen=True)
+class Results:
+    """A results folder: each table as a numpy structured array (None if absent), the analysis."""
+
+    spots: np.ndarray | None = None
+    points: np.ndarray | None = None
+    line: np.ndarray | None = None
+    fits: np.ndarray | None = None
+    imu: np.ndarray | None = None
+    tof: np.ndarray | None = None
+    analysis: dict | None = None
+    columns: dict = field(default_factory=dict)
+
+
+def _read_table(path: Path) -> np.ndarray | None:
+    """A table as a structured array (floats, with NaN for empty cells; ids as integers)."""
+    if not path.is_file():
+        return None
+    with path.open(newline="") as stream:
+        rows = list(csv.reader(stream))
+    header, body = rows[0], rows[1:]
+    integers = {"frame", "laser_id", "valid", "flags", "point_count"}
+    dtype = [(name, np.int64 if name in integers else np.float64) for name in header]
+    table = np.zeros(len(body), dtype=dtype)
+    for index, name in enumerate(header):
+        values = [row[index] for row in body]
+        if name in integers:
+            table[name] = [int(v) for v in values]
+        else:
+            table[name] = [float(v) if v else np.nan for v in values]
+    return table
+
+
+def load_results(directory: str | Path) -> Results:
+    """Read a folder written by `sds process` or `sds export` (tables as numpy arrays; for
+    pandas: `pandas.read_csv(folder / "points.csv")`)."""
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise FileNotFoundError(f"{directory}: no such results folder")
+    tables = {table: _read_table(directory / f"{table}.csv") for table in COLUMNS}
+    analysis_path, columns_path = directory / "analysis.json", directory / "columns.json"
+    analysis = json.loads(analysis_path.read_text()) if analysis_path.is_file() else None
+    columns = json.loads(columns_path.read_text()) if columns_path.is_file() else {}
+    return Results(**tables, analysis=analysis, columns=columns)

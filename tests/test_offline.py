@@ -1,0 +1,76 @@
+"""`sds process` / `sds export` on bad input, and the result files' round trip."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from rclpy.serialization import serialize_message
+from sds_recon.results import COLUMNS, ResultsWriter, load_results
+from sds_record.mcap_files import McapRecorder
+from std_msgs.msg import Header
+
+SDS = str(Path(sys.executable).with_name("sds"))
+
+
+def sds(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([SDS, *args], capture_output=True, text=True, timeout=120)
+
+
+def test_results_round_trip_with_missing_values(tmp_path: Path) -> None:
+    writer = ResultsWriter(tmp_path)
+    writer.add("spots", [(0, 0.0, 3, 10.5, 20.25, 10.5, 20.25, 0.04, 250.0, 1, 0),
+                         (0, 0.0, 4, float("nan"), float("nan"), float("nan"), float("nan"),
+                          0.0, 0.0, 0, 1)])
+    writer.add_fit((0, 0.0, 0.1, 0.0, 0.0, 0.0, 0.0, 0.99, 0.02, 0.008, 20),
+                   ("mean", "lateral_1_cos"), [0.1, 2.5])
+    writer.add_fit((1, 0.0333, *(float("nan"),) * 8, 2), (), [])
+    writer.close()
+    results = load_results(tmp_path)
+    assert results.spots["x_px"][0] == 10.5 and np.isnan(results.spots["x_px"][1])
+    assert list(results.spots["laser_id"]) == [3, 4] and results.spots["laser_id"].dtype == int
+    assert results.fits["lateral_1_cos_mm"][0] == 2.5 and np.isnan(results.fits["p00_mm"][1])
+    assert results.points is None and set(results.columns) == {"spots", "fits"}
+    assert list(results.columns["spots"]) == list(COLUMNS["spots"])
+
+
+def one_line_error(done: subprocess.CompletedProcess, text: str) -> None:
+    assert done.returncode == 2, done.stdout + done.stderr
+    assert text in done.stderr and len(done.stderr.strip().splitlines()) == 1, done.stderr
+
+
+def test_bad_input_gives_one_line_and_exit_2(repo: Path, tmp_path: Path) -> None:
+    rig = repo / "config" / "rigs" / "stelium.yaml"
+    broken = yaml.safe_load(rig.read_text())
+    del broken["container"]
+    broken["camera"]["model"] = str(repo / "config" / "cameras" / "gopro_hero5_session.yaml")
+    broken_rig = tmp_path / "broken.yaml"
+    broken_rig.write_text(yaml.safe_dump(broken))
+    video = tmp_path / "garbage.mp4"
+    video.write_bytes(b"not a video" * 100)
+    one_line_error(sds("process", "--video", str(video), "--rig", str(broken_rig), "--out",
+                       str(tmp_path / "a")), "container")
+    one_line_error(sds("process", "--video", str(video), "--rig", str(rig), "--out",
+                       str(tmp_path / "b")), "garbage.mp4")
+    recording = McapRecorder(tmp_path / "no_frames.mcap")
+    recording.add_topic("/test/header", "std_msgs/msg/Header")
+    recording.write("/test/header", serialize_message(Header(frame_id="x")), 1, 1)
+    recording.close()
+    one_line_error(sds("process", "--mcap", str(tmp_path / "no_frames.mcap"), "--rig", str(rig),
+                       "--out", str(tmp_path / "c")), "no camera frames")
+    one_line_error(sds("export", str(tmp_path / "no_frames.mcap"), "--out",
+                       str(tmp_path / "d")), "no laser spots")
+    one_line_error(sds("export", str(tmp_path / "missing.mcap"), "--out", str(tmp_path / "e")),
+                   "no such recording")
+
+
+@pytest.mark.parametrize("table", sorted(COLUMNS))
+def test_every_column_is_described_with_its_unit_or_meaning(table: str) -> None:
+    for column, description in COLUMNS[table].items():
+        assert description, column
+        if column.endswith(("_mm", "_px", "_s", "_deg", "_m_s2")):
+            assert "[" in description, column
