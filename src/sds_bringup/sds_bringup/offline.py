@@ -9,16 +9,23 @@ the same files from a recording of the graph.
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
+import cv2
 import numpy as np
 from mcap.exceptions import McapError
 from mcap_ros2.reader import read_ros2_messages
 from sds_camera.frame_source import FrameSource, FrameSourceError, Region, open_source, select
 from sds_camera.image_msg import msg_to_image
+from sds_recon.calibration.laser_files import (
+    calibrate_from_observations,
+    read_surfaces,
+    report_text,
+)
 from sds_recon.reconstruction import (
     SurfaceFits,
     SurfacePoints,
@@ -27,7 +34,7 @@ from sds_recon.reconstruction import (
     reconstruct_spots,
 )
 from sds_recon.results import ResultsWriter
-from sds_recon.rig import Rig, RigError, load_rig
+from sds_recon.rig import Rig, RigError, load_rig, save_rig
 from sds_recon.sloshing.analysis import AnalysisOptions, analyze
 from sds_recon.sloshing.estimators import DecayError
 from sds_recon.sloshing.recording import (
@@ -60,10 +67,10 @@ class RedFrame:
     offset: tuple[int, int]
 
 
-def video_frames(path: Path, rig: Rig) -> Iterator[RedFrame]:
+def video_frames(path: Path, rig: Rig, fps: float = 0.0) -> Iterator[RedFrame]:
     """A video's frames, the container's region (Rig.container_region_px) in red; the video
     is opened and checked here, before the first frame is asked for."""
-    source = open_source(str(path))
+    source = open_source(str(path), fps=fps)
     region = Region(*rig.container_region_px(rig.camera))
     try:
         region.check_inside(source.width, source.height)
@@ -111,6 +118,46 @@ def _recorded_frames(path: Path) -> Iterator[RedFrame]:
 
 def _stamp_s(msg) -> float:
     return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+
+
+CALIBRATION_PATH_TOLERANCE_PX = 25.0
+"""Spots of uncalibrated (leaning) beams sit off their nominal image paths: look wider."""
+
+
+def calibrate_from_images(rig: Rig, images: list[Path], surfaces: Path, out: Path
+                          ) -> tuple[Rig, Path]:
+    """Track the spots and line on images of known surfaces (image k is frame k of the
+    surfaces CSV), calibrate the beams and the line plane, write the rig and its report."""
+    known = read_surfaces(surfaces)
+    values = node_parameters(GRAPH, "tracker")
+    config = tracker_config({**values, "path_tolerance_px": CALIBRATION_PATH_TOLERANCE_PX})
+    region = Region(*rig.container_region_px(rig.camera))
+    frames, ids, pixels, line_frames, line_pixels = [], [], [], [], []
+    for frame, path in enumerate(images):
+        if frame not in known:
+            raise RecordingError(f"{surfaces}: no known surface for frame {frame} ({path})")
+        image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+        if image is None:
+            raise RecordingError(f"{path}: not a readable image")
+        region.check_inside(image.shape[1], image.shape[0])
+        tracker = FrameTracker(rig, config, parse_seeds(values["seeds"]))
+        _, line = tracker.process(0, select(image, region, "red"), (region.x, region.y))
+        (_, spots), = tracker.flush()
+        for spot in (s for s in spots if not s.flags & LOST):
+            frames.append(frame)
+            ids.append(spot.laser_id)
+            pixels.append((spot.x_raw_px, spot.y_raw_px))
+        line_frames += [frame] * len(line.x_px)
+        line_pixels += list(zip(line.x_px, line.y_px, strict=True))
+    calibrated, report = calibrate_from_observations(
+        rig, known, np.array(frames), np.array(ids), np.array(pixels).reshape(-1, 2),
+        (np.array(line_frames), np.array(line_pixels).reshape(-1, 2)))
+    out.mkdir(parents=True, exist_ok=True)
+    rig_path = out / "rig_calibrated.yaml"
+    save_rig(calibrated, rig_path, comment=f"Calibrated by `sds process --calibrate-lasers` "
+                                           f"from {len(images)} images:\n{report_text(report)}")
+    rig_path.with_suffix(".report.json").write_text(json.dumps(report, indent=2) + "\n")
+    return calibrated, rig_path
 
 
 class RunTables:
@@ -263,11 +310,19 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
         description="Run the graph's tracker, reconstruction and analysis in one process (the "
                     "parameters of config/graphs/drop.yaml) and write the result files.")
     inputs = process.add_mutually_exclusive_group(required=True)
-    inputs.add_argument("--video", type=Path, help="video file (or image folder)")
+    inputs.add_argument("--video", type=Path, help="video file, or image folder (with --fps)")
     inputs.add_argument("--mcap", type=Path, help="recording with camera frames")
     process.add_argument("--rig", type=Path, required=True)
     process.add_argument("--out", type=Path, required=True)
+    process.add_argument("--fps", type=float, default=0.0,
+                         help="frame rate of an image folder [1/s]")
     process.add_argument("--gravity", type=float, help="gravity for the theory [m/s²]")
+    process.add_argument("--calibrate-lasers", type=Path, nargs="+", metavar="IMAGE",
+                         help="images of known surfaces: calibrate the beams and line plane "
+                              "first (needs --surfaces) and process with the calibrated rig")
+    process.add_argument("--surfaces", type=Path,
+                         help="known surface per image: frame, tilt_x_deg, tilt_y_deg"
+                              "[, offset_mm] (frame k = k-th image)")
     process.add_argument("--no-progress", action="store_true")
     process.set_defaults(run=run_process)
     export = commands.add_parser(
@@ -293,7 +348,13 @@ def run_process(args: argparse.Namespace) -> int:
         if not source.exists():
             raise RecordingError(f"{source}: no such file")
         rig = load_rig(args.rig)
-        frames = video_frames(source, rig) if args.video else mcap_frames(source)
+        if args.calibrate_lasers:
+            if args.surfaces is None:
+                raise ValueError("--calibrate-lasers needs --surfaces")
+            rig, rig_path = calibrate_from_images(rig, args.calibrate_lasers, args.surfaces,
+                                                  args.out)
+            print(f"sds process: calibrated rig written to {rig_path}")
+        frames = video_frames(source, rig, args.fps) if args.video else mcap_frames(source)
         tables = RunTables(ResultsWriter(args.out), rig)
         count = process_frames(frames, rig, tables, progress=not args.no_progress)
     except (RigError, RecordingError, FrameSourceError, GraphFileError, McapError, OSError,

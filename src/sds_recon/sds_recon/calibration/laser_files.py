@@ -59,12 +59,23 @@ def read_line(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 def calibrate_lasers(rig: Rig, spots: Path, surfaces: Path, line: Path | None = None,
                      fit_emitters: bool = False) -> tuple[Rig, dict[str, Any]]:
-    """The rig with calibrated beams (and line plane), and a report of what changed."""
+    """The rig with calibrated beams (and line plane) from files, and a report."""
     known = read_surfaces(surfaces)
     frames, ids, pixels = read_spots(spots)
     missing = sorted(set(frames.tolist()) - set(known))
     if missing:
         raise ValueError(f"no known surface for frames {missing[:10]} of {spots}")
+    line_observations = read_line(line) if line is not None else None
+    return calibrate_from_observations(rig, known, frames, ids, pixels, line_observations,
+                                       fit_emitters)
+
+
+def calibrate_from_observations(rig: Rig, known: dict[int, KnownSurface], frames: np.ndarray,
+                                ids: np.ndarray, pixels: np.ndarray,
+                                line: tuple[np.ndarray, np.ndarray] | None = None,
+                                fit_emitters: bool = False) -> tuple[Rig, dict[str, Any]]:
+    """The rig with calibrated beams (and line plane, from (frames, pixels) of the line) from
+    spots on known surfaces, and a report of what changed."""
     fits = calibrate_beams(rig, ids, pixels, [known[f] for f in frames], fit_emitters)
     by_id = {fit.laser_id: fit for fit in fits}
     diodes = []
@@ -86,7 +97,7 @@ def calibrate_lasers(rig: Rig, spots: Path, surfaces: Path, line: Path | None = 
             "emitter_mm": fit.emitter_mm.tolist()})
     calibrated = replace(rig, diodes=tuple(diodes))
     if line is not None and rig.line_laser is not None:
-        line_frames, line_pixels = read_line(line)
+        line_frames, line_pixels = line
         plane = calibrate_line_plane(rig, line_pixels, [known[f] for f in line_frames])
         emitter = rig.line_laser.emitter_mm
         emitter = emitter - ((emitter - plane.point_mm) @ plane.normal) * plane.normal
