@@ -9,6 +9,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 from mcap_ros2.reader import read_ros2_messages
 from ros_helpers import LATCHED, RELIABLE, Probe, SdsGraphRun, wait_until
@@ -83,7 +84,9 @@ def test_record_play_record_gives_the_same_messages(tmp_path: Path) -> None:
         assert [m.data for m in again[topic]] == [m.data for m in messages], topic
         offsets = [(m.log_time_ns - origin) * 1e-9 for m in messages]
         offsets_again = [(m.log_time_ns - origin_again) * 1e-9 for m in again[topic]]
-        assert offsets_again == pytest.approx(offsets, abs=0.02), topic
+        # log times are reception times: scheduling on a loaded 2-core machine moves them
+        differences = np.abs(np.subtract(offsets_again, offsets))
+        assert np.median(differences) < 0.005 and differences.max() < 0.05, (topic, differences)
     stamps = [m.ros_msg.stamp for m in read_ros2_messages(second)
               if m.channel.topic == "/test/header"]
     assert [s.sec * 10**9 + s.nanosec for s in stamps] == [
