@@ -28,7 +28,12 @@ WRAP = 2**32
 
 
 class ProtocolError(ValueError):
-    """A line that is not a valid version-1 record; the message says what is wrong."""
+    """A line that is not a valid version-1 record; the message says what is wrong, `reason`
+    names the kind of fault (for counting)."""
+
+    def __init__(self, message: str, reason: str = "invalid record") -> None:
+        super().__init__(message)
+        self.reason = reason
 
 
 @dataclass(frozen=True)
@@ -42,12 +47,13 @@ class Record:
 
     def __post_init__(self) -> None:
         if self.kind not in FIELDS:
-            raise ProtocolError(f"unknown record kind {self.kind!r}")
+            raise ProtocolError(f"unknown record kind {self.kind!r}", "unknown kind")
         if len(self.values) != len(FIELDS[self.kind]):
             raise ProtocolError(f"{self.kind} has {len(FIELDS[self.kind])} values, "
-                                f"got {len(self.values)}")
+                                f"got {len(self.values)}", "wrong value count")
         if not (0 <= self.seq < WRAP and 0 <= self.t_us < WRAP):
-            raise ProtocolError(f"seq and t_us must lie in 0..2^32-1, got {self.seq}, {self.t_us}")
+            raise ProtocolError(f"seq and t_us must lie in 0..2^32-1, got {self.seq}, "
+                                f"{self.t_us}", "out of range")
 
 
 def checksum(body: str) -> str:
@@ -71,22 +77,25 @@ def parse_line(line: str | bytes) -> Record:
         try:
             line = line.decode("ascii")
         except UnicodeDecodeError as error:
-            raise ProtocolError("non-ASCII bytes in the line") from error
+            raise ProtocolError("non-ASCII bytes in the line", "non-ASCII") from error
     line = line.rstrip("\r\n")
     if not line.startswith("$") or "*" not in line:
-        raise ProtocolError("a record starts with '$' and has '*' before its checksum")
+        raise ProtocolError("a record starts with '$' and has '*' before its checksum",
+                            "no frame")
     body, _, given = line[1:].rpartition("*")
     if given != checksum(body):
-        raise ProtocolError(f"checksum {given!r} does not match {checksum(body)!r}")
+        raise ProtocolError(f"checksum {given!r} does not match {checksum(body)!r}",
+                            "bad checksum")
     parts = body.split(",")
     if parts[0] != HEADER[1:]:
-        raise ProtocolError(f"unknown protocol header {parts[0]!r} (expected {HEADER[1:]})")
+        raise ProtocolError(f"unknown protocol header {parts[0]!r} (expected {HEADER[1:]})",
+                            "unknown header")
     if len(parts) < 4:
-        raise ProtocolError("a record needs seq, t_us and kind")
+        raise ProtocolError("a record needs seq, t_us and kind", "too few fields")
     try:
         numbers = [int(p) for p in (parts[1], parts[2], *parts[4:])]
     except ValueError as error:
-        raise ProtocolError(f"non-integer field in {body!r}") from error
+        raise ProtocolError(f"non-integer field in {body!r}", "non-integer field") from error
     return Record(numbers[0], numbers[1], parts[3], tuple(numbers[2:]))
 
 

@@ -1,0 +1,121 @@
+"""The Arduino's byte stream, clock mapping and protocol: fault injection and fuzzing."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from sds_arduino.clock import DeviceClock
+from sds_arduino.protocol import FIELDS, WRAP, ProtocolError, Record, format_record, parse_line
+from sds_arduino.stream import RecordStream
+
+NOISE = bytes(b for b in range(256) if b not in b"$\r\n")
+PRINTABLE = bytes(b for b in range(0x20, 0x7F) if b != ord("$"))
+
+
+def valid_records(count: int, rng: np.random.Generator) -> list[Record]:
+    kinds = list(FIELDS)
+    records = []
+    for seq in range(count):
+        kind = kinds[rng.integers(len(kinds))]
+        values = tuple(int(v) for v in rng.integers(-16000, 16000, len(FIELDS[kind])))
+        records.append(Record(seq, (seq * 5000 + 7) % WRAP, kind, values))
+    return records
+
+
+def corrupted_stream(records: list[Record], rng: np.random.Generator
+                     ) -> tuple[bytes, list[Record], int, int]:
+    """Lines with random corruption, truncation and noise between them: the bytes, the
+    records that must come out, the bad lines and the noise bytes that must be counted."""
+    out, intact, bad, noise = bytearray(), [], 0, 0
+    for index, record in enumerate(records):
+        cut = False
+        line = bytearray(format_record(record).encode())
+        fault = rng.random()
+        last = index == len(records) - 1
+        if fault < 0.1:                                  # one byte replaced
+            position = int(rng.integers(1, len(line) - 2))
+            line[position] = PRINTABLE[(PRINTABLE.index(line[position]) + 1
+                                        + int(rng.integers(len(PRINTABLE) - 1)))
+                                       % len(PRINTABLE)] if line[position] in PRINTABLE \
+                else PRINTABLE[0]
+            bad += 1
+        elif fault < 0.2 and not last:                   # cut short: the next '$' ends it
+            line = line[: int(rng.integers(1, len(line) - 2))]
+            bad += 1
+            cut = True
+        else:
+            intact.append(record)
+        out += line
+        if rng.random() < 0.1:                           # noise between records
+            junk = bytes(NOISE[i] for i in rng.integers(len(NOISE), size=rng.integers(1, 20)))
+            out += junk
+            noise += 0 if cut else len(junk)   # after a cut line it joins that line's frame
+    return bytes(out), intact, bad, noise
+
+
+def test_100k_corrupted_lines_give_every_valid_record_and_count_the_rest() -> None:
+    rng = np.random.default_rng(7)
+    records = valid_records(100_000, rng)
+    data, intact, bad, noise = corrupted_stream(records, rng)
+    stream, out, position = RecordStream(), [], 0
+    while position < len(data):                          # arbitrary read sizes
+        size = int(rng.integers(1, 300))
+        out += stream.feed(data[position:position + size])
+        position += size
+    assert out == intact
+    assert stream.stats.bad_lines == bad
+    assert stream.stats.noise_bytes == noise
+    assert stream.stats.records == len(intact)
+    assert stream.stats.missing_records == len(records) - len(intact) - \
+        (records[-1] not in intact)
+
+
+def test_a_disconnect_mid_line_drops_that_line_only() -> None:
+    records = valid_records(3, np.random.default_rng(0))
+    lines = [format_record(r).encode() for r in records]
+    stream = RecordStream()
+    out = list(stream.feed(lines[0] + lines[1][:10]))
+    stream.reset()
+    out += stream.feed(lines[2])
+    assert out == [records[0], records[2]]
+    assert stream.stats.reasons == {"cut by a disconnect": 1}
+    assert stream.stats.missing_records == 1
+
+
+@settings(max_examples=2000, deadline=None)
+@given(st.binary(max_size=200))
+def test_fuzzed_bytes_never_crash_the_parser(data: bytes) -> None:
+    try:
+        record = parse_line(data)
+    except ProtocolError:
+        return
+    assert format_record(record).rstrip("\r\n") == data.decode().rstrip("\r\n")
+
+
+@settings(max_examples=1000, deadline=None)
+@given(st.lists(st.binary(max_size=120), max_size=20))
+def test_fuzzed_chunks_never_crash_the_stream(chunks: list[bytes]) -> None:
+    """Any bytes in any chunking: no exception, and every record or rejection had its '$'."""
+    stream = RecordStream()
+    records = [record for chunk in chunks for record in stream.feed(chunk)]
+    stream.reset()
+    assert len(records) + stream.stats.bad_lines <= b"".join(chunks).count(b"$")
+    assert all(isinstance(r, Record) for r in records)
+
+
+def test_clock_mapping_recovers_offset_and_drift() -> None:
+    """Device micros() with a 1.234 s offset, 40 ppm drift and wraps; host delays 0.1–5 ms."""
+    rng = np.random.default_rng(3)
+    clock = DeviceClock()
+    true_s = np.arange(0, 120, 0.005)
+    ticks = np.round((true_s + 4294.0) * (1 + 40e-6) * 1e6).astype(np.int64) % WRAP
+    host = 1000.0 + true_s + rng.exponential(1e-3, len(true_s)) + 1e-4
+    errors = []
+    for tick, truth, arrival in zip(ticks, true_s, host, strict=True):
+        device = clock.device_seconds(int(tick))
+        clock.observe(device, arrival)
+        errors.append(clock.to_host(device) - (1000.0 + truth))
+    errors = np.abs(np.array(errors)[len(errors) // 4:])   # after the first 30 s
+    assert errors.max() < 0.5e-3, errors.max()
+    assert abs(clock.rate - 1 / (1 + 40e-6)) < 2e-6
