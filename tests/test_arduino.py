@@ -2,12 +2,20 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from mcap_ros2.reader import read_ros2_messages
 from sds_arduino.clock import DeviceClock
 from sds_arduino.protocol import FIELDS, WRAP, ProtocolError, Record, format_record, parse_line
 from sds_arduino.stream import RecordStream
+from sds_sim.arduino import arduino_records
+from sds_sim.scenario import load_scenario
 
 NOISE = bytes(b for b in range(256) if b not in b"$\r\n")
 PRINTABLE = bytes(b for b in range(0x20, 0x7F) if b != ord("$"))
@@ -119,3 +127,30 @@ def test_clock_mapping_recovers_offset_and_drift() -> None:
     errors = np.abs(np.array(errors)[len(errors) // 4:])   # after the first 30 s
     assert errors.max() < 0.5e-3, errors.max()
     assert abs(clock.rate - 1 / (1 + 40e-6)) < 2e-6
+
+
+def test_sds_import_sd_writes_every_valid_record_to_mcap(repo: Path, tmp_path: Path) -> None:
+    scenario = load_scenario(repo / "config" / "scenarios" / "ground_kick.yaml",
+                             {"duration_s": 2.0})
+    records = arduino_records(scenario)
+    lines = [format_record(r) for r in records]
+    lines.insert(10, "$SDS1,garbage*00\r\n")
+    del lines[20]                                   # a lost record: a sequence gap
+    log = tmp_path / "SDS_LOG.TXT"
+    log.write_text("".join(lines))
+    done = subprocess.run([str(Path(sys.executable).with_name("sds")), "import-sd", str(log)],
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert "1 lines rejected, 1 records missing" in done.stdout
+    kept = [r for r in records if r is not records[19]]
+    by_topic: dict[str, list] = {}
+    for message in read_ros2_messages(str(log.with_suffix(".mcap"))):
+        by_topic.setdefault(message.channel.topic, []).append(message.ros_msg)
+    imu = [r for r in kept if r.kind == "IMU"]
+    assert len(by_topic["/arduino/imu"]) == len(imu)
+    assert len(by_topic["/arduino/tof"]) == sum(r.kind == "TOF" for r in kept)
+    assert len(by_topic["/arduino/events"]) == sum(r.kind in ("TRG", "LED", "LAS") for r in kept)
+    first = by_topic["/arduino/imu"][5]
+    assert first.linear_acceleration.z == pytest.approx(imu[5].values[2] * 9.80665e-3)
+    stamp = first.header.stamp.sec + first.header.stamp.nanosec * 1e-9
+    assert stamp == pytest.approx((imu[5].t_us - records[0].t_us) * 1e-6, abs=1e-9)

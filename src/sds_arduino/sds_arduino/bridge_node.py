@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 import threading
 
 import serial
@@ -12,14 +11,10 @@ from rclpy.time import Time
 from sensor_msgs.msg import Imu, Range
 
 from sds_arduino.clock import DeviceClock
+from sds_arduino.messages import TOPICS, SensorSpec, record_message
 from sds_arduino.protocol import Record
 from sds_arduino.stream import RecordStream
 from sds_msgs.msg import SyncEvent
-
-STANDARD_GRAVITY = 9.80665
-EVENT_KINDS = {("TRG", 1): SyncEvent.KIND_TRIGGER, ("TRG", 0): SyncEvent.KIND_TRIGGER,
-               ("LED", 1): SyncEvent.KIND_LED_ON, ("LED", 0): SyncEvent.KIND_LED_OFF,
-               ("LAS", 1): SyncEvent.KIND_LASERS_ON, ("LAS", 0): SyncEvent.KIND_LASERS_OFF}
 
 
 class ArduinoBridgeNode(Node):
@@ -45,10 +40,16 @@ class ArduinoBridgeNode(Node):
                    ("port", "baud", "frame_id", "accel_noise_mg", "tof_noise_mm",
                     "tof_field_of_view_rad", "tof_min_range_m", "tof_max_range_m",
                     "reconnect_period_s", "stats_period_s")}
+        self._spec = SensorSpec(self._p["frame_id"], float(self._p["accel_noise_mg"]),
+                                float(self._p["tof_noise_mm"]),
+                                float(self._p["tof_field_of_view_rad"]),
+                                float(self._p["tof_min_range_m"]),
+                                float(self._p["tof_max_range_m"]))
         reliable = QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE)
-        self._imu_pub = self.create_publisher(Imu, "imu", reliable)
-        self._tof_pub = self.create_publisher(Range, "tof", reliable)
-        self._event_pub = self.create_publisher(SyncEvent, "events", reliable)
+        self._publishers_by_topic = {
+            "imu": self.create_publisher(Imu, "imu", reliable),
+            "tof": self.create_publisher(Range, "tof", reliable),
+            "events": self.create_publisher(SyncEvent, "events", reliable)}
         self.stream = RecordStream()
         self.clock_map = DeviceClock()
         self.published = 0
@@ -88,33 +89,8 @@ class ArduinoBridgeNode(Node):
         device_s = self.clock_map.device_seconds(record.t_us)
         self.clock_map.observe(device_s, received_s)
         stamp = Time(nanoseconds=round(self.clock_map.to_host(device_s) * 1e9)).to_msg()
-        if record.kind == "IMU":
-            msg = Imu()
-            msg.header.stamp, msg.header.frame_id = stamp, self._p["frame_id"]
-            a = [v * STANDARD_GRAVITY * 1e-3 for v in record.values]
-            msg.linear_acceleration.x, msg.linear_acceleration.y, msg.linear_acceleration.z = a
-            variance = (self._p["accel_noise_mg"] * STANDARD_GRAVITY * 1e-3) ** 2
-            msg.linear_acceleration_covariance = [variance, 0.0, 0.0, 0.0, variance, 0.0,
-                                                  0.0, 0.0, variance]
-            msg.orientation_covariance[0] = -1.0
-            msg.angular_velocity_covariance[0] = -1.0
-            self._imu_pub.publish(msg)
-        elif record.kind == "TOF":
-            range_mm, status = record.values
-            msg = Range(radiation_type=Range.INFRARED,
-                        field_of_view=float(self._p["tof_field_of_view_rad"]),
-                        min_range=float(self._p["tof_min_range_m"]),
-                        max_range=float(self._p["tof_max_range_m"]),
-                        range=range_mm * 1e-3 if status == 0 else math.nan)
-            msg.variance = (self._p["tof_noise_mm"] * 1e-3) ** 2
-            msg.header.stamp, msg.header.frame_id = stamp, self._p["frame_id"]
-            self._tof_pub.publish(msg)
-        else:
-            msg = SyncEvent(kind=EVENT_KINDS[(record.kind, int(record.values[0] != 0))],
-                            source="arduino", device_time_us=round(device_s * 1e6),
-                            sequence=record.seq)
-            msg.header.stamp, msg.header.frame_id = stamp, self._p["frame_id"]
-            self._event_pub.publish(msg)
+        msg = record_message(record, stamp, round(device_s * 1e6), self._spec)
+        self._publishers_by_topic[TOPICS[record.kind]].publish(msg)
         self.published += 1
 
     def summary(self) -> str:

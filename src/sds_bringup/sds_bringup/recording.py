@@ -1,4 +1,4 @@
-"""`sds mcap-repair` (a recording left without its summary made whole) and `sds view`."""
+"""Recording files: `sds mcap-repair`, `sds view` and `sds import-sd`."""
 
 from __future__ import annotations
 
@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from sds_arduino.import_sd import import_sd
 from sds_recon.rig import RigError, load_rig
 from sds_record.mcap_files import repair
 from sds_viz.from_mcap import mcap_to_rrd
@@ -23,6 +24,7 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
     parser.add_argument("target", type=Path)
     parser.set_defaults(run=run)
     add_view_parser(commands)
+    add_import_sd_parser(commands)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -67,4 +69,31 @@ def run_view(args: argparse.Namespace) -> int:
         return 2
     print(f"sds view: {conversion.shown} messages shown ({conversion.skipped} of types the "
           f"scene does not show) in {output}")
+    return 0
+
+
+def add_import_sd_parser(commands: argparse._SubParsersAction) -> None:
+    """Register `sds import-sd`."""
+    parser = commands.add_parser(
+        "import-sd", help="an Arduino SD-card log as an MCAP recording",
+        description="Turn the Arduino's SD-card log (protocol v1) into /arduino/imu, "
+                    "/arduino/tof and /arduino/events messages in an MCAP file, stamped with "
+                    "the device clock (seconds since the first record, plus --start-s).")
+    parser.add_argument("log", type=Path)
+    parser.add_argument("--out", type=Path, help="MCAP to write (default: beside the log)")
+    parser.add_argument("--start-s", type=float, default=0.0,
+                        help="time of the log's first record on the recording's clock [s]")
+    parser.set_defaults(run=run_import_sd)
+
+
+def run_import_sd(args: argparse.Namespace) -> int:
+    """Import; a one-line error and exit code 2 on bad input."""
+    output = args.out or args.log.with_suffix(".mcap")
+    try:
+        result = import_sd(args.log, output, start_s=args.start_s)
+    except (OSError, ValueError) as error:
+        print(f"sds import-sd: {error}", file=sys.stderr)
+        return 2
+    print(f"sds import-sd: {result.records} records to {output} ({result.rejected_lines} "
+          f"lines rejected, {result.missing_records} records missing by sequence number)")
     return 0

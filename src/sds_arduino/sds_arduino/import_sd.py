@@ -1,0 +1,54 @@
+"""`sds import-sd`: an SD-card log as an MCAP recording (drops where only the card was read)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from builtin_interfaces.msg import Time
+from rclpy.serialization import serialize_message
+from sds_record.mcap_files import McapRecorder
+
+from sds_arduino.clock import DeviceClock
+from sds_arduino.messages import TOPICS, SensorSpec, record_message
+from sds_arduino.protocol import read_log
+
+TYPE_NAMES = {"imu": "sensor_msgs/msg/Imu", "tof": "sensor_msgs/msg/Range",
+              "events": "sds_msgs/msg/SyncEvent"}
+
+
+@dataclass(frozen=True)
+class Import:
+    """How many records went in, how many lines were rejected, how many records are missing."""
+
+    records: int
+    rejected_lines: int
+    missing_records: int
+
+
+def import_sd(log: str | Path, output: str | Path, namespace: str = "/arduino",
+              start_s: float = 0.0, spec: SensorSpec | None = None) -> Import:
+    """Every valid record as /arduino/imu, /arduino/tof, /arduino/events messages stamped with
+    the device clock (seconds since the log's first record, plus `start_s`)."""
+    records, rejected = read_log(log)
+    if not records:
+        raise ValueError(f"{log}: no valid protocol-v1 record ({rejected} lines rejected)")
+    spec = spec or SensorSpec()
+    clock = DeviceClock()
+    recorder = McapRecorder(output)
+    missing, last_seq = 0, None
+    try:
+        for record in records:
+            if last_seq is not None:
+                missing += (record.seq - last_seq - 1) % 2**32
+            last_seq = record.seq
+            device_s = clock.device_seconds(record.t_us)
+            stamp_ns = round((start_s + device_s) * 1e9)
+            topic = f"{namespace}/{TOPICS[record.kind]}"
+            recorder.add_topic(topic, TYPE_NAMES[TOPICS[record.kind]])
+            msg = record_message(record, Time(sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9),
+                                 round(device_s * 1e6), spec)
+            recorder.write(topic, serialize_message(msg), stamp_ns, stamp_ns)
+    finally:
+        recorder.close()
+    return Import(len(records), rejected, missing)
