@@ -66,6 +66,11 @@ def test_bridge_publishes_every_valid_record_through_a_pty(repo: Path, tmp_path:
         assert wait_until(lambda: all(probe.node.count_publishers(t) for t in (
             "/arduino/imu", "/arduino/tof", "/arduino/events"))), graph.output()
         graph.wait_for_line("reading", timeout=30)
+        camera_sync = probe.node.create_publisher(SyncEvent, "/camera/sync", DEEP)
+        assert wait_until(lambda: camera_sync.get_subscription_count() > 0), graph.output()
+        camera_led = SyncEvent(kind=SyncEvent.KIND_LED_ON, source="camera")
+        camera_led.header.stamp.sec = 1234     # the video's clock: far from the ROS clock
+        camera_sync.publish(camera_led)
         time.sleep(0.5)
         writer.stdin.write("GO\n")
         writer.stdin.flush()
@@ -88,11 +93,17 @@ def test_bridge_publishes_every_valid_record_through_a_pty(repo: Path, tmp_path:
         assert msg.orientation_covariance[0] == -1.0
     for msg, record in zip(tof, kinds["TOF"], strict=True):
         assert msg.range == pytest.approx(record.values[0] * 1e-3)
+    led_on = [e for e in events if e.kind == SyncEvent.KIND_LED_ON]
+    assert len(led_on) == 1 and led_on[0].header.stamp.sec == 1234
+    assert led_on[0].header.stamp.nanosec < 1000   # the device's LED switch is the camera's
+    assert "LED offset" in graph.output()
     stamps = np.array([m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for m in imu])
     device = np.array([r.t_us for r in kinds["IMU"]]) * 1e-6
     intervals = np.diff(stamps) - np.diff(device) / (1 + scenario.arduino.clock_drift_ppm * 1e-6)
-    # the mapping is refitted as records arrive (and restarted by the replug)
+    # the mapping is refitted as records arrive; two jumps: where the LED aligns the clocks,
+    # and at the replug (the writer paused 2 s there, which its device times do not show)
     assert np.median(np.abs(intervals)) < 1e-4
+    assert np.sum(np.abs(intervals) > 0.1) == 2
     final = re.search(r"final: records (\d+), published (\d+), bad lines (\d+), noise bytes "
                       r"(\d+), missing records (\d+), reconnects (\d+)", graph.output())
     assert final, graph.output()

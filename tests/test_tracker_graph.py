@@ -23,7 +23,7 @@ from sds_sim.scenario import load_scenario
 from sds_sim.simulate import SimulationOutput, simulate
 from sensor_msgs.msg import Image, PointCloud2
 
-from sds_msgs.msg import LaserLineProfile, LaserSpot, LaserSpotArray, SurfaceFit
+from sds_msgs.msg import LaserLineProfile, LaserSpot, LaserSpotArray, SurfaceFit, SyncEvent
 
 pytestmark = pytest.mark.ros
 
@@ -40,6 +40,7 @@ class DropRun:
     lines: list
     clouds: list
     fits: list
+    sync: list
     log: str
 
 
@@ -57,6 +58,8 @@ def drop_run(repo, tmp_path_factory) -> DropRun:
     lines = probe.collect(LaserLineProfile, "/tracker/line")
     clouds = probe.collect(PointCloud2, "/recon/points")
     fits = probe.collect(SurfaceFit, "/recon/surface_fit")
+    sync = probe.collect(SyncEvent, "/camera/sync")
+    led_x, led_y = (int(v) for v in scenario.events.led_position_px)
     # The camera waits for three image subscribers: the tracker, the recorder and this probe
     # once it has found the tracker's and the reconstruction's publishers; the tracker takes
     # no frame before its spots reach three (the reconstruction, the recorder and this probe).
@@ -65,7 +68,8 @@ def drop_run(repo, tmp_path_factory) -> DropRun:
                         "--set", f"camera.roi={region}", "--set", f"tracker.rig={rig_file}",
                         "--set", f"recon.rig={rig_file}", "--set", "camera.wait_for_subscribers=3",
                         "--set", "tracker.wait_for_consumers=3",
-                        "--set", f"recorder.output={recording}")
+                        "--set", f"recorder.output={recording}",
+                        "--set", f"camera.led_roi={[led_x - 12, led_y - 12, 24, 24]}")
     try:
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline and not all(
@@ -81,7 +85,7 @@ def drop_run(repo, tmp_path_factory) -> DropRun:
     finally:
         graph.stop()
         probe.close()
-    return DropRun(output, rig_file, recording, tmp_path, spots, lines, clouds, fits,
+    return DropRun(output, rig_file, recording, tmp_path, spots, lines, clouds, fits, sync,
                    graph.output())
 
 
@@ -221,3 +225,14 @@ def test_export_round_trip_equals_the_graphs_messages(drop_run: DropRun) -> None
             [fit.p00_mm, np.degrees(fit.tilt_x_rad), fit.rmse_mm])
     assert set(results.columns) == {"spots", "points", "line", "fits"}
     assert all(column in results.columns["points"] for column in results.points.dtype.names)
+
+
+def test_the_sync_led_is_found_in_the_video(drop_run: DropRun) -> None:
+    """The frame source reports the LED's switches with the stamps of the frames showing them."""
+    stamps = {m.frame_index: (m.header.stamp.sec, m.header.stamp.nanosec)
+              for m in drop_run.spots}
+    switches = [(e.kind, (e.header.stamp.sec, e.header.stamp.nanosec)) for e in drop_run.sync]
+    with drop_run.output.frames.open() as file:
+        led = [int(r["frame"]) for r in csv.DictReader(file) if r["led_on"] in ("1", "True")]
+    assert switches == [(SyncEvent.KIND_LED_ON, stamps[led[0]]),
+                        (SyncEvent.KIND_LED_OFF, stamps[led[-1] + 1])], drop_run.log

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import threading
 
+import numpy as np
 import serial
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
 from sensor_msgs.msg import Imu, Range
 
-from sds_arduino.clock import DeviceClock
+from sds_arduino.clock import DeviceClock, camera_offset_s
 from sds_arduino.messages import TOPICS, SensorSpec, record_message
 from sds_arduino.protocol import Record
 from sds_arduino.stream import RecordStream
@@ -23,7 +24,9 @@ class ArduinoBridgeNode(Node):
     `imu` (sensor_msgs/Imu: linear acceleration [m/s²] with its covariance; orientation and
     angular velocity marked unknown, covariance[0] = -1), `tof` (sensor_msgs/Range [m]; NaN when
     the sensor flags the reading), `events` (sds_msgs/SyncEvent). Stamps are the device clock
-    mapped onto the ROS clock (offset and drift, updated online).
+    mapped onto the ROS clock (offset and drift, updated online) and, once the sync LED has
+    been seen both commanded (LED record) and in the video (`camera_sync`), shifted onto the
+    camera's clock so that IMU, ToF and frames line up (`align_to_camera`).
     """
 
     def __init__(self, node_name: str = "arduino", **node_kwargs) -> None:
@@ -34,12 +37,13 @@ class ArduinoBridgeNode(Node):
                               ("frame_id", "arduino"), ("accel_noise_mg", 8.0),
                               ("tof_noise_mm", 1.0), ("tof_field_of_view_rad", 0.44),
                               ("tof_min_range_m", 0.03), ("tof_max_range_m", 2.0),
-                              ("reconnect_period_s", 0.2), ("stats_period_s", 5.0)):
+                              ("reconnect_period_s", 0.2), ("stats_period_s", 5.0),
+                              ("align_to_camera", True)):
             self.declare_parameter(name, default)
         self._p = {name: self.get_parameter(name).value for name in
                    ("port", "baud", "frame_id", "accel_noise_mg", "tof_noise_mm",
                     "tof_field_of_view_rad", "tof_min_range_m", "tof_max_range_m",
-                    "reconnect_period_s", "stats_period_s")}
+                    "reconnect_period_s", "stats_period_s", "align_to_camera")}
         self._spec = SensorSpec(self._p["frame_id"], float(self._p["accel_noise_mg"]),
                                 float(self._p["tof_noise_mm"]),
                                 float(self._p["tof_field_of_view_rad"]),
@@ -55,6 +59,11 @@ class ArduinoBridgeNode(Node):
         self.published = 0
         self.reconnects = 0
         self._stop = threading.Event()
+        self._sync_lock = threading.Lock()
+        self._device_led_on: list[float] = []
+        self._camera_led_on: list[float] = []
+        self.camera_offset_s = float("nan")
+        self.create_subscription(SyncEvent, "camera_sync", self._on_camera_sync, reliable)
         self._reported = None
         self.create_timer(float(self._p["stats_period_s"]), self._report)
         self._thread = threading.Thread(target=self._read, name="serial", daemon=True)
@@ -85,10 +94,30 @@ class ArduinoBridgeNode(Node):
         if port is not None:
             port.close()
 
+    def _on_camera_sync(self, msg: SyncEvent) -> None:
+        """A sync-LED switch seen in the video: the camera's clock against the device's."""
+        if msg.kind == SyncEvent.KIND_LED_ON:
+            with self._sync_lock:
+                self._camera_led_on.append(Time.from_msg(msg.header.stamp).nanoseconds * 1e-9)
+                self._align()
+
+    def _align(self) -> None:
+        offset = camera_offset_s(self._device_led_on, self._camera_led_on)
+        if self._p["align_to_camera"] and np.isfinite(offset) and offset != self.camera_offset_s:
+            self.camera_offset_s = offset
+            self.get_logger().info(f"stamps on the camera's clock: LED offset {offset:+.4f} s")
+
     def _publish(self, record: Record, received_s: float) -> None:
         device_s = self.clock_map.device_seconds(record.t_us)
         self.clock_map.observe(device_s, received_s)
-        stamp = Time(nanoseconds=round(self.clock_map.to_host(device_s) * 1e9)).to_msg()
+        host_s = self.clock_map.to_host(device_s)
+        with self._sync_lock:
+            if record.kind == "LED" and record.values[0]:
+                self._device_led_on.append(host_s)
+                self._align()
+            if np.isfinite(self.camera_offset_s):
+                host_s += self.camera_offset_s
+        stamp = Time(nanoseconds=round(host_s * 1e9)).to_msg()
         msg = record_message(record, stamp, round(device_s * 1e6), self._spec)
         self._publishers_by_topic[TOPICS[record.kind]].publish(msg)
         self.published += 1

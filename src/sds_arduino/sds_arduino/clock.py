@@ -62,3 +62,12 @@ class DeviceClock:
         self._elapsed_us = 0
         self.offset_s = float("nan")
         self.rate = 1.0
+
+
+def camera_offset_s(device_on_s: list[float], camera_on_s: list[float]) -> float:
+    """Camera time minus device time [s] of the same sync-LED switch-ons (median over the
+    pairs, matched in order); NaN without a pair."""
+    pairs = min(len(device_on_s), len(camera_on_s))
+    if pairs == 0:
+        return float("nan")
+    return float(np.median(np.subtract(camera_on_s[:pairs], device_on_s[:pairs])))

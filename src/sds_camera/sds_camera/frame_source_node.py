@@ -26,7 +26,8 @@ from sds_camera.frame_source import (
     select,
 )
 from sds_camera.image_msg import image_to_msg
-from sds_msgs.msg import CameraModel
+from sds_camera.led import LedDetector
+from sds_msgs.msg import CameraModel, SyncEvent
 
 PACINGS = ("realtime", "flood")
 STAMPS = ("clock", "media")
@@ -73,6 +74,10 @@ class FrameSourceNode(Node):
         )
         self._image_pub = self.create_publisher(Image, "image", reliable)
         self._model_pub = self.create_publisher(CameraModel, "camera_model", latched)
+        self._sync_pub = self.create_publisher(SyncEvent, "sync", reliable)
+        led_roi = [int(v) for v in self.get_parameter("led_roi").value]
+        self._led = LedDetector(tuple(led_roi)) if len(led_roi) == 4 and led_roi[2] > 0 else None
+        self._led_switches: dict[int, bool] = {}
         self._ack_topic = self.create_subscription(
             Header, "frame_ack", self._on_ack, reliable
         ).topic_name
@@ -97,6 +102,7 @@ class FrameSourceNode(Node):
         self.declare_parameter("wait_for_subscribers", 1)
         self.declare_parameter("ack_consumers", 1)
         self.declare_parameter("max_in_flight", 2)
+        self.declare_parameter("led_roi", [0, 0, 0, 0])
 
     def _read_parameters(self) -> dict:
         names = ["source", "fps", "roi", "channel", "pacing", "rate", "stamp", "frame_id",
@@ -156,6 +162,10 @@ class FrameSourceNode(Node):
         end = _EndOfStream()
         try:
             for frame in self._source.frames():
+                if self._led is not None:
+                    switch = self._led.update(frame.index, frame.image)
+                    if switch is not None:
+                        self._led_switches[frame.index] = switch.on
                 image = select(frame.image, self._region, self._p["channel"])
                 if not self._put(Frame(frame.index, frame.time_ns, image)):
                     return
@@ -234,6 +244,11 @@ class FrameSourceNode(Node):
             if not self._publish(image_to_msg(item.image, stamp, p["frame_id"])):
                 return
             self.published += 1
+            led_on = self._led_switches.pop(item.index, None)
+            if led_on is not None:
+                self._sync_pub.publish(SyncEvent(
+                    header=Header(stamp=stamp, frame_id=p["frame_id"]), source=p["frame_id"],
+                    kind=SyncEvent.KIND_LED_ON if led_on else SyncEvent.KIND_LED_OFF))
 
     def _publish(self, msg: Image) -> bool:
         """Publish unless the node is stopping; False once the graph shuts down."""
