@@ -48,19 +48,39 @@ def _run_graph(args: argparse.Namespace) -> int:
 
 def _add_demo(commands: argparse._SubParsersAction) -> None:
     parser = commands.add_parser(
-        "demo", help="run the graph on built-in data and print a summary",
-        description="Simulate a ground test (config/scenarios/ground_kick.yaml), stream it "
-                    "through the graph, and report what arrived.",
+        "demo", help="simulate a drop, measure it with the whole graph, compare with the truth",
+        description="Simulate a 4.7 s drop (config/scenarios/drop_4p7s.yaml), run the whole "
+                    "chain on it as node processes (camera, tracker, reconstruction, Arduino "
+                    "bridge on a pseudo-terminal, recorder, Rerun), analyse the recording and "
+                    "print the results next to the simulator's truth.",
     )
     parser.add_argument("--out", type=Path, default=Path("demo_output"))
-    parser.add_argument("--seconds", type=float, default=5.0, help="simulated duration [s]")
+    parser.add_argument("--seconds", type=float, help="simulated duration [s] (default 4.7)")
     parser.set_defaults(run=_run_demo)
+    run = commands.add_parser(
+        "run", help="a video or a live camera through the whole graph, then the analysis",
+        description="Run the whole chain (config/graphs/drop.yaml + arduino.yaml + view.yaml) "
+                    "on a recorded video or a live camera; Ctrl-C stops a live run.")
+    source = run.add_mutually_exclusive_group(required=True)
+    source.add_argument("--video", help="video file")
+    source.add_argument("--camera", help="camera device, e.g. /dev/video0")
+    run.add_argument("--rig", type=Path, required=True)
+    run.add_argument("--out", type=Path, default=Path("run_output"))
+    run.add_argument("--port", help="the Arduino's serial port (default: arduino.yaml's)")
+    run.add_argument("--gravity", type=float, help="gravity for the theory [m/s²]")
+    run.set_defaults(run=_run_run)
 
 
 def _run_demo(args: argparse.Namespace) -> int:
     from sds_bringup.demo import run_demo
 
     return run_demo(args.out, args.seconds)
+
+
+def _run_run(args: argparse.Namespace) -> int:
+    from sds_bringup.demo import run_live
+
+    return run_live(args.video or args.camera, args.rig, args.out, args.port, args.gravity)
 
 
 def _add_calibrate(commands: argparse._SubParsersAction) -> None:

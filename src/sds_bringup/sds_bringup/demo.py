@@ -1,60 +1,276 @@
-"""`sds demo`: a simulated ground test streamed through the graph, with a summary."""
+"""`sds demo` and `sds run`: the whole measuring chain as real node processes, then the analysis.
+
+The graph is config/graphs/drop.yaml (frame source → tracker → reconstruction, recorder) plus
+arduino.yaml (the serial bridge) and view.yaml (Rerun, saved to .rrd). The demo simulates a
+drop, feeds the simulator's Arduino stream through a pseudo-terminal, and compares the
+analysis with the simulator's truth.
+"""
 
 from __future__ import annotations
 
-import json
+import csv
+import os
+import threading
+import time
+import tty
+from dataclasses import dataclass
 from pathlib import Path
 
-from sds_camera.frame_source import VideoFileSource
+import numpy as np
+from sds_arduino.protocol import ProtocolError, parse_line
+from sds_recon.results import ResultsWriter, load_results
+from sds_recon.rig import Rig, load_rig
+from sds_recon.sloshing.analysis import AnalysisOptions, analyze
+from sds_recon.sloshing.recording import read_mcap
+from sds_recon.sloshing.report import results_dict, summary_lines, truth_from_run, write_report
 from sds_sim.scenario import load_scenario
 from sds_sim.simulate import simulate
+from tqdm import tqdm
 
 from sds_bringup.graph import apply_overrides, load_graph
 from sds_bringup.launcher import Launcher
+from sds_bringup.offline import RunTables, export_recording
 from sds_bringup.paths import CONFIG
 from sds_bringup.ros_env import graph_environment, pick_domain_id
 
-DEMO_GRAPH = CONFIG / "graphs" / "camera_monitor.yaml"
-DEMO_SCENARIO = CONFIG / "scenarios" / "ground_kick.yaml"
-DEMO_SCALE = 0.5   # 1920x1080: the whole demo in well under a minute on 2 cores
+DEMO_SCENARIO = CONFIG / "scenarios" / "drop_4p7s.yaml"
+GRAPHS = ("drop.yaml", "arduino.yaml", "view.yaml")
+IDLE_TIMEOUT_S = 60.0
+LED_ROI_HALF_PX = 12
 
 
-def run_demo(out: Path, seconds: float) -> int:
-    """Simulate a ground test, run camera -> monitor as separate processes, print the summary."""
-    scenario = load_scenario(DEMO_SCENARIO, {"duration_s": seconds, "scale": DEMO_SCALE})
-    print(f"simulating '{scenario.name}' ({seconds:g} s at {DEMO_SCALE:g} x 3840x2160)")
-    simulation = simulate(scenario, out / "simulation")
-    clip = simulation.video.resolve()
-    written = scenario.frame_count
-    decodable = VideoFileSource(clip).announced_frames
-    region = scenario.rig.container_region_px(scenario.rig.camera.scaled(DEMO_SCALE))
-    summary_path = (out / "monitor_summary.json").resolve()
-    summary_path.unlink(missing_ok=True)
-    entries = apply_overrides(load_graph(DEMO_GRAPH), [
-        f"camera.source={clip}",
-        f"camera.roi={list(region)}",
-        "camera.channel=red",
-        f"monitor.summary_path={summary_path}",
-    ])
+@dataclass(frozen=True)
+class RunOutputs:
+    """Where a run put its files."""
+
+    recording: Path
+    rerun: Path
+    log: Path
+
+
+def graph_entries(overrides: list[str]):
+    """The full chain: drop.yaml, arduino.yaml and view.yaml, with overrides."""
+    entries = [e for name in GRAPHS for e in load_graph(CONFIG / "graphs" / name)]
+    return apply_overrides(entries, overrides)
+
+
+def run_graph(overrides: list[str], out: Path, expected_frames: int | None,
+              serial_lines: list[bytes] | None = None, port: Path | None = None) -> RunOutputs:
+    """Run the chain until `expected_frames` fits were made (or Ctrl-C for a live camera),
+    with a progress bar; node logs go to out/graph.log."""
+    outputs = RunOutputs(out / "recording.mcap", out / "recording.rrd", out / "graph.log")
+    outputs.recording.unlink(missing_ok=True)
     domain_id = pick_domain_id()
-    print(f"running the graph ({DEMO_GRAPH.name}) on ROS_DOMAIN_ID={domain_id}")
-    code = Launcher(entries, graph_environment(domain_id)).run()
-    if not summary_path.is_file():
-        print("demo failed: the monitor wrote no summary")
-        return code or 1
-    summary = json.loads(summary_path.read_text())
-    print(f"\nSDS demo summary ({out}/)")
-    print(f"  simulation:       {simulation.directory}/ (video, arduino/, truth/)")
-    modes = ", ".join(f"{m.frequency_hz:.2f} Hz (zeta {m.damping_ratio:g})"
-                      for m in scenario.mode_motions())
-    print(f"  truth:            modes at {modes}")
-    print(f"  clip:             {clip.name}, {written} frames written, {decodable} in the file")
-    shape = "x".join(map(str, summary["shape"]))
-    print(f"  received:         {summary['frames']} frames, {shape} {summary['encoding']}")
-    print(f"  receive rate:     {summary['receive_fps']:.2f} fps (video at {scenario.fps:g})")
-    print(f"  latency:          median {summary['latency_ms_median']:.1f} ms, "
-          f"p95 {summary['latency_ms_p95']:.1f} ms")
-    print(f"  out of order:     {summary['out_of_order']}")
-    complete = summary["frames"] == decodable and summary["out_of_order"] == 0
-    print("  result:           " + ("every frame arrived in order" if complete else "FRAMES LOST"))
-    return code or (0 if complete else 1)
+    environment = graph_environment(domain_id)
+    os.environ.update(environment)
+    # The camera waits for tracker, recorder and viewer; the tracker for reconstruction,
+    # recorder, viewer and the progress bar; the reconstruction for recorder and viewer.
+    entries = graph_entries([*overrides, f"recorder.output={outputs.recording.resolve()}",
+                             f"viewer.output={outputs.rerun.resolve()}",
+                             "camera.wait_for_subscribers=3", "tracker.wait_for_consumers=4",
+                             "recon.wait_for_consumers=2"])
+    with outputs.log.open("w") as log:
+        launcher = Launcher(entries, environment, output=log)
+        unplug = threading.Event()
+        watcher = threading.Thread(target=_watch, args=(launcher, expected_frames, serial_lines,
+                                                        port, unplug), daemon=True)
+        print(f"running the graph on ROS_DOMAIN_ID={domain_id}: "
+              + ", ".join(e.name for e in entries) + f" (log: {outputs.log})")
+        launcher.run(on_started=watcher.start)
+        unplug.set()   # the stand-in Arduino leaves after the bridge
+    return outputs
+
+
+def _watch(launcher: Launcher, expected_frames: int | None, serial_lines: list[bytes] | None,
+           port: Path | None, unplug: threading.Event) -> None:
+    """Count the tracked frames (progress bar), feed the Arduino stream, stop the graph."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+    from sds_msgs.msg import LaserSpotArray
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    executor = SingleThreadedExecutor(context=context)
+    node = Node("demo_progress", context=context)
+    executor.add_node(node)
+    tracked: list[int] = []   # frames tracked (the tracker waits for this subscriber too)
+    node.create_subscription(LaserSpotArray, "/tracker/spots",
+                             lambda msg: tracked.append(msg.frame_index),
+                             QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+    bar = tqdm(total=expected_frames, desc="frames", unit="frame")
+    written = threading.Event()
+    try:
+        feeding = serial_lines is not None and port is not None
+        if feeding:
+            # The stand-in Arduino starts once the bridge is up (opening a port discards what
+            # waited in it), like a rig switched on with the graph running.
+            while not launcher.stopping and not node.count_publishers("/arduino/imu"):
+                executor.spin_once(timeout_sec=0.1)
+            time.sleep(1.0)
+            threading.Thread(target=feed_serial, args=(port, serial_lines, written, unplug),
+                             daemon=True).start()
+        last, last_change = 0, time.monotonic()
+        while not launcher.stopping:
+            executor.spin_once(timeout_sec=0.1)
+            if len(tracked) != last:
+                bar.update(len(tracked) - last)
+                last, last_change = len(tracked), time.monotonic()
+            done = expected_frames is not None and last >= expected_frames and (
+                not feeding or written.is_set())
+            stalled = expected_frames is not None and \
+                time.monotonic() - last_change > IDLE_TIMEOUT_S
+            if done or stalled:
+                time.sleep(2.0)   # reconstruction, recorder and viewer finish the last frames
+                break
+    finally:
+        bar.close()
+        executor.shutdown(timeout_sec=1.0)
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+        launcher.request_stop()
+
+
+def feed_serial(port: Path, lines: list[bytes], written: threading.Event,
+                unplug: threading.Event) -> None:
+    """A stand-in Arduino: the lines on a pseudo-terminal linked at `port`, in device time;
+    `written` is set after the last, and it stays plugged in until `unplug` is set."""
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    port.unlink(missing_ok=True)
+    port.symlink_to(os.ttyname(slave))
+    start, first_us = time.monotonic(), None
+    for line in lines:
+        try:
+            t_us = parse_line(line).t_us
+        except ProtocolError:
+            t_us = None
+        if t_us is not None:
+            first_us = t_us if first_us is None else first_us
+            delay = start + (t_us - first_us) * 1e-6 - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+        os.write(master, line)
+    written.set()
+    unplug.wait()
+    os.close(master)
+    os.close(slave)
+
+
+def height_errors(truth_spots: Path, points: np.ndarray) -> np.ndarray:
+    """Measured minus true height [mm] of every spot point with a truth."""
+    truth = {}
+    with truth_spots.open() as file:
+        for row in csv.DictReader(file):
+            if row["visible"] == "1":
+                truth[(int(row["frame"]), int(row["laser_id"]))] = float(row["Z_mm"])
+    return np.array([p["Z_mm"] - truth[(int(p["frame"]), int(p["laser_id"]))]
+                     for p in points if (int(p["frame"]), int(p["laser_id"])) in truth])
+
+
+def analyse_run(recording: Path, rig: Rig, out: Path, options: AnalysisOptions,
+                truth_run: Path | None = None) -> dict:
+    """Result files, the analysis report; the results as a dictionary."""
+    tables = RunTables(ResultsWriter(out / "results"), rig)
+    export_recording(recording, rig, tables)
+    tables.writer.close()
+    analysis = analyze(read_mcap(recording), rig, options)
+    truth = truth_from_run(truth_run) if truth_run else None
+    write_report(analysis, out / "analysis", truth)
+    return results_dict(analysis, truth)
+
+
+def run_demo(out: Path, seconds: float | None) -> int:
+    """Simulate a drop, run the whole chain on it, analyse, print the summary."""
+    out.mkdir(parents=True, exist_ok=True)
+    overrides = {} if seconds is None else {"duration_s": seconds}
+    scenario = load_scenario(DEMO_SCENARIO, overrides)
+    print(f"simulating '{scenario.name}': {scenario.duration_s:g} s, {scenario.frame_count} "
+          f"frames at 3840x2160")
+    simulation = simulate(scenario, out / "simulation")
+    rig = scenario.rig
+    led_x, led_y = (int(v) for v in scenario.events.led_position_px)
+    half = LED_ROI_HALF_PX
+    port = (out / "ttyARDUINO").resolve()
+    serial_lines = simulation.serial.read_bytes().splitlines(keepends=True)
+    outputs = run_graph([f"camera.source={simulation.video.resolve()}",
+                         f"camera.roi={list(rig.container_region_px(rig.camera))}",
+                         f"camera.led_roi={[led_x - half, led_y - half, 2 * half, 2 * half]}",
+                         f"tracker.rig={scenario.rig_file.resolve()}",
+                         f"recon.rig={scenario.rig_file.resolve()}",
+                         f"viewer.rig={scenario.rig_file.resolve()}",
+                         f"arduino.port={port}"],
+                        out, scenario.frame_count, serial_lines, port)
+    if not outputs.recording.is_file():
+        print(f"demo failed: no recording (see {outputs.log})")
+        return 1
+    result = analyse_run(outputs.recording, rig, out,
+                         AnalysisOptions(gravity_m_s2=scenario.gravity), simulation.run)
+    return print_summary(out, scenario, simulation, outputs, result)
+
+
+def print_summary(out: Path, scenario, simulation, outputs: RunOutputs, result: dict) -> int:
+    """The demo's summary: files, modes against the truth, heights, spots, the Arduino."""
+    results = load_results(out / "results")
+    spots, points = results.spots, results.points
+    frames = len(set(spots["frame"].tolist())) if spots is not None else 0
+    errors = height_errors(simulation.spots, points[points["laser_id"] != 65535])
+    log = outputs.log.read_text()
+    arduino = [line for line in log.splitlines() if "final: records" in line]
+    offset = [line.split("LED offset ")[1] for line in log.splitlines() if "LED offset" in line]
+    print(f"\nSDS demo: '{scenario.name}', {scenario.frame_count} frames "
+          f"({scenario.duration_s:g} s at {scenario.fps:g} fps, 3840x2160)")
+    print(f"  recording (MCAP)   {outputs.recording}")
+    print(f"  Rerun              {outputs.rerun}   (open: rerun {outputs.rerun.name})")
+    print(f"  report             {out / 'analysis' / 'report.html'}")
+    print(f"  result files       {out / 'results'}/ (spots, points, line, fits, imu, tof .csv)")
+    print(f"  frames processed   {frames} of {scenario.frame_count}")
+    print(f"  heights            RMSE {np.sqrt(np.mean(errors**2)):.3f} mm against the truth "
+          f"({len(errors)} points)")
+    flags = {name: int(np.sum(spots["flags"] & bit != 0)) for name, bit in (
+        ("lost", 1), ("saturated", 2), ("reflection suspected", 4), ("off path", 8),
+        ("Hampel-replaced", 16))}
+    print(f"  spots              {len(spots)} ({len(spots) // max(frames, 1)} per frame): "
+          + ", ".join(f"{count} {name}" for name, count in flags.items()))
+    if arduino:
+        print(f"  Arduino            {arduino[-1].split('final: ')[1]}")
+    if offset:
+        print(f"  clocks             camera vs Arduino, from the sync LED: {offset[-1]}")
+    print("  sloshing (the report has every method; errors against the simulator's truth):")
+    for line in summary_lines(result):
+        if any(key in line for key in ("matrix_pencil", " tof ", "no oscillation", "note:")):
+            print(f"    {line}")
+    complete = frames == scenario.frame_count
+    print("  result             " + ("every frame measured" if complete else "FRAMES MISSING"))
+    return 0 if complete else 1
+
+
+def run_live(source: str, rig_file: Path, out: Path, port: str | None,
+             gravity: float | None) -> int:
+    """`sds run`: a video file or a camera through the whole chain, then the analysis."""
+    out.mkdir(parents=True, exist_ok=True)
+    rig = load_rig(rig_file)
+    overrides = [f"camera.source={source}",
+                 f"camera.roi={list(rig.container_region_px(rig.camera))}",
+                 f"tracker.rig={rig_file.resolve()}", f"recon.rig={rig_file.resolve()}",
+                 f"viewer.rig={rig_file.resolve()}"]
+    if port:
+        overrides.append(f"arduino.port={port}")
+    is_file = Path(source).is_file()
+    frames = None
+    if is_file:
+        from sds_camera.frame_source import VideoFileSource
+
+        frames = VideoFileSource(Path(source)).announced_frames
+    outputs = run_graph(overrides, out, frames)
+    if not outputs.recording.is_file():
+        print(f"run failed: no recording (see {outputs.log})")
+        return 1
+    result = analyse_run(outputs.recording, rig, out, AnalysisOptions(gravity_m_s2=gravity))
+    print(f"\nSDS run: {source}\n  recording {outputs.recording}\n  Rerun {outputs.rerun}\n"
+          f"  report {out / 'analysis' / 'report.html'}\n  results {out / 'results'}/")
+    for line in summary_lines(result):
+        print(f"    {line}")
+    return 0

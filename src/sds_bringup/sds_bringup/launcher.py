@@ -76,6 +76,11 @@ class Launcher:
         """Ask the graph to shut down (signal handler and API)."""
         self._stop.set()
 
+    @property
+    def stopping(self) -> bool:
+        """Whether a shutdown was asked for."""
+        return self._stop.is_set()
+
     def run(self, on_started: Callable[[], None] | None = None) -> int:
         """Start every process, wait, shut down; return the first non-zero exit code or 0."""
         previous = {s: signal.signal(s, self.request_stop) for s in (signal.SIGINT, signal.SIGTERM)}

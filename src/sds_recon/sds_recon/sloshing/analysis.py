@@ -30,6 +30,8 @@ TILT_STEP_DEG = 0.5
 """Frames whose tilt stays within this of a plateau's median belong to it."""
 MIN_PLATEAU_FRAMES = 5
 MIN_MENISCUS_POINTS = 200
+MIN_CYCLES = 3
+"""A component with fewer cycles than this in the window is noted as doubtful."""
 
 
 @dataclass(frozen=True)
@@ -157,6 +159,11 @@ def analyze_series(name: str, time_s: np.ndarray, values: np.ndarray, unit: str,
         return ModeResult(name, time_s, values, unit, fit, None, (), tuple(notes))
     frequency = component.natural_frequency_hz
     estimates = [fit.estimate(component, pencil_method)]
+    _, damping_sigma = component.sigmas()
+    if component.damping_ratio < -3 * damping_sigma:
+        notes.append("growing (ζ < 0 beyond 3σ): not a free decay")
+    if frequency * (fit.end_s - fit.start_s) < MIN_CYCLES:
+        notes.append(f"fewer than {MIN_CYCLES} cycles in the window")
     try:
         peaks = fft_peaks(time_s, values, 4, start_s=start_s, end_s=end_s)
         if peaks:
@@ -186,9 +193,18 @@ def tof_quick_estimate(time_s: np.ndarray, range_mm: np.ndarray, options: Analys
 
     The ToF sees the mean level over its footprint, so it sees the lateral mode only where the
     footprint is off-centre, and its clock is the Arduino's: the window starts at the series'
-    own excitation (largest swing, or onset + forcing), not the camera's.
+    own excitation (largest swing, or onset + forcing), not the camera's. If its stamps step
+    back (the bridge moved them onto the camera's clock), the part after the step is used.
     """
-    start = decay_start(time_s, range_mm, replace(options, start_s=None))
+    time_s, range_mm = np.asarray(time_s, dtype=float), np.asarray(range_mm, dtype=float)
+    backwards = np.flatnonzero(np.diff(time_s) <= 0)
+    if len(backwards):   # the clock was re-aligned (sync LED): the part after the last step
+        time_s, range_mm = time_s[backwards[-1] + 1:], range_mm[backwards[-1] + 1:]
+    try:
+        start = decay_start(time_s, range_mm, replace(options, start_s=None))
+    except DecayError as error:
+        return ModeResult("lateral_1", time_s, range_mm, "mm", None, None, (),
+                          (f"tof: {error}",))
     return analyze_series("lateral_1", time_s, range_mm, "mm", start, None, options,
                           expected_hz, pencil_method="tof")
 

@@ -427,7 +427,8 @@ def fit_damped_sinusoids(time_s: ArrayLike, values: ArrayLike, max_components: i
         parameters, covariance, rss = _fit_components(tau, y, poles)
         found = len(poles)
         rates, omegas = parameters[0:2 * found:2], parameters[1:2 * found:2]
-        if np.any(omegas <= 0) or not 0 < rss < np.inf or not np.isfinite(parameters).all():
+        if np.any(omegas <= 0) or np.any(omegas >= nyquist) or not 0 < rss < np.inf \
+                or not np.isfinite(parameters).all():
             continue
         linear = parameters[2 * found:]
         components = tuple(

@@ -100,7 +100,8 @@ def _plot_modes(modes: tuple[ModeResult, ...], window: tuple[float, float], path
             ax.set_title(f"{mode.name}: {'; '.join(mode.notes)}", fontsize=9)
         ax.set_ylabel(f"q [{mode.unit}]")
         ax.grid(alpha=0.3)
-    axes[0, 0].legend(fontsize=7, loc="upper right", ncol=4)
+    if axes[0, 0].get_legend_handles_labels()[0]:
+        axes[0, 0].legend(fontsize=7, loc="upper right", ncol=4)
     axes[-1, 0].set_xlabel("time [s]")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -111,13 +112,14 @@ def _plot_spectrum(analysis: SloshingAnalysis, path: Path) -> None:
     """Amplitude spectra in the window, the theory's modes and the estimates drawn over them."""
     fig, ax = plt.subplots(figsize=(10, 4))
     top = 0.0
-    for mode in analysis.modes + analysis.tof:
+    labelled = [(m, m.name) for m in analysis.modes] + [(m, f"{m.name} (ToF)")
+                                                         for m in analysis.tof]
+    for mode, label in labelled:
         try:
             t, y = finite_window(mode.time_s, mode.values, *mode_window(mode, analysis))
         except ValueError:
             continue
         freqs, amplitude = amplitude_spectrum(t, y)
-        label = f"{mode.name} (ToF)" if mode in analysis.tof else mode.name
         line, = ax.semilogy(freqs, amplitude, lw=1.0, label=label)
         top = max(top, float(amplitude.max()))
         for estimate in mode.estimates[:1]:
@@ -134,7 +136,8 @@ def _plot_spectrum(analysis: SloshingAnalysis, path: Path) -> None:
                  f"g = {gravity:g} m/s²" + (" (flat capillary surface, see notes)"
                                              if gravity == 0 else ""), fontsize=9)
     ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=8)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -260,6 +263,7 @@ def summary_lines(result: dict) -> list[str]:
             name = mode["mode"] + (" (ToF)" if group == "tof" else "")
             if not mode["estimates"]:
                 lines.append(f"{name:16s} {'; '.join(mode['notes'])}")
+                continue
             for e in mode["estimates"]:
                 error = ""
                 damping = (f"ζ = {e['damping_ratio']:.4f} ± {_sigma(e['damping_ratio_sigma'])}"
@@ -270,4 +274,5 @@ def summary_lines(result: dict) -> list[str]:
                         error += f", ζ {e['damping_error_pct']:+.1f} %"
                 lines.append(f"{name:16s} {e['method']:14s} f = {e['frequency_hz']:.4f} ± "
                              f"{_sigma(e['frequency_sigma_hz'])} Hz  {damping}{error}")
+            lines += [f"{'':16s} note: {note}" for note in mode["notes"]]
     return lines
