@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from ros_helpers import Probe, SdsGraphRun, wait_until
+from ros_helpers import LATCHED, Probe, SdsGraphRun, wait_until
 from sds_arduino.protocol import format_record
 from sds_sim.arduino import arduino_records
 from sds_sim.scenario import load_scenario
@@ -66,7 +66,7 @@ def test_bridge_publishes_every_valid_record_through_a_pty(repo: Path, tmp_path:
         assert wait_until(lambda: all(probe.node.count_publishers(t) for t in (
             "/arduino/imu", "/arduino/tof", "/arduino/events"))), graph.output()
         graph.wait_for_line("reading", timeout=30)
-        camera_sync = probe.node.create_publisher(SyncEvent, "/camera/sync", DEEP)
+        camera_sync = probe.node.create_publisher(SyncEvent, "/camera/sync", LATCHED)
         assert wait_until(lambda: camera_sync.get_subscription_count() > 0), graph.output()
         camera_led = SyncEvent(kind=SyncEvent.KIND_LED_ON, source="camera")
         camera_led.header.stamp.sec = 1234     # the video's clock: far from the ROS clock

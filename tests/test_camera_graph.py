@@ -114,6 +114,16 @@ def test_composed_graph_runs_camera_and_monitor_in_one_process(clip, tmp_path):
     assert result["shape"] == [240, 320, 3]
 
 
+def test_repeat_plays_the_clip_again_as_one_continuous_stream(clip, tmp_path):
+    summary = tmp_path / "summary.json"
+    graph = SdsGraphRun("camera_monitor.yaml", "--compose", "--set", f"camera.source={clip}",
+                         "--set", "camera.pacing=flood", "--set", "camera.repeat=3",
+                         "--set", f"monitor.summary_path={summary}")
+    assert graph.wait(timeout=60) == 0, graph.output()
+    result = json.loads(summary.read_text())
+    assert result["frames"] == 3 * len(FRAMES) and result["out_of_order"] == 0
+
+
 def test_truncated_video_ends_the_stream_with_an_error_and_valid_frames(clip, probe, tmp_path):
     whole = write_lossless_clip(tmp_path / "whole.mkv", FRAMES, NTSC)
     cut = tmp_path / "cut.mkv"

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mcap_ros2.reader import read_ros2_messages
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from ros_helpers import Probe, SdsGraphRun
 from rosbags.highlevel import AnyReader
 from rrd_helpers import rrd_entities
@@ -26,6 +27,8 @@ from sensor_msgs.msg import Image, PointCloud2
 from sds_msgs.msg import LaserLineProfile, LaserSpot, LaserSpotArray, SurfaceFit, SyncEvent
 
 pytestmark = pytest.mark.ros
+SYNC_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 @dataclass
@@ -58,7 +61,7 @@ def drop_run(repo, tmp_path_factory) -> DropRun:
     lines = probe.collect(LaserLineProfile, "/tracker/line")
     clouds = probe.collect(PointCloud2, "/recon/points")
     fits = probe.collect(SurfaceFit, "/recon/surface_fit")
-    sync = probe.collect(SyncEvent, "/camera/sync")
+    sync = probe.collect(SyncEvent, "/camera/sync", SYNC_QOS)
     led_x, led_y = (int(v) for v in scenario.events.led_position_px)
     # The camera waits for three image subscribers: the tracker, the recorder and this probe
     # once it has found the tracker's and the reconstruction's publishers; the tracker takes

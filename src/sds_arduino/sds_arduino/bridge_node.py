@@ -7,7 +7,7 @@ import threading
 import numpy as np
 import serial
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
 from sensor_msgs.msg import Imu, Range
 
@@ -63,7 +63,9 @@ class ArduinoBridgeNode(Node):
         self._device_led_on: list[float] = []
         self._camera_led_on: list[float] = []
         self.camera_offset_s = float("nan")
-        self.create_subscription(SyncEvent, "camera_sync", self._on_camera_sync, reliable)
+        self.create_subscription(SyncEvent, "camera_sync", self._on_camera_sync, QoSProfile(
+            depth=10, reliability=ReliabilityPolicy.RELIABLE,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL))
         self._reported = None
         self.create_timer(float(self._p["stats_period_s"]), self._report)
         self._thread = threading.Thread(target=self._read, name="serial", daemon=True)

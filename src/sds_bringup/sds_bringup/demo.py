@@ -105,11 +105,11 @@ def _watch(launcher: Launcher, expected_frames: int | None, serial_lines: list[b
     try:
         feeding = serial_lines is not None and port is not None
         if feeding:
-            # The stand-in Arduino starts once the bridge is up (opening a port discards what
-            # waited in it), like a rig switched on with the graph running.
-            while not launcher.stopping and not node.count_publishers("/arduino/imu"):
-                executor.spin_once(timeout_sec=0.1)
-            time.sleep(1.0)
+            # The stand-in Arduino starts with the video, as on the rig: once the bridge is up
+            # (opening a port discards what waited in it) and the first frame is tracked.
+            while not launcher.stopping and not (node.count_publishers("/arduino/imu")
+                                                 and tracked):
+                executor.spin_once(timeout_sec=0.05)
             threading.Thread(target=feed_serial, args=(port, serial_lines, written, unplug),
                              daemon=True).start()
         last, last_change = 0, time.monotonic()

@@ -74,7 +74,10 @@ class FrameSourceNode(Node):
         )
         self._image_pub = self.create_publisher(Image, "image", reliable)
         self._model_pub = self.create_publisher(CameraModel, "camera_model", latched)
-        self._sync_pub = self.create_publisher(SyncEvent, "sync", reliable)
+        # Kept for late subscribers (the bridge, a recorder): the blink comes at the start.
+        self._sync_pub = self.create_publisher(SyncEvent, "sync", QoSProfile(
+            depth=10, reliability=ReliabilityPolicy.RELIABLE,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL))
         led_roi = [int(v) for v in self.get_parameter("led_roi").value]
         self._led = LedDetector(tuple(led_roi)) if len(led_roi) == 4 and led_roi[2] > 0 else None
         self._led_switches: dict[int, bool] = {}
@@ -103,10 +106,12 @@ class FrameSourceNode(Node):
         self.declare_parameter("ack_consumers", 1)
         self.declare_parameter("max_in_flight", 2)
         self.declare_parameter("led_roi", [0, 0, 0, 0])
+        self.declare_parameter("repeat", 1)
 
     def _read_parameters(self) -> dict:
         names = ["source", "fps", "roi", "channel", "pacing", "rate", "stamp", "frame_id",
-                 "camera_model", "wait_for_subscribers", "ack_consumers", "max_in_flight"]
+                 "camera_model", "wait_for_subscribers", "ack_consumers", "max_in_flight",
+                 "repeat"]
         p = {name: self.get_parameter(name).value for name in names}
         for name, allowed in (("channel", CHANNELS), ("pacing", PACINGS), ("stamp", STAMPS)):
             if p[name] not in allowed:
@@ -157,11 +162,28 @@ class FrameSourceNode(Node):
         self.exit_code = EXIT_SOURCE_ERROR
         self.finished.set()
 
+    def _repeated_frames(self):
+        """The source's frames, played `repeat` times (0: forever) with increasing index and
+        time: one continuous stream (long runs from a short file)."""
+        repeat, played, index, offset_ns, period_ns = int(self._p["repeat"]), 0, 0, 0, 0
+        while True:
+            last_ns = 0
+            for frame in self._source.frames():
+                yield Frame(index, offset_ns + frame.time_ns, frame.image)
+                period_ns = frame.time_ns - last_ns if frame.time_ns > last_ns else period_ns
+                last_ns, index = frame.time_ns, index + 1
+            played += 1
+            if (repeat and played >= repeat) or self._stop.is_set() or index == 0:
+                return
+            offset_ns += last_ns + period_ns
+            self._source.close()
+            self._source = open_source(self._p["source"], fps=self._p["fps"])
+
     def _read_frames(self) -> None:
         """Decode thread: select region and channel, hand frames to the publish thread."""
         end = _EndOfStream()
         try:
-            for frame in self._source.frames():
+            for frame in self._repeated_frames():
                 if self._led is not None:
                     switch = self._led.update(frame.index, frame.image)
                     if switch is not None:

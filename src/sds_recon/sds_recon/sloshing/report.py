@@ -79,20 +79,24 @@ def _json_safe(value):
 
 
 def _plot_modes(modes: tuple[ModeResult, ...], window: tuple[float, float], path: Path) -> None:
-    """Each mode's samples, fitted model and decay envelope."""
+    """Each mode's samples, fitted model and decay envelope, against the time since the
+    first sample of the first mode [s]."""
+    origin = float(np.nanmin(modes[0].time_s)) if len(modes[0].time_s) else 0.0
+    window = (window[0] - origin, window[1] - origin)
     fig, axes = plt.subplots(len(modes), 1, figsize=(10, 2.6 * len(modes)), squeeze=False,
                              sharex=True)
     for ax, mode in zip(axes[:, 0], modes, strict=True):
-        ax.plot(mode.time_s, mode.values, ".", ms=2.5, color="0.35", label="measured")
+        ax.plot(mode.time_s - origin, mode.values, ".", ms=2.5, color="0.35", label="measured")
         ax.axvspan(*window, color="tab:blue", alpha=0.06, label="analysis window")
         if mode.fit is not None and mode.component is not None:
             t = np.linspace(mode.fit.start_s, mode.fit.end_s, 2000)
-            ax.plot(t, mode.fit.evaluate(t), lw=0.9, color="tab:red", label="fitted model")
+            ax.plot(t - origin, mode.fit.evaluate(t), lw=0.9, color="tab:red",
+                    label="fitted model")
             tau = t - mode.fit.start_s
             envelope = mode.component.amplitude * np.exp(-mode.component.decay_rate_s * tau)
             for sign in (1, -1):
-                ax.plot(t, mode.fit.offset + sign * envelope, "--", lw=1.0, color="tab:orange",
-                        label="envelope" if sign == 1 else None)
+                ax.plot(t - origin, mode.fit.offset + sign * envelope, "--", lw=1.0,
+                        color="tab:orange", label="envelope" if sign == 1 else None)
             best = mode.estimates[0]
             ax.set_title(f"{mode.name}: f = {best.frequency_hz:.4f} Hz, "
                          f"ζ = {best.damping_ratio:.4f} ({best.method})", fontsize=9)
@@ -102,7 +106,7 @@ def _plot_modes(modes: tuple[ModeResult, ...], window: tuple[float, float], path
         ax.grid(alpha=0.3)
     if axes[0, 0].get_legend_handles_labels()[0]:
         axes[0, 0].legend(fontsize=7, loc="upper right", ncol=4)
-    axes[-1, 0].set_xlabel("time [s]")
+    axes[-1, 0].set_xlabel("time since the first frame [s]")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

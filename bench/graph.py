@@ -1,0 +1,236 @@
+"""Whole-graph benchmark (issue 10): a simulated 4K 30 fps drop through the measuring chain.
+
+    .venv/bin/python bench/graph.py [--seconds 4.7] [--minutes 10] [--out /tmp/bench_graph]
+
+Prints, measured in one run on the same file:
+- decode-only fps (the frame source's own work: decode, container region, red channel);
+- per-stage time per frame in one process: decode, transport (serialise the image message),
+  tracking, triangulation and fits, recording (MCAP write of the image);
+- whole-graph fps with `pacing: flood` (camera → tracker → reconstruction → recorder, every
+  frame acknowledged) and its ratio to decode-only;
+- frame → PointCloud2 latency in real time (median, p95; the Hampel window's own delay of
+  hampel_window // 2 frames is part of it and given apart);
+- peak memory per process, and resident memory over a `--minutes` real-time run
+  (frame source `repeat: 0`; the recorder leaves the images out there to spare the disk).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+SCENARIO = REPO / "config" / "scenarios" / "drop_4p7s.yaml"
+HAMPEL_DELAY_FRAMES = 2
+IDLE_S = 10.0
+
+
+def simulate_once(out: Path, seconds: float):
+    from sds_sim.scenario import load_scenario
+    from sds_sim.simulate import simulate
+
+    scenario = load_scenario(SCENARIO, {"duration_s": seconds})
+    video = out / "sim" / "video.mp4"
+    if not video.is_file():
+        simulate(scenario, out / "sim", progress=False)
+    return scenario, video
+
+
+def stage_times(video: Path, rig) -> dict[str, float]:
+    """Median ms per frame of each stage, run one after the other in this process."""
+    from builtin_interfaces.msg import Time
+    from rclpy.serialization import serialize_message
+    from sds_camera.frame_source import Region, open_source, select
+    from sds_camera.image_msg import image_to_msg
+    from sds_recon.reconstruction import fit_surface, reconstruct_line, reconstruct_spots
+    from sds_record.mcap_files import McapRecorder
+    from sds_tracker.spots import LOST
+    from sds_tracker.tracker import FrameTracker
+
+    region = Region(*rig.container_region_px(rig.camera))
+    tracker = FrameTracker(rig)
+    recorder = McapRecorder(video.with_name("stages.mcap"))
+    recorder.add_topic("/camera/image", "sensor_msgs/msg/Image")
+    times: dict[str, list[float]] = {k: [] for k in ("decode", "transport", "tracking",
+                                                      "triangulation", "recording")}
+    source = open_source(str(video))
+    frames = source.frames()
+    while True:
+        start = time.perf_counter()
+        frame = next(frames, None)
+        if frame is None:
+            break
+        red = np.ascontiguousarray(select(frame.image, region, "red"))
+        times["decode"].append(time.perf_counter() - start)
+        start = time.perf_counter()
+        data = serialize_message(image_to_msg(red, Time(sec=frame.index), "camera"))
+        times["transport"].append(time.perf_counter() - start)
+        start = time.perf_counter()
+        ready, line = tracker.process(frame.index, red, (region.x, region.y))
+        times["tracking"].append(time.perf_counter() - start)
+        start = time.perf_counter()
+        for _, spots in ready:
+            found = [s for s in spots if not s.flags & LOST]
+            points = reconstruct_spots(rig, [s.laser_id for s in found],
+                                       [[s.x_px, s.y_px] for s in found],
+                                       [s.sigma_px for s in found])
+            fit_surface(points.points_mm, rig.container.radius_mm)
+        reconstruct_line(rig, np.column_stack([line.x_px, line.y_px]), line.sigma_px)
+        times["triangulation"].append(time.perf_counter() - start)
+        start = time.perf_counter()
+        recorder.write("/camera/image", data, frame.time_ns, frame.time_ns)
+        times["recording"].append(time.perf_counter() - start)
+    recorder.close()
+    source.close()
+    return {k: 1e3 * statistics.median(v[5:]) for k, v in times.items()}
+
+
+def decode_fps(video: Path, rig) -> float:
+    from sds_camera.frame_source import Region, open_source, select
+
+    region = Region(*rig.container_region_px(rig.camera))
+    source = open_source(str(video))
+    start, count = time.perf_counter(), 0
+    for frame in source.frames():
+        select(frame.image, region, "red")
+        count += 1
+    source.close()
+    return count / (time.perf_counter() - start)
+
+
+def memory_kb(pid: int, field: str) -> int:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith(field):
+            return int(line.split()[1])
+    return 0
+
+
+def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
+              image_subscribers: int = 2):
+    """The drop graph with a probe on /recon/points: receipt times and stamps, memory."""
+    from sds_bringup.graph import apply_overrides, load_graph
+    from sds_bringup.launcher import Launcher
+    from sds_bringup.ros_env import graph_environment, pick_domain_id
+
+    domain = pick_domain_id()
+    environment = graph_environment(domain)
+    os.environ.update(environment)
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import PointCloud2
+
+    entries = apply_overrides(load_graph(REPO / "config" / "graphs" / "drop.yaml"),
+                              [*overrides, f"camera.wait_for_subscribers={image_subscribers}",
+                               "tracker.wait_for_consumers=2", "recon.wait_for_consumers=1"])
+    receipts: list[tuple[float, float]] = []
+    memory: dict[str, list[tuple[float, int]]] = {}
+
+    def watch() -> None:
+        context = rclpy.Context()
+        rclpy.init(context=context)
+        node = Node("bench_probe", context=context)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        node.create_subscription(
+            PointCloud2, "/recon/points",
+            lambda m: receipts.append((time.time(), m.header.stamp.sec
+                                       + m.header.stamp.nanosec * 1e-9)),
+            QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+        start, last_sample, count, last_change = time.monotonic(), 0.0, 0, 0.0
+        while not launcher.stopping:
+            executor.spin_once(timeout_sec=0.05)
+            now = time.monotonic()
+            if now - last_sample > 10.0:
+                last_sample = now
+                for process in launcher.processes:
+                    if process.popen and process.popen.poll() is None:
+                        memory.setdefault(process.name, []).append(
+                            (now - start, memory_kb(process.popen.pid, "VmRSS")))
+            if receipts and (len(receipts) != count or last_change == 0.0):
+                count, last_change = len(receipts), now
+            finished = expected is not None and (
+                len(receipts) >= expected or (receipts and now - last_change > IDLE_S))
+            if finished or (minutes is not None and now - start > minutes * 60):
+                for process in launcher.processes:
+                    if process.popen and process.popen.poll() is None:
+                        memory.setdefault(process.name + " peak", []).append(
+                            (now - start, memory_kb(process.popen.pid, "VmHWM")))
+                break
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+        launcher.request_stop()
+
+    with Path(os.devnull).open("w") as log:
+        launcher = Launcher(entries, environment, output=log)
+        launcher.run(on_started=threading.Thread(target=watch, daemon=True).start)
+    return receipts, memory
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--seconds", type=float, default=4.7)
+    parser.add_argument("--minutes", type=float, default=10.0)
+    parser.add_argument("--out", type=Path, default=Path("/tmp/bench_graph"))
+    parser.add_argument("--in-flight", type=int, default=2,
+                        help="frames the flooding source may have unacknowledged")
+    args = parser.parse_args()
+    sys.stdout.reconfigure(line_buffering=True)   # each result shows as soon as measured
+    args.out.mkdir(parents=True, exist_ok=True)
+    scenario, video = simulate_once(args.out, args.seconds)
+    rig, rig_file = scenario.rig, scenario.rig_file.resolve()
+    region = list(rig.container_region_px(rig.camera))
+    base = [f"camera.source={video}", f"camera.roi={region}", f"tracker.rig={rig_file}",
+            f"recon.rig={rig_file}"]
+    frames = scenario.frame_count
+
+    decode = decode_fps(video, rig)
+    stages = stage_times(video, rig)
+    receipts, memory = run_graph([*base, f"recorder.output={args.out / 'flood.mcap'}",
+                                  f"camera.max_in_flight={args.in_flight}"], frames, None)
+    graph = (len(receipts) - 1) / (receipts[-1][0] - receipts[0][0])
+    print(f"frames: {frames} of 3840x2160 (region {region[2]}x{region[3]} red)")
+    print(f"decode-only: {decode:.1f} fps")
+    print("stages [ms/frame, median]: " + ", ".join(f"{k} {v:.2f}" for k, v in stages.items()))
+    print(f"whole graph (flood, {args.in_flight} in flight, images recorded): {graph:.1f} fps, "
+          f"ratio {graph / decode:.2f}, {len(receipts)}/{frames} frames")
+    peaks = {k.removesuffix(" peak"): v[-1][1] / 1024 for k, v in memory.items()
+             if k.endswith(" peak")}
+    print("peak memory [MB]: " + ", ".join(f"{k} {v:.0f}" for k, v in peaks.items()))
+
+    receipts, memory = run_graph([*base, "camera.pacing=realtime", "camera.repeat=0",
+                                  f"recorder.output={args.out / 'long.mcap'}",
+                                  "recorder.exclude=[/camera/image]"], None, args.minutes,
+                                 image_subscribers=1)
+    if len(receipts) < 60:
+        print(f"real time: only {len(receipts)} clouds arrived")
+        return
+    latency = np.array([r - s for r, s in receipts[30:]]) * 1e3
+    hampel_ms = HAMPEL_DELAY_FRAMES / scenario.fps * 1e3
+    print(f"real time {args.minutes:g} min: {len(receipts)} clouds, "
+          f"{(len(receipts) - 1) / (receipts[-1][0] - receipts[0][0]):.2f} fps")
+    print(f"latency frame -> PointCloud2 [ms]: median {np.median(latency):.1f}, "
+          f"p95 {np.percentile(latency, 95):.1f} (of which the Hampel window's "
+          f"{hampel_ms:.1f}); processing alone: median {np.median(latency) - hampel_ms:.1f}, "
+          f"p95 {np.percentile(latency, 95) - hampel_ms:.1f}")
+    for name, samples in memory.items():
+        if name.endswith(" peak") or len(samples) < 4:
+            continue
+        t, rss = np.array(samples, dtype=float).T
+        half = len(t) // 2
+        slope = np.polyfit(t[half:] / 60, rss[half:] / 1024, 1)[0]
+        print(f"memory {name}: {rss[0] / 1024:.0f} -> {rss[-1] / 1024:.0f} MB RSS, "
+              f"second-half slope {slope:+.2f} MB/min")
+
+
+if __name__ == "__main__":
+    sys.exit(main())
