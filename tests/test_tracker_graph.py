@@ -239,3 +239,15 @@ def test_the_sync_led_is_found_in_the_video(drop_run: DropRun) -> None:
         led = [int(r["frame"]) for r in csv.DictReader(file) if r["led_on"] in ("1", "True")]
     assert switches == [(SyncEvent.KIND_LED_ON, stamps[led[0]]),
                         (SyncEvent.KIND_LED_OFF, stamps[led[-1] + 1])], drop_run.log
+
+
+def test_sds_run_measures_a_recorded_video_with_the_whole_graph(drop_run: DropRun) -> None:
+    """`sds run --video`: the chain (with the bridge waiting on a port nobody plugs in)."""
+    out = drop_run.folder / "run"
+    done = sds("run", "--video", str(drop_run.output.video), "--rig", str(drop_run.rig_file),
+               "--out", str(out), "--port", str(out / "no_arduino"))
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert (out / "recording.mcap").is_file() and (out / "recording.rrd").is_file()
+    assert (out / "analysis" / "report.html").is_file()
+    results = load_results(out / "results")
+    assert sorted(set(results.spots["frame"])) == list(range(30))
