@@ -128,9 +128,11 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import PointCloud2
 
+    from sds_msgs.msg import LaserSpotArray
+
     entries = apply_overrides(load_graph(REPO / "config" / "graphs" / "drop.yaml"),
                               [*overrides, f"camera.wait_for_subscribers={image_subscribers}",
-                               "tracker.wait_for_consumers=2", "recon.wait_for_consumers=1"])
+                               "tracker.wait_for_consumers=3", "recon.wait_for_consumers=1"])
     receipts: list[tuple[float, float]] = []
     memory: dict[str, list[tuple[float, int]]] = {}
 
@@ -140,6 +142,10 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
         node = Node("bench_probe", context=context)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
+        # Subscribing to the spots too makes the tracker wait for this probe (its third
+        # consumer), so the probe's cloud subscription is in place before the first cloud.
+        node.create_subscription(LaserSpotArray, "/tracker/spots", lambda _: None,
+                                 QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
         node.create_subscription(
             PointCloud2, "/recon/points",
             lambda m: receipts.append((time.time(), m.header.stamp.sec

@@ -74,6 +74,7 @@ class ReconstructionNode(Node):
         self.declare_parameter("default_sigma_px", 0.1)
         self.declare_parameter("frame_id", "world")
         self.declare_parameter("estimate_period_s", 1.0)
+        self.declare_parameter("estimate_window_s", 20.0)
         self.declare_parameter("wait_for_consumers", 0)
         self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sloshing")
         self._estimating: Future | None = None
@@ -94,7 +95,8 @@ class ReconstructionNode(Node):
         self._fit_pub = self.create_publisher(SurfaceFit, "surface_fit", qos)
         self._estimate_pub = self.create_publisher(SloshingEstimate, "sloshing", qos)
         period = float(self.get_parameter("estimate_period_s").value)
-        self._running = RunningAnalysis(period) if period > 0 else None
+        window = float(self.get_parameter("estimate_window_s").value)
+        self._running = RunningAnalysis(period, window_s=window) if period > 0 else None
         self._qos = qos
         self._consumers = int(self.get_parameter("wait_for_consumers").value)
         if self._consumers > 0:

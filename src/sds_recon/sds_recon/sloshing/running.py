@@ -10,14 +10,15 @@ from sds_recon.sloshing.modal import ModalSeries, mode_coordinates
 
 
 class RunningAnalysis:
-    """Per-frame modal amplitudes in; every `period_s` of data, the modes' current estimates."""
+    """Per-frame modal amplitudes in; every `period_s` of data, the modes' current estimates
+    over the last `window_s` (a drop lasts 4.7 or 9.3 s; the cost grows with the window)."""
 
     def __init__(self, period_s: float, options: AnalysisOptions | None = None,
-                 expected_hz: dict[str, float] | None = None, max_frames: int = 3600) -> None:
+                 expected_hz: dict[str, float] | None = None, window_s: float = 20.0) -> None:
         self.period_s = period_s
         self.options = options or AnalysisOptions()
         self.expected_hz = expected_hz or {}
-        self.max_frames = max_frames
+        self.window_s = window_s
         self._names: tuple[str, ...] = ()
         self._times: list[float] = []
         self._rows: list[np.ndarray] = []
@@ -29,7 +30,7 @@ class RunningAnalysis:
             self._names, self._times, self._rows = names, [], []
         self._times.append(time_s)
         self._rows.append(np.asarray(amplitudes_mm, dtype=float))
-        if len(self._times) > self.max_frames:
+        while self._times[-1] - self._times[0] > self.window_s:
             del self._times[0], self._rows[0]
 
     def due(self) -> bool:
