@@ -16,7 +16,7 @@ import time
 import tty
 from pathlib import Path
 
-from sds_arduino.protocol import ProtocolError, parse_line
+from sds_arduino.replay import paced
 
 
 def plug(link: Path) -> tuple[int, int]:
@@ -35,17 +35,7 @@ def main() -> None:
     master, slave = plug(link)
     print("READY", flush=True)
     sys.stdin.readline()
-    start, first_us = time.monotonic(), None
-    for index, line in enumerate(lines):
-        try:
-            t_us = parse_line(line.lstrip(bytes(range(0x24)) + b"%#\xff")).t_us
-        except ProtocolError:
-            t_us = None
-        if t_us is not None:
-            first_us = t_us if first_us is None else first_us
-            delay = start + (t_us - first_us) * 1e-6 - time.monotonic()
-            if delay > 0:
-                time.sleep(delay)
+    for index, line in enumerate(paced(lines)):
         if index == disconnect_at:
             os.write(master, line[: len(line) // 2])
             time.sleep(0.5)

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from sds_arduino.protocol import ProtocolError, parse_line
+from sds_arduino.replay import paced
 from sds_recon.results import ResultsWriter, load_results
 from sds_recon.rig import Rig, load_rig
 from sds_recon.sloshing.analysis import AnalysisOptions, analyze
@@ -141,17 +141,7 @@ def feed_serial(port: Path, lines: list[bytes], written: threading.Event,
     tty.setraw(slave)
     port.unlink(missing_ok=True)
     port.symlink_to(os.ttyname(slave))
-    start, first_us = time.monotonic(), None
-    for line in lines:
-        try:
-            t_us = parse_line(line).t_us
-        except ProtocolError:
-            t_us = None
-        if t_us is not None:
-            first_us = t_us if first_us is None else first_us
-            delay = start + (t_us - first_us) * 1e-6 - time.monotonic()
-            if delay > 0:
-                time.sleep(delay)
+    for line in paced(lines):
         os.write(master, line)
     written.set()
     unplug.wait()
