@@ -201,5 +201,8 @@ def test_demo_measures_a_simulated_drop_with_the_whole_graph(tmp_path, repo):
     analysis = json.loads((tmp_path / "analysis" / "analysis.json").read_text())
     lateral_1 = next(m for m in analysis["modes"] if m["mode"] == "lateral_1")
     assert abs(lateral_1["estimates"][0]["frequency_error_pct"]) < 0.5
-    heights = re.search(r"heights +RMSE ([0-9.]+) mm", result.stdout)
+    heights = re.search(r"heights +RMSE ([0-9.]+) mm against the truth \((\d+) points\)",
+                        result.stdout)
     assert heights and float(heights.group(1)) < 0.2, result.stdout
+    spots = re.search(r"spots +(\d+) \(20 per frame\): (\d+) lost", result.stdout)
+    assert spots and int(heights.group(2)) == int(spots.group(1)) - int(spots.group(2))

@@ -245,6 +245,7 @@ def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:
     first: float | None = None
     frames = 0
     frame_of: dict[float, int] = {}   # header stamp [s] -> frame index (clouds carry none)
+    clouds: list[tuple[float, float, SurfacePoints]] = []
     for message in read_ros2_messages(str(path)):
         name, msg = (message.schema.name if message.schema else ""), message.ros_msg
         if not hasattr(msg, "header"):
@@ -266,11 +267,11 @@ def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:
                             msg.peak_intensity, msg.flags)
         elif name == "sensor_msgs/msg/PointCloud2":
             cloud = cloud_points(msg)
-            if cloud is not None:
-                tables.add_points(frame_of.get(stamp, -1), time_s, SurfacePoints(
+            if cloud is not None:   # its frame is known once every spots message is read
+                clouds.append((stamp, time_s, SurfacePoints(
                     cloud["laser_id"].astype(int), cloud_xyz(cloud),
                     cloud["height_sigma_mm"].astype(float),
-                    cloud["miss_distance_mm"].astype(float)))
+                    cloud["miss_distance_mm"].astype(float))))
         elif name == "sds_msgs/msg/SurfaceFit":
             _add_fit_message(tables, msg, time_s)
         elif name == "sensor_msgs/msg/Imu":
@@ -280,6 +281,8 @@ def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:
             tables.writer.add("tof", [(time_s, msg.range * 1e3)])
     if frames == 0:
         raise RecordingError(f"{path}: no laser spots (sds_msgs/LaserSpotArray) recorded")
+    for stamp, time_s, points in clouds:
+        tables.add_points(frame_of.get(stamp, -1), time_s, points)
     return frames
 
 
