@@ -188,20 +188,26 @@ def decay_start(time_s: np.ndarray, values: np.ndarray, options: AnalysisOptions
 
 
 def tof_quick_estimate(time_s: np.ndarray, range_mm: np.ndarray, options: AnalysisOptions,
-                       expected_hz: float | None = None) -> ModeResult:
+                       expected_hz: float | None = None,
+                       camera_window_s: tuple[float, float] | None = None) -> ModeResult:
     """The fundamental from the ToF range alone (between drops).
 
     The ToF sees the mean level over its footprint, so it sees the lateral mode only where the
     footprint is off-centre, and its clock is the Arduino's: the window starts at the series'
-    own excitation (largest swing, or onset + forcing), not the camera's. If its stamps step
-    back (the bridge moved them onto the camera's clock), the part after the step is used.
+    own excitation (largest swing, or onset + forcing), not the camera's — unless its stamps
+    are on the camera's clock (the bridge aligned them with the sync LED) and cover the camera's
+    decay window, which it then shares. If its stamps step back (the alignment), the part
+    after the step is used.
     """
     time_s, range_mm = np.asarray(time_s, dtype=float), np.asarray(range_mm, dtype=float)
     backwards = np.flatnonzero(np.diff(time_s) <= 0)
     if len(backwards):   # the clock was re-aligned (sync LED): the part after the last step
         time_s, range_mm = time_s[backwards[-1] + 1:], range_mm[backwards[-1] + 1:]
     try:
-        start = decay_start(time_s, range_mm, replace(options, start_s=None))
+        if camera_window_s is not None and time_s[0] <= camera_window_s[0] < time_s[-1]:
+            start = camera_window_s[0]
+        else:
+            start = decay_start(time_s, range_mm, replace(options, start_s=None))
     except DecayError as error:
         return ModeResult("lateral_1", time_s, range_mm, "mm", None, None, (),
                           (f"tof: {error}",))
@@ -277,7 +283,7 @@ def analyze(recording: SurfaceRecording, rig: Rig, options: AnalysisOptions | No
     tof = ()
     if len(recording.tof_time_s) >= 16:
         tof = (tof_quick_estimate(recording.tof_time_s, recording.tof_range_mm, options,
-                                  expected.get("lateral_1")),)
+                                  expected.get("lateral_1"), (float(start), end)),)
     try:
         quiet_until = excitation_onset(first.time_s, first.values_mm)
     except DecayError:
