@@ -37,6 +37,8 @@ DEMO_SCENARIO = CONFIG / "scenarios" / "drop_4p7s.yaml"
 GRAPHS = ("drop.yaml", "arduino.yaml", "view.yaml")
 IDLE_TIMEOUT_S = 60.0
 LED_ROI_HALF_PX = 12
+BRIDGE_OPEN_S = 0.5
+"""The bridge opens its port within this of publishing (it reads from its start)."""
 
 
 @dataclass(frozen=True)
@@ -69,20 +71,25 @@ def run_graph(overrides: list[str], out: Path, expected_frames: int | None,
                              f"viewer.output={outputs.rerun.resolve()}",
                              "camera.wait_for_subscribers=3", "tracker.wait_for_consumers=4",
                              "recon.wait_for_consumers=2"])
+    cable = plug_in(port) if serial_lines is not None and port is not None else None
     with outputs.log.open("w") as log:
         launcher = Launcher(entries, environment, output=log)
-        unplug = threading.Event()
+        unplug, feeding = threading.Event(), threading.Event()
         watcher = threading.Thread(target=_watch, args=(launcher, expected_frames, serial_lines,
-                                                        port, unplug), daemon=True)
+                                                        cable, unplug, feeding), daemon=True)
         print(f"running the graph on ROS_DOMAIN_ID={domain_id}: "
               + ", ".join(e.name for e in entries) + f" (log: {outputs.log})")
         launcher.run(on_started=watcher.start)
         unplug.set()   # the stand-in Arduino leaves after the bridge
+    if cable is not None and not feeding.is_set():
+        for fd in cable:
+            os.close(fd)
     return outputs
 
 
 def _watch(launcher: Launcher, expected_frames: int | None, serial_lines: list[bytes] | None,
-           port: Path | None, unplug: threading.Event) -> None:
+           cable: tuple[int, int] | None, unplug: threading.Event,
+           feeding: threading.Event) -> None:
     """Count the tracked frames (progress bar), feed the Arduino stream, stop the graph."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
@@ -103,14 +110,15 @@ def _watch(launcher: Launcher, expected_frames: int | None, serial_lines: list[b
     bar = tqdm(total=expected_frames, desc="frames", unit="frame")
     written = threading.Event()
     try:
-        feeding = serial_lines is not None and port is not None
-        if feeding:
-            # The stand-in Arduino starts with the video, as on the rig: once the bridge is up
-            # (opening a port discards what waited in it) and the first frame is tracked.
+        if cable is not None and serial_lines is not None:
+            # The stand-in Arduino starts with the video, as on the rig: once the bridge has
+            # opened the port (opening discards what waited in it) and the first frame is in.
             while not launcher.stopping and not (node.count_publishers("/arduino/imu")
                                                  and tracked):
                 executor.spin_once(timeout_sec=0.05)
-            threading.Thread(target=feed_serial, args=(port, serial_lines, written, unplug),
+            time.sleep(BRIDGE_OPEN_S)
+            feeding.set()
+            threading.Thread(target=feed_serial, args=(cable, serial_lines, written, unplug),
                              daemon=True).start()
         last, last_change = 0, time.monotonic()
         while not launcher.stopping:
@@ -119,7 +127,7 @@ def _watch(launcher: Launcher, expected_frames: int | None, serial_lines: list[b
                 bar.update(len(tracked) - last)
                 last, last_change = len(tracked), time.monotonic()
             done = expected_frames is not None and last >= expected_frames and (
-                not feeding or written.is_set())
+                not feeding.is_set() or written.is_set())
             stalled = expected_frames is not None and \
                 time.monotonic() - last_change > IDLE_TIMEOUT_S
             if done or stalled:
@@ -133,14 +141,20 @@ def _watch(launcher: Launcher, expected_frames: int | None, serial_lines: list[b
         launcher.request_stop()
 
 
-def feed_serial(port: Path, lines: list[bytes], written: threading.Event,
-                unplug: threading.Event) -> None:
-    """A stand-in Arduino: the lines on a pseudo-terminal linked at `port`, in device time;
-    `written` is set after the last, and it stays plugged in until `unplug` is set."""
+def plug_in(port: Path) -> tuple[int, int]:
+    """A pseudo-terminal (raw) whose slave is linked at `port`: the stand-in Arduino's cable."""
     master, slave = os.openpty()
     tty.setraw(slave)
     port.unlink(missing_ok=True)
     port.symlink_to(os.ttyname(slave))
+    return master, slave
+
+
+def feed_serial(cable: tuple[int, int], lines: list[bytes], written: threading.Event,
+                unplug: threading.Event) -> None:
+    """A stand-in Arduino: the lines on the pseudo-terminal, in device time; `written` is set
+    after the last, and it stays plugged in until `unplug` is set."""
+    master, slave = cable
     for line in paced(lines):
         os.write(master, line)
     written.set()
