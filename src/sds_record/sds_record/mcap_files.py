@@ -17,6 +17,7 @@ from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader, make_reader
 from mcap.records import Channel, Message, Schema
 from mcap.stream_reader import StreamReader
+from mcap.summary import Summary
 from mcap.writer import CompressionType, Writer
 
 from sds_record.schemas import MESSAGE_ENCODING, SCHEMA_ENCODING, message_definition
@@ -119,6 +120,15 @@ class McapRecorder:
             self._stream.close()
 
 
+def _summary(path: Path) -> Summary | None:
+    """The file's summary section; None when it has none or ends early (a crash)."""
+    with path.open("rb") as stream:
+        try:
+            return make_reader(stream).get_summary()
+        except (McapError, OSError, ValueError, StopIteration):
+            return None
+
+
 def _linear_messages(path: Path) -> Iterator[tuple[Schema | None, Channel, Message]]:
     """Every complete message in file order, stopping quietly at a truncated tail."""
     with path.open("rb") as stream:
@@ -139,12 +149,7 @@ def read_messages(path: str | Path, topics: Iterable[str] | None = None
     """Messages in log-time order; a file without its summary (a crash) is read linearly."""
     path = Path(path)
     wanted = set(topics) if topics is not None else None
-    with path.open("rb") as stream:
-        try:
-            complete = make_reader(stream).get_summary() is not None
-        except (McapError, OSError, ValueError, StopIteration):
-            complete = False
-    source = _indexed_messages(path, wanted) if complete else _linear_messages(path)
+    source = _indexed_messages(path, wanted) if _summary(path) else _linear_messages(path)
     for schema, channel, message in source:
         if wanted is not None and channel.topic not in wanted:
             continue
@@ -156,11 +161,7 @@ def read_messages(path: str | Path, topics: Iterable[str] | None = None
 def recorded_topics(path: str | Path) -> dict[str, tuple[str, bool]]:
     """Topic → (type name, latched) of every channel in the file (summary, else a scan)."""
     path = Path(path)
-    with path.open("rb") as stream:
-        try:
-            summary = make_reader(stream).get_summary()
-        except (McapError, OSError, ValueError, StopIteration):
-            summary = None
+    summary = _summary(path)
     if summary is not None:
         schemas, channels = summary.schemas, summary.channels.values()
     else:
@@ -185,11 +186,7 @@ def repair(source: str | Path, target: str | Path, compression: str = "zstd") ->
     source, target = Path(source), Path(target)
     if source.resolve() == target.resolve():
         raise ValueError("repair writes a new file: give a target other than the source")
-    with source.open("rb") as stream:
-        try:
-            had_summary = make_reader(stream).get_summary() is not None
-        except (McapError, OSError, ValueError, StopIteration):
-            had_summary = False
+    had_summary = _summary(source) is not None
     schemas: dict[int, int] = {}
     channels: dict[int, int] = {}
     count = 0
