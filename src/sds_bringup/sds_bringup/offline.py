@@ -42,6 +42,7 @@ from sds_recon.sloshing.recording import (
     cloud_points,
     cloud_xyz,
     recording_from_rows,
+    stamp_s,
 )
 from sds_recon.sloshing.report import write_report
 from sds_record.mcap_files import recorded_topics
@@ -54,7 +55,6 @@ from sds_bringup.paths import CONFIG
 
 GRAPH = CONFIG / "graphs" / "drop.yaml"
 """The graph whose tracker and reconstruction parameters the offline pipeline uses."""
-FLAG_LOST = 1
 
 
 @dataclass(frozen=True)
@@ -108,16 +108,12 @@ def _recorded_frames(path: Path) -> Iterator[RedFrame]:
             if offset is None:
                 raise RecordingError(f"{path}: a camera frame before any camera model "
                                      "(the region offset is unknown)")
-            stamp = _stamp_s(message.ros_msg)
+            stamp = stamp_s(message.ros_msg)
             first = stamp if first is None else first
             image = msg_to_image(message.ros_msg)
             yield RedFrame(index, stamp - first, image[..., 2] if image.ndim == 3 else image,
                            offset)
             index += 1
-
-
-def _stamp_s(msg) -> float:
-    return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
 
 
 CALIBRATION_PATH_TOLERANCE_PX = 25.0
@@ -170,7 +166,7 @@ class RunTables:
 
     def add_spots(self, frame: int, time_s: float, rows: list[tuple]) -> None:
         """Spot rows (laser_id, x, y, x_raw, y_raw, sigma, intensity, flags) of a frame."""
-        self.writer.add("spots", [(frame, time_s, i, x, y, xr, yr, s, p, int(not f & FLAG_LOST),
+        self.writer.add("spots", [(frame, time_s, i, x, y, xr, yr, s, p, int(not f & LOST),
                                    f) for i, x, y, xr, yr, s, p, f in rows])
 
     def add_points(self, frame: int, time_s: float, points: SurfacePoints) -> None:
@@ -250,7 +246,7 @@ def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:
         name, msg = (message.schema.name if message.schema else ""), message.ros_msg
         if not hasattr(msg, "header"):
             continue
-        stamp = _stamp_s(msg)
+        stamp = stamp_s(msg)
         if first is None and name in ("sensor_msgs/msg/Image", "sds_msgs/msg/LaserSpotArray",
                                       "sds_msgs/msg/LaserLineProfile"):
             first = stamp

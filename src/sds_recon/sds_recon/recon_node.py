@@ -25,6 +25,7 @@ from sds_recon.reconstruction import (
 )
 from sds_recon.rig import Rig, RigError, load_rig
 from sds_recon.sloshing.modal import ModalSeries
+from sds_recon.sloshing.recording import stamp_s
 from sds_recon.sloshing.running import RunningAnalysis
 
 CLOUD_FIELDS = (("x", np.float32), ("y", np.float32), ("z", np.float32),
@@ -143,8 +144,8 @@ class ReconstructionNode(Node):
             fit.modal_amplitudes_mm = [float(a) for a in fits.modal.amplitudes_mm]
         self._fit_pub.publish(fit)
         if self._running is not None and fit.mode_names:
-            stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
-            self._running.add(stamp, tuple(fit.mode_names), np.array(fit.modal_amplitudes_mm))
+            self._running.add(stamp_s(msg), tuple(fit.mode_names),
+                              np.array(fit.modal_amplitudes_mm))
             if self._running.due() and (self._estimating is None or self._estimating.done()):
                 self._estimating = self._worker.submit(self._publish_estimates, msg.header,
                                                        self._running.snapshot())

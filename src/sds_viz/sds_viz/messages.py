@@ -5,16 +5,10 @@ from __future__ import annotations
 import numpy as np
 from sds_camera.image_msg import msg_to_image
 from sds_recon.reconstruction import LINE_LASER_ID
-from sds_recon.sloshing.recording import cloud_points, cloud_xyz
+from sds_recon.sloshing.recording import cloud_points, cloud_xyz, stamp_s
 
+from sds_msgs.msg import LaserSpot
 from sds_viz.scene import RerunScene
-
-FLAG_LOST = 1
-
-
-def stamp_s(msg) -> float:
-    """A message's header stamp [s]."""
-    return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
 
 
 def log_message(scene: RerunScene, type_name: str, msg) -> bool:
@@ -38,7 +32,7 @@ def _image(scene: RerunScene, msg) -> None:
 def _spots(scene: RerunScene, msg) -> None:
     ids = np.array([s.laser_id for s in msg.spots], dtype=int)
     pixels = np.array([[s.x_px, s.y_px] for s in msg.spots], dtype=float).reshape(-1, 2)
-    lost = np.array([bool(s.flags & FLAG_LOST) for s in msg.spots], dtype=bool)
+    lost = np.array([bool(s.flags & LaserSpot.FLAG_LOST) for s in msg.spots], dtype=bool)
     scene.log_spots(ids, pixels, lost | ~np.isfinite(pixels).all(axis=1))
 
 

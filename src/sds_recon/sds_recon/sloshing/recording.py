@@ -93,7 +93,8 @@ def cloud_xyz(cloud: np.ndarray) -> np.ndarray:
     return np.column_stack([cloud["x"], cloud["y"], cloud["z"]]).astype(float)
 
 
-def _stamp_s(msg) -> float:
+def stamp_s(msg) -> float:
+    """A message's header stamp [s] (rclpy's messages or decoded from MCAP: the same fields)."""
     return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
 
 
@@ -113,11 +114,11 @@ def read_mcap(path: str | Path) -> SurfaceRecording:
                 if schema.name == "sensor_msgs/msg/PointCloud2":
                     cloud = cloud_points(msg)
                     if cloud is not None and len(cloud):
-                        rows["time"].append(np.full(len(cloud), _stamp_s(msg)))
+                        rows["time"].append(np.full(len(cloud), stamp_s(msg)))
                         rows["id"].append(cloud["laser_id"].astype(int))
                         rows["xyz"].append(cloud_xyz(cloud))
                 elif schema.name == "sensor_msgs/msg/Range" and np.isfinite(msg.range):
-                    tof_time.append(_stamp_s(msg))
+                    tof_time.append(stamp_s(msg))
                     tof_range.append(msg.range * 1e3)
     except (McapError, OSError, ValueError) as error:
         raise RecordingError(f"{path}: {error}") from None
