@@ -3,15 +3,15 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from itertools import pairwise
 from pathlib import Path
 
 from builtin_interfaces.msg import Time
 from rclpy.serialization import serialize_message
 from sds_record.mcap_files import McapRecorder
 
-from sds_arduino.clock import DeviceClock
 from sds_arduino.messages import TOPICS, SensorSpec, record_message
-from sds_arduino.protocol import read_log
+from sds_arduino.protocol import WRAP, read_log, unwrap_time_s
 
 TYPE_NAMES = {"imu": "sensor_msgs/msg/Imu", "tof": "sensor_msgs/msg/Range",
               "events": "sds_msgs/msg/SyncEvent"}
@@ -34,15 +34,12 @@ def import_sd(log: str | Path, output: str | Path, namespace: str = "/arduino",
     if not records:
         raise ValueError(f"{log}: no valid protocol-v1 record ({rejected} lines rejected)")
     spec = spec or SensorSpec()
-    clock = DeviceClock()
+    device_times = unwrap_time_s([r.t_us for r in records])
+    device_times -= device_times[0]
+    missing = sum((b.seq - a.seq - 1) % WRAP for a, b in pairwise(records))
     recorder = McapRecorder(output)
-    missing, last_seq = 0, None
     try:
-        for record in records:
-            if last_seq is not None:
-                missing += (record.seq - last_seq - 1) % 2**32
-            last_seq = record.seq
-            device_s = clock.device_seconds(record.t_us)
+        for record, device_s in zip(records, device_times, strict=True):
             stamp_ns = round((start_s + device_s) * 1e9)
             topic = f"{namespace}/{TOPICS[record.kind]}"
             recorder.add_topic(topic, TYPE_NAMES[TOPICS[record.kind]])
