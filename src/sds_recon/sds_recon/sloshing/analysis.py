@@ -257,13 +257,19 @@ def meniscus_profile(recording: SurfaceRecording, radius_mm: float, before_s: fl
     return radial_profile(points, radius_mm), source
 
 
+def rig_theory(rig: Rig, options: AnalysisOptions) -> tuple[float, list[TheoreticalMode]]:
+    """Gravity [m/s²] (the rig's unless overridden) and the linear modes of its container."""
+    gravity = rig.gravity_m_s2 if options.gravity_m_s2 is None else options.gravity_m_s2
+    return gravity, theoretical_modes(rig.container.radius_mm, rig.container.fill_height_mm,
+                                      gravity, rig.fluid.surface_tension_n_m,
+                                      rig.fluid.density_kg_m3)
+
+
 def analyze(recording: SurfaceRecording, rig: Rig, options: AnalysisOptions | None = None
             ) -> SloshingAnalysis:
     """Separate the modes, estimate each one's frequency and damping, tilt table, meniscus."""
     options = options or AnalysisOptions()
-    gravity = rig.gravity_m_s2 if options.gravity_m_s2 is None else options.gravity_m_s2
-    theory = theoretical_modes(rig.container.radius_mm, rig.container.fill_height_mm, gravity,
-                               rig.fluid.surface_tension_n_m, rig.fluid.density_kg_m3)
+    gravity, theory = rig_theory(rig, options)
     expected = {m.name: m.frequency_hz for m in theory} if gravity > 0 else {}
     expected.update(options.expected_hz)
     modal = modal_series(recording.time_s, recording.points_mm, rig.container.radius_mm)
@@ -304,9 +310,7 @@ def analyze_table(source: str, time_s: np.ndarray, series: dict[str, np.ndarray]
     1 g theory), one result per expected mode found in it. `tof`: the columns are ToF ranges.
     """
     options = options or AnalysisOptions()
-    gravity = rig.gravity_m_s2 if options.gravity_m_s2 is None else options.gravity_m_s2
-    theory = theoretical_modes(rig.container.radius_mm, rig.container.fill_height_mm, gravity,
-                               rig.fluid.surface_tension_n_m, rig.fluid.density_kg_m3)
+    gravity, theory = rig_theory(rig, options)
     expected = dict(options.expected_hz) or (
         {m.name: m.frequency_hz for m in theory[:2]} if gravity > 0 else {})
     results, windows = [], []
