@@ -17,7 +17,7 @@ from sds_recon.sloshing.recording import (
     read_points_csv,
     read_series_csv,
 )
-from sds_recon.sloshing.report import results_dict, summary_lines, truth_from_run, write_report
+from sds_recon.sloshing.report import summary_lines, truth_from_run, write_report
 
 from sds_bringup.paths import CONFIG
 
@@ -97,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
     files = write_report(analysis, args.out, truth)
     print(f"sds analyze: {analysis.source}, free decay {analysis.window_s[0]:.3f}–"
           f"{analysis.window_s[1]:.3f} s")
-    for line in summary_lines(results_dict(analysis, truth)):
+    for line in summary_lines(files.results):
         print(f"  {line}")
     print(f"wrote {files.json}, {files.html}")
     return 0

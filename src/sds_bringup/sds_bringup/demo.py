@@ -22,7 +22,7 @@ from sds_recon.results import ResultsWriter, load_results
 from sds_recon.rig import Rig, load_rig
 from sds_recon.sloshing.analysis import AnalysisOptions, analyze
 from sds_recon.sloshing.recording import read_mcap
-from sds_recon.sloshing.report import results_dict, summary_lines, truth_from_run, write_report
+from sds_recon.sloshing.report import summary_lines, truth_from_run, write_report
 from sds_sim.scenario import load_scenario
 from sds_sim.simulate import simulate
 from tqdm import tqdm
@@ -182,8 +182,7 @@ def analyse_run(recording: Path, rig: Rig, out: Path, options: AnalysisOptions,
     tables.writer.close()
     analysis = analyze(read_mcap(recording), rig, options)
     truth = truth_from_run(truth_run) if truth_run else None
-    write_report(analysis, out / "analysis", truth)
-    return results_dict(analysis, truth)
+    return write_report(analysis, out / "analysis", truth).results
 
 
 def run_demo(out: Path, seconds: float | None) -> int:

@@ -24,11 +24,12 @@ Truth = dict[str, tuple[float, float]]
 
 @dataclass(frozen=True)
 class ReportFiles:
-    """Paths of what `write_report` wrote."""
+    """Paths of what `write_report` wrote, and the results it wrote into the JSON."""
 
     json: Path
     html: Path
     figures: tuple[Path, ...]
+    results: dict
 
 
 def truth_from_run(path: str | Path) -> Truth:
@@ -256,7 +257,7 @@ def write_report(analysis: SloshingAnalysis, directory: str | Path,
     html_path.write_text("<!doctype html><meta charset=utf-8><title>SDS sloshing analysis"
                          "</title><body style='font-family:sans-serif;max-width:1100px'>"
                          + "".join(sections) + "</body>\n")
-    return ReportFiles(json_path, html_path, tuple(figures))
+    return ReportFiles(json_path, html_path, tuple(figures), result)
 
 
 def summary_lines(result: dict) -> list[str]:
