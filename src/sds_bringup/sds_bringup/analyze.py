@@ -78,11 +78,16 @@ def _analysis(args: argparse.Namespace, options: AnalysisOptions):
         ranges = np.array([r.values[0] for r in tof], dtype=float)
         return analyze_table(str(path), time_s, {"tof_range_mm": ranges}, rig, options, "mm",
                              tof=True)
-    header = path.read_text(errors="replace").lstrip().split("\n", 1)[0]
-    if "laser_id" in header:
+    if "laser_id" in _header(path):
         return analyze(read_points_csv(path), rig, options)
     time_s, series = read_series_csv(path)
     return analyze_table(str(path), time_s, series, rig, options)
+
+
+def _header(path: Path) -> str:
+    """A table's header row: its first line that is neither empty nor a comment."""
+    with path.open(errors="replace") as stream:
+        return next((line for line in stream if line.strip() and not line.startswith("#")), "")
 
 
 def run(args: argparse.Namespace) -> int:
