@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import threading
+from dataclasses import fields
 
 import numpy as np
 import serial
@@ -33,22 +34,13 @@ class ArduinoBridgeNode(Node):
         super().__init__(node_name, **node_kwargs)
         self.finished = threading.Event()
         self.exit_code = 0
-        for name, default in (("port", "/dev/ttyACM0"), ("baud", 115200),
-                              ("frame_id", "arduino"), ("accel_noise_mg", 8.0),
-                              ("tof_noise_mm", 1.0), ("tof_field_of_view_rad", 0.44),
-                              ("tof_min_range_m", 0.03), ("tof_max_range_m", 2.0),
-                              ("reconnect_period_s", 0.2), ("stats_period_s", 5.0),
-                              ("align_to_camera", True)):
+        sensor = {f.name: f.default for f in fields(SensorSpec)}
+        defaults = {"port": "/dev/ttyACM0", "baud": 115200, **sensor,
+                    "reconnect_period_s": 0.2, "stats_period_s": 5.0, "align_to_camera": True}
+        for name, default in defaults.items():
             self.declare_parameter(name, default)
-        self._p = {name: self.get_parameter(name).value for name in
-                   ("port", "baud", "frame_id", "accel_noise_mg", "tof_noise_mm",
-                    "tof_field_of_view_rad", "tof_min_range_m", "tof_max_range_m",
-                    "reconnect_period_s", "stats_period_s", "align_to_camera")}
-        self._spec = SensorSpec(self._p["frame_id"], float(self._p["accel_noise_mg"]),
-                                float(self._p["tof_noise_mm"]),
-                                float(self._p["tof_field_of_view_rad"]),
-                                float(self._p["tof_min_range_m"]),
-                                float(self._p["tof_max_range_m"]))
+        self._p = {name: self.get_parameter(name).value for name in defaults}
+        self._spec = SensorSpec(**{name: self._p[name] for name in sensor})
         reliable = QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE)
         self._publishers_by_topic = {
             "imu": self.create_publisher(Imu, "imu", reliable),

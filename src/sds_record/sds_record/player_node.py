@@ -44,22 +44,19 @@ class PlayerNode(Node):
         self.finished = threading.Event()
         self.exit_code = 0
         self.published = 0
-        for name, default in (("input", ""), ("topics", [""]), ("remap", [""]), ("rate", 1.0),
-                              ("pacing", "recorded"), ("start_s", 0.0), ("stop_s", 0.0),
-                              ("clock", True), ("wait_for_subscribers", 1),
-                              ("ack_topic_for", ""), ("ack_consumers", 1),
-                              ("max_in_flight", 2), ("linger_s", 2.0)):
+        defaults = {"input": "", "topics": [""], "remap": [""], "rate": 1.0,
+                    "pacing": "recorded", "start_s": 0.0, "stop_s": 0.0, "clock": True,
+                    "wait_for_subscribers": 1, "ack_topic_for": "", "ack_consumers": 1,
+                    "max_in_flight": 2, "linger_s": 2.0}
+        for name, default in defaults.items():
             self.declare_parameter(name, default)
-        self._p = {name: self.get_parameter(name).value for name in
-                   ("input", "topics", "rate", "pacing", "start_s", "stop_s", "clock",
-                    "wait_for_subscribers", "ack_topic_for", "ack_consumers", "max_in_flight",
-                    "linger_s")}
+        self._p = {name: self.get_parameter(name).value for name in defaults}
         self._stop = threading.Event()
         self._pending: dict[int, int] = {}   # stamp [ns] -> acks still awaited
         self._acks = threading.Condition()
         self._outputs: dict[str, object] = {}
         try:
-            self._remaps = parse_remaps(self.get_parameter("remap").value)
+            self._remaps = parse_remaps(self._p["remap"])
             self._check_parameters()
             self._create_publishers()
         except (ValueError, OSError, ImportError, AttributeError) as error:

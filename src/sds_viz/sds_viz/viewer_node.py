@@ -40,11 +40,11 @@ class ViewerNode(Node):
         super().__init__(node_name, **node_kwargs)
         self.finished = threading.Event()
         self.exit_code = 0
-        for name, default in (("rig", ""), ("output", ""), ("connect", ""), ("spawn", False),
-                              ("image_scale", 0.25), ("image_every", 1)):
+        defaults = {"rig": "", "output": "", "connect": "", "spawn": False, "image_scale": 0.25,
+                    "image_every": 1}
+        for name, default in defaults.items():
             self.declare_parameter(name, default)
-        p = {name: self.get_parameter(name).value for name in
-             ("rig", "output", "connect", "spawn", "image_scale", "image_every")}
+        p = {name: self.get_parameter(name).value for name in defaults}
         try:
             rig = load_rig(p["rig"]) if p["rig"] else None
         except (RigError, OSError) as error:
