@@ -112,10 +112,17 @@ def memory_kb(pid: int, field: str) -> int:
     return 0
 
 
+def cpu_s(pid: int) -> float:
+    """User + system CPU time [s] a process has used so far."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
-              image_subscribers: int = 2):
-    """The drop graph with a probe on /recon/points: receipt times and stamps, memory."""
-    from sds_bringup.graph import apply_overrides, load_graph
+              image_subscribers: int = 2, compose: bool = False):
+    """The drop graph with a probe on /recon/points: receipt times and stamps, memory, and
+    each process's CPU time between the first and the last cloud."""
+    from sds_bringup.graph import apply_overrides, composed, load_graph
     from sds_bringup.launcher import Launcher
     from sds_bringup.ros_env import graph_environment, pick_domain_id
 
@@ -133,8 +140,16 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
     entries = apply_overrides(load_graph(REPO / "config" / "graphs" / "drop.yaml"),
                               [*overrides, f"camera.wait_for_subscribers={image_subscribers}",
                                "tracker.wait_for_consumers=3", "recon.wait_for_consumers=1"])
+    if compose:
+        entries = composed(entries)
     receipts: list[tuple[float, float]] = []
     memory: dict[str, list[tuple[float, int]]] = {}
+    cpu: dict[str, list[float]] = {}
+
+    def sample_cpu() -> None:
+        for process in launcher.processes:
+            if process.popen and process.popen.poll() is None:
+                cpu.setdefault(process.name, []).append(cpu_s(process.popen.pid))
 
     def watch() -> None:
         context = rclpy.Context()
@@ -162,10 +177,13 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
                         memory.setdefault(process.name, []).append(
                             (now - start, memory_kb(process.popen.pid, "VmRSS")))
             if receipts and (len(receipts) != count or last_change == 0.0):
+                if last_change == 0.0:
+                    sample_cpu()
                 count, last_change = len(receipts), now
             finished = expected is not None and (
                 len(receipts) >= expected or (receipts and now - last_change > IDLE_S))
             if finished or (minutes is not None and now - start > minutes * 60):
+                sample_cpu()
                 for process in launcher.processes:
                     if process.popen and process.popen.poll() is None:
                         memory.setdefault(process.name + " peak", []).append(
@@ -179,7 +197,9 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
     with Path(os.devnull).open("w") as log:
         launcher = Launcher(entries, environment, output=log)
         launcher.run(on_started=threading.Thread(target=watch, daemon=True).start)
-    return receipts, memory
+    per_frame = {name: 1e3 * (v[-1] - v[0]) / max(len(receipts) - 1, 1)
+                 for name, v in cpu.items() if len(v) == 2}
+    return receipts, memory, per_frame
 
 
 def main() -> None:
@@ -201,7 +221,7 @@ def main() -> None:
 
     decode = decode_fps(video, rig)
     stages = stage_times(video, rig)
-    receipts, memory = run_graph([*base, f"recorder.output={args.out / 'flood.mcap'}",
+    receipts, memory, cpu = run_graph([*base, f"recorder.output={args.out / 'flood.mcap'}",
                                   f"camera.max_in_flight={args.in_flight}"], frames, None)
     graph = (len(receipts) - 1) / (receipts[-1][0] - receipts[0][0])
     print(f"frames: {frames} of 3840x2160 (region {region[2]}x{region[3]} red)")
@@ -209,11 +229,14 @@ def main() -> None:
     print("stages [ms/frame, median]: " + ", ".join(f"{k} {v:.2f}" for k, v in stages.items()))
     print(f"whole graph (flood, {args.in_flight} in flight, images recorded): {graph:.1f} fps, "
           f"ratio {graph / decode:.2f}, {len(receipts)}/{frames} frames")
+    print("CPU per frame while flooding [ms]: "
+          + ", ".join(f"{k} {v:.1f}" for k, v in cpu.items())
+          + f"; total {sum(cpu.values()):.1f} of {2e3 / graph:.1f} for 2 cores")
     peaks = {k.removesuffix(" peak"): v[-1][1] / 1024 for k, v in memory.items()
              if k.endswith(" peak")}
     print("peak memory [MB]: " + ", ".join(f"{k} {v:.0f}" for k, v in peaks.items()))
 
-    receipts, memory = run_graph([*base, "camera.pacing=realtime", "camera.repeat=0",
+    receipts, memory, cpu = run_graph([*base, "camera.pacing=realtime", "camera.repeat=0",
                                   f"recorder.output={args.out / 'long.mcap'}",
                                   "recorder.exclude=[/camera/image]"], None, args.minutes,
                                  image_subscribers=1)

@@ -52,6 +52,14 @@ def test_processes_group_nodes_and_compose_puts_all_in_one(repo):
     assert single.required
 
 
+def test_compose_keeps_niced_nodes_in_their_own_processes(repo):
+    entries = load_graph(repo / "config" / "graphs" / "drop.yaml")
+    processes = {p.name: p for p in group_processes(composed(entries))}
+    assert set(processes) == {"graph", "sloshing"}
+    assert processes["sloshing"].nice == 10 and processes["graph"].nice == 0
+    assert "sloshing" not in [e.name for e in processes["graph"].entries]
+
+
 @pytest.mark.parametrize(
     "text, message",
     [
@@ -61,6 +69,9 @@ def test_processes_group_nodes_and_compose_puts_all_in_one(repo):
         ("nodes:\n  - {name: a, plugin: m:C, params: nope.yaml}", "does not exist"),
         ("nodes:\n  - {name: a, plugin: m:C}\n  - {name: a, plugin: m:D}", "used twice"),
         ("nodes: [", "cannot read"),
+        ("nodes:\n  - {name: a, plugin: m:C, nice: 20}", "'nice'"),
+        ("nodes:\n  - {name: a, plugin: m:C, nice: -5}", "'nice'"),
+        ("nodes:\n  - {name: a, plugin: m:C, nice: high}", "'nice'"),
     ],
 )
 def test_bad_graph_files_are_named_in_the_error(tmp_path, text, message):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -117,9 +118,10 @@ def test_running_estimates_follow_a_decay(repo):
         estimates = probe.collect(SloshingEstimate, "/recon/sloshing")
         fits = probe.collect(SurfaceFit, "/recon/surface_fit")
         spots_pub = probe.node.create_publisher(LaserSpotArray, "/tracker/spots", RELIABLE)
+        # The sloshing node (its own process) subscribes to the fits besides this probe.
         assert wait_until(lambda: spots_pub.get_subscription_count() > 0
                           and probe.node.count_publishers("/recon/sloshing") > 0
-                          and probe.node.count_publishers("/recon/surface_fit") > 0), \
+                          and probe.node.count_subscribers("/recon/surface_fit") >= 2), \
             graph.output()
         for frame in range(120):
             time_s = frame / 30.0
@@ -134,6 +136,10 @@ def test_running_estimates_follow_a_decay(repo):
             time.sleep(0.005)
         assert wait_until(lambda: len(fits) == 120), graph.output()
         assert wait_until(lambda: any(e.window_end_s > 2.9 for e in estimates)), graph.output()
+        niceness = {int(Path(f"/proc/{pid}/stat").read_text().rsplit(") ", 1)[1].split()[16])
+                    for pid in graph.child_pids()}
+        # The estimates' process runs 10 steps nicer than the reconstruction's (recon.yaml).
+        assert len(niceness) == 2 and max(niceness) - min(niceness) == 10
     finally:
         probe.close()
         graph.stop()

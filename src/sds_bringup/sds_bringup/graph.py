@@ -24,6 +24,7 @@ class NodeEntry:
     remap: dict[str, str] = field(default_factory=dict)
     process: str = ""
     required: bool = False
+    nice: int = 0
 
     def ros_args(self) -> list[str]:
         """The node's --ros-args: parameter files, then single parameters, then remappings."""
@@ -39,7 +40,7 @@ class NodeEntry:
         return args
 
 
-_NODE_KEYS = {"name", "plugin", "params", "parameters", "remap", "process", "required"}
+_NODE_KEYS = {"name", "plugin", "params", "parameters", "remap", "process", "required", "nice"}
 
 
 def load_graph(path: str | Path) -> list[NodeEntry]:
@@ -80,6 +81,9 @@ def _node_entry(path: Path, index: int, item: Any) -> NodeEntry:
     for key in ("parameters", "remap"):
         if not isinstance(item.get(key, {}), dict):
             raise GraphFileError(f"{where}: '{key}' must be a mapping")
+    nice = item.get("nice", 0)
+    if not isinstance(nice, int) or isinstance(nice, bool) or not 0 <= nice <= 19:
+        raise GraphFileError(f"{where}: 'nice' must be an integer from 0 to 19, got {nice!r}")
     return NodeEntry(
         name=item["name"],
         plugin=item["plugin"],
@@ -88,6 +92,7 @@ def _node_entry(path: Path, index: int, item: Any) -> NodeEntry:
         remap={str(k): str(v) for k, v in item.get("remap", {}).items()},
         process=str(item.get("process", item["name"])),
         required=bool(item.get("required", False)),
+        nice=nice,
     )
 
 
@@ -109,8 +114,9 @@ def apply_overrides(entries: list[NodeEntry], overrides: list[str]) -> list[Node
 
 
 def composed(entries: list[NodeEntry]) -> list[NodeEntry]:
-    """The same graph with every node hosted in one process."""
-    return [replace(entry, process="graph") for entry in entries]
+    """The same graph with every node hosted in one process, but for niced nodes: a priority
+    is a process's, so each of them keeps its own."""
+    return [entry if entry.nice else replace(entry, process="graph") for entry in entries]
 
 
 def node_parameters(graph_file: str | Path, node_name: str) -> dict[str, Any]:

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import ctypes
+import functools
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -19,9 +21,12 @@ _PR_SET_PDEATHSIG = 1
 GRACE_PERIOD_S = 10.0
 
 
-def _die_with_parent() -> None:
-    """In the child: receive SIGTERM when the launcher dies, even by SIGKILL (Linux)."""
+def _prepare_child(nice: int) -> None:
+    """In the child: receive SIGTERM when the launcher dies, even by SIGKILL (Linux); lower
+    the priority by `nice`."""
     ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+    if nice:
+        os.nice(nice)
 
 
 @dataclass
@@ -36,6 +41,11 @@ class GraphProcess:
     def required(self) -> bool:
         """Whether the graph ends when this process exits."""
         return any(entry.required for entry in self.entries)
+
+    @property
+    def nice(self) -> int:
+        """The process's niceness: the highest its nodes ask for."""
+        return max(entry.nice for entry in self.entries)
 
     def command(self) -> list[str]:
         """The node host command line (python -O drops the generated messages' asserts)."""
@@ -105,7 +115,7 @@ class Launcher:
                 stderr=subprocess.STDOUT,
                 stdin=subprocess.DEVNULL,
                 start_new_session=True,
-                preexec_fn=_die_with_parent,
+                preexec_fn=functools.partial(_prepare_child, process.nice),
             )
             self._say(process.name, f"started (pid {process.popen.pid}): "
                       + ", ".join(entry.name for entry in process.entries))

@@ -75,10 +75,13 @@ def _finished(node: Node) -> bool:
 def main() -> None:
     """Entry point of the graph processes started by the launcher."""
     specs = json.loads(sys.argv[1])
-    entries = [
-        (load_plugin(spec["plugin"]), spec["name"], spec["required"], spec["ros_args"])
-        for spec in specs
-    ]
+    try:
+        entries = [
+            (load_plugin(spec["plugin"]), spec["name"], spec["required"], spec["ros_args"])
+            for spec in specs
+        ]
+    except KeyboardInterrupt:   # the graph stopped while the nodes' modules were loading
+        raise SystemExit(0) from None
     raise SystemExit(run_nodes(entries, args=[sys.argv[0]]))
 
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import threading
-from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
 from rclpy.node import Node
@@ -14,7 +13,6 @@ from sds_msgs.msg import (
     LaserLineProfile,
     LaserSpot,
     LaserSpotArray,
-    SloshingEstimate,
     SurfaceFit,
 )
 from sds_recon.reconstruction import (
@@ -24,9 +22,6 @@ from sds_recon.reconstruction import (
     reconstruct_spots,
 )
 from sds_recon.rig import Rig, RigError, load_rig
-from sds_recon.sloshing.modal import ModalSeries
-from sds_recon.sloshing.recording import stamp_s
-from sds_recon.sloshing.running import RunningAnalysis
 
 CLOUD_FIELDS = (("x", np.float32), ("y", np.float32), ("z", np.float32),
                 ("laser_id", np.uint16), ("height_sigma_mm", np.float32),
@@ -74,11 +69,7 @@ class ReconstructionNode(Node):
         self.declare_parameter("beam_weight", 0.5)
         self.declare_parameter("default_sigma_px", 0.1)
         self.declare_parameter("frame_id", "world")
-        self.declare_parameter("estimate_period_s", 1.0)
-        self.declare_parameter("estimate_window_s", 20.0)
         self.declare_parameter("wait_for_consumers", 0)
-        self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sloshing")
-        self._estimating: Future | None = None
         try:
             self._rig: Rig = load_rig(self.get_parameter("rig").value)
         except (RigError, OSError) as error:
@@ -94,10 +85,6 @@ class ReconstructionNode(Node):
         self._points_pub = self.create_publisher(PointCloud2, "points", qos)
         self._line_pub = self.create_publisher(PointCloud2, "line_points", qos)
         self._fit_pub = self.create_publisher(SurfaceFit, "surface_fit", qos)
-        self._estimate_pub = self.create_publisher(SloshingEstimate, "sloshing", qos)
-        period = float(self.get_parameter("estimate_period_s").value)
-        window = float(self.get_parameter("estimate_window_s").value)
-        self._running = RunningAnalysis(period, window_s=window) if period > 0 else None
         self._qos = qos
         self._consumers = int(self.get_parameter("wait_for_consumers").value)
         if self._consumers > 0:
@@ -109,7 +96,7 @@ class ReconstructionNode(Node):
                                f"{len(self._rig.diodes)} diodes")
 
     def _subscribe_when_consumed(self) -> None:
-        outputs = (self._points_pub, self._line_pub, self._fit_pub, self._estimate_pub)
+        outputs = (self._points_pub, self._line_pub, self._fit_pub)
         if all(p.get_subscription_count() >= self._consumers for p in outputs):
             self._wait_timer.cancel()
             self._subscribe_inputs()
@@ -143,36 +130,6 @@ class ReconstructionNode(Node):
             fit.mode_names = list(fits.modal.names)
             fit.modal_amplitudes_mm = [float(a) for a in fits.modal.amplitudes_mm]
         self._fit_pub.publish(fit)
-        if self._running is not None and fit.mode_names:
-            self._running.add(stamp_s(msg), tuple(fit.mode_names),
-                              np.array(fit.modal_amplitudes_mm))
-            if self._running.due() and (self._estimating is None or self._estimating.done()):
-                self._estimating = self._worker.submit(self._publish_estimates, msg.header,
-                                                       self._running.snapshot())
-                self._estimating.add_done_callback(self._report_failure)
-
-    def _report_failure(self, future: Future) -> None:
-        """A running estimate that raised is logged; frames and fits go on."""
-        if not future.cancelled() and future.exception() is not None:
-            self.get_logger().error(f"running sloshing estimate failed: {future.exception()!r}")
-
-    def _publish_estimates(self, header, series: ModalSeries) -> None:
-        """The running estimates of the lateral modes (in the worker thread: a fit takes up to
-        0.15 s, which must not hold up the frames)."""
-        for mode in self._running.estimate(series):
-            for estimate in mode.estimates:
-                self._estimate_pub.publish(SloshingEstimate(
-                    header=header, mode=mode.name, method=estimate.method,
-                    frequency_hz=estimate.frequency_hz,
-                    frequency_sigma_hz=estimate.frequency_sigma_hz,
-                    damping_ratio=estimate.damping_ratio,
-                    damping_ratio_sigma=estimate.damping_ratio_sigma,
-                    window_start_s=estimate.window_start_s, window_end_s=estimate.window_end_s))
-
-    def destroy_node(self) -> None:
-        """Let a running estimate finish before the publishers go."""
-        self._worker.shutdown(wait=True, cancel_futures=True)
-        super().destroy_node()
 
     def _on_line(self, msg: LaserLineProfile) -> None:
         result = reconstruct_line(self._rig, np.column_stack([msg.x_px, msg.y_px]),

@@ -1,0 +1,97 @@
+"""ROS 2 node: surface fits in, running sloshing estimates (frequency, damping) out."""
+
+from __future__ import annotations
+
+from concurrent.futures import Future, ThreadPoolExecutor
+
+import numpy as np
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from sds_msgs.msg import SloshingEstimate, SurfaceFit
+from sds_recon.sloshing.modal import ModalSeries
+from sds_recon.sloshing.recording import stamp_s
+from sds_recon.sloshing.running import RunningAnalysis
+
+FIT_QUEUE_DEPTH = 1000
+"""Fits kept for the node (33 s at 30 fps): an estimate holds the interpreter for up to 0.4 s,
+and a flooding replay sends fits faster than real time; none may be dropped meanwhile."""
+PARAMETERS = {"estimate_period_s": 1.0, "estimate_window_s": 20.0, "wait_for_consumers": 0}
+"""The node's parameters (config/params/sloshing.yaml documents them) and their defaults."""
+
+
+class SloshingNode(Node):
+    """Accumulate each frame's modal amplitudes (from surface_fit) and, every
+    `estimate_period_s` of recording time, estimate the lateral modes over the last
+    `estimate_window_s` with every method; publish them on `sloshing`.
+
+    A fit takes up to 0.4 s of CPU: the node runs in a process of its own, at a lower priority
+    (`nice` in the graph file), so that it never holds up the measuring chain.
+    """
+
+    def __init__(self, node_name: str = "sloshing", **node_kwargs) -> None:
+        super().__init__(node_name, **node_kwargs)
+        values = {name: self.declare_parameter(name, default).value
+                  for name, default in PARAMETERS.items()}
+        self._running = RunningAnalysis(float(values["estimate_period_s"]),
+                                        window_s=float(values["estimate_window_s"]))
+        self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="estimate")
+        self._estimating: Future | None = None
+        self._qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE,
+                               history=HistoryPolicy.KEEP_LAST)
+        self._estimate_pub = self.create_publisher(SloshingEstimate, "sloshing", self._qos)
+        self._consumers = int(values["wait_for_consumers"])
+        if self._consumers > 0:
+            # No fit is taken before the estimates have their consumers (e.g. the recorder).
+            self._wait_timer = self.create_timer(0.05, self._subscribe_when_consumed)
+        else:
+            self._subscribe()
+
+    def _subscribe_when_consumed(self) -> None:
+        if self._estimate_pub.get_subscription_count() >= self._consumers:
+            self._wait_timer.cancel()
+            self._subscribe()
+
+    def _subscribe(self) -> None:
+        self.create_subscription(SurfaceFit, "surface_fit", self._on_fit,
+                                 QoSProfile(depth=FIT_QUEUE_DEPTH,
+                                            reliability=ReliabilityPolicy.RELIABLE,
+                                            history=HistoryPolicy.KEEP_LAST))
+
+    def _on_fit(self, fit: SurfaceFit) -> None:
+        if not fit.mode_names:
+            return
+        self._running.add(stamp_s(fit), tuple(fit.mode_names), np.array(fit.modal_amplitudes_mm))
+        if self._running.due() and (self._estimating is None or self._estimating.done()):
+            self._estimating = self._worker.submit(self._publish_estimates, fit.header,
+                                                   self._running.snapshot())
+            self._estimating.add_done_callback(self._report_failure)
+
+    def _report_failure(self, future: Future) -> None:
+        """An estimate that raised is logged; the next period tries again."""
+        if not future.cancelled() and future.exception() is not None:
+            self.get_logger().error(f"running sloshing estimate failed: {future.exception()!r}")
+
+    def _publish_estimates(self, header, series: ModalSeries) -> None:
+        """The lateral modes' estimates (in the worker thread, so that fits keep arriving)."""
+        for mode in self._running.estimate(series):
+            for estimate in mode.estimates:
+                self._estimate_pub.publish(SloshingEstimate(
+                    header=header, mode=mode.name, method=estimate.method,
+                    frequency_hz=estimate.frequency_hz,
+                    frequency_sigma_hz=estimate.frequency_sigma_hz,
+                    damping_ratio=estimate.damping_ratio,
+                    damping_ratio_sigma=estimate.damping_ratio_sigma,
+                    window_start_s=estimate.window_start_s, window_end_s=estimate.window_end_s))
+
+    def destroy_node(self) -> None:
+        """Let a running estimate finish before the publisher goes."""
+        self._worker.shutdown(wait=True, cancel_futures=True)
+        super().destroy_node()
+
+
+def main(args: list[str] | None = None) -> None:
+    """Run the node alone in this process."""
+    from sds_bringup.node_host import run_nodes
+
+    raise SystemExit(run_nodes([(SloshingNode, "sloshing", False)], args))
