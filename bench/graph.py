@@ -7,9 +7,10 @@ Prints, measured in one run on the same file:
 - per-stage time per frame in one process: decode, transport (serialise the image message),
   tracking, triangulation and fits, recording (MCAP write of the image);
 - whole-graph fps with `pacing: flood` (camera → tracker → reconstruction → recorder, every
-  frame acknowledged) and its ratio to decode-only;
+  frame acknowledged; sloshing estimates) and its ratio to decode-only, with each process's
+  CPU time per frame, nodes in their own processes and composed;
 - frame → PointCloud2 latency in real time (median, p95; the Hampel window's own delay of
-  hampel_window // 2 frames is part of it and given apart);
+  hampel_window // 2 frames is part of it and given apart), both layouts;
 - peak memory per process, and resident memory over a `--minutes` real-time run
   (frame source `repeat: 0`; the recorder leaves the images out there to spare the disk).
 """
@@ -30,6 +31,9 @@ REPO = Path(__file__).resolve().parents[1]
 SCENARIO = REPO / "config" / "scenarios" / "drop_4p7s.yaml"
 HAMPEL_DELAY_FRAMES = 2
 IDLE_S = 10.0
+LAYOUTS = {"4 processes + sloshing": False, "composed + sloshing": True}
+"""The graph's nodes each in a process, or composed into one (the niced sloshing node keeps
+its own process in both)."""
 
 
 def simulate_once(out: Path, seconds: float):
@@ -44,7 +48,8 @@ def simulate_once(out: Path, seconds: float):
 
 
 def stage_times(video: Path, rig) -> dict[str, float]:
-    """Median ms per frame of each stage, run one after the other in this process."""
+    """Mean ms per frame of each stage (the recorder's chunk compression comes every few
+    frames), run one after the other in this process."""
     from builtin_interfaces.msg import Time
     from rclpy.serialization import serialize_message
     from sds_camera.frame_source import Region, open_source, select
@@ -89,7 +94,7 @@ def stage_times(video: Path, rig) -> dict[str, float]:
         times["recording"].append(time.perf_counter() - start)
     recorder.close()
     source.close()
-    return {k: 1e3 * statistics.median(v[5:]) for k, v in times.items()}
+    return {k: 1e3 * statistics.mean(v[5:]) for k, v in times.items()}
 
 
 def decode_fps(video: Path, rig) -> float:
@@ -151,7 +156,7 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
             if process.popen and process.popen.poll() is None:
                 cpu.setdefault(process.name, []).append(cpu_s(process.popen.pid))
 
-    def watch() -> None:
+    def probe() -> None:
         context = rclpy.Context()
         rclpy.init(context=context)
         node = Node("bench_probe", context=context)
@@ -192,7 +197,12 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
         executor.shutdown()
         node.destroy_node()
         rclpy.shutdown(context=context)
-        launcher.request_stop()
+
+    def watch() -> None:
+        try:
+            probe()
+        finally:   # the graph stops even if the probe fails
+            launcher.request_stop()
 
     with Path(os.devnull).open("w") as log:
         launcher = Launcher(entries, environment, output=log)
@@ -221,44 +231,47 @@ def main() -> None:
 
     decode = decode_fps(video, rig)
     stages = stage_times(video, rig)
-    receipts, memory, cpu = run_graph([*base, f"recorder.output={args.out / 'flood.mcap'}",
-                                  f"camera.max_in_flight={args.in_flight}"], frames, None)
-    graph = (len(receipts) - 1) / (receipts[-1][0] - receipts[0][0])
     print(f"frames: {frames} of 3840x2160 (region {region[2]}x{region[3]} red)")
     print(f"decode-only: {decode:.1f} fps")
-    print("stages [ms/frame, median]: " + ", ".join(f"{k} {v:.2f}" for k, v in stages.items()))
-    print(f"whole graph (flood, {args.in_flight} in flight, images recorded): {graph:.1f} fps, "
-          f"ratio {graph / decode:.2f}, {len(receipts)}/{frames} frames")
-    print("CPU per frame while flooding [ms]: "
-          + ", ".join(f"{k} {v:.1f}" for k, v in cpu.items())
-          + f"; total {sum(cpu.values()):.1f} of {2e3 / graph:.1f} for 2 cores")
-    peaks = {k.removesuffix(" peak"): v[-1][1] / 1024 for k, v in memory.items()
-             if k.endswith(" peak")}
-    print("peak memory [MB]: " + ", ".join(f"{k} {v:.0f}" for k, v in peaks.items()))
+    print("stages [ms/frame, mean]: " + ", ".join(f"{k} {v:.2f}" for k, v in stages.items()))
+    for layout, compose in LAYOUTS.items():
+        receipts, memory, cpu = run_graph(
+            [*base, f"recorder.output={args.out / 'flood.mcap'}",
+             f"camera.max_in_flight={args.in_flight}"], frames, None, compose=compose)
+        graph = (len(receipts) - 1) / (receipts[-1][0] - receipts[0][0])
+        print(f"{layout}, flood ({args.in_flight} in flight, images recorded): {graph:.1f} fps, "
+              f"ratio {graph / decode:.2f}, {len(receipts)}/{frames} frames")
+        print("  CPU per frame [ms]: " + ", ".join(f"{k} {v:.1f}" for k, v in cpu.items())
+              + f"; total {sum(cpu.values()):.1f} (2 cores give {2e3 / graph:.1f})")
+        peaks = {k.removesuffix(" peak"): v[-1][1] / 1024 for k, v in memory.items()
+                 if k.endswith(" peak")}
+        print("  peak memory [MB]: " + ", ".join(f"{k} {v:.0f}" for k, v in peaks.items()))
 
-    receipts, memory, cpu = run_graph([*base, "camera.pacing=realtime", "camera.repeat=0",
-                                  f"recorder.output={args.out / 'long.mcap'}",
-                                  "recorder.exclude=[/camera/image]"], None, args.minutes,
-                                 image_subscribers=1)
-    if len(receipts) < 60:
-        print(f"real time: only {len(receipts)} clouds arrived")
-        return
-    latency = np.array([r - s for r, s in receipts[30:]]) * 1e3
     hampel_ms = HAMPEL_DELAY_FRAMES / scenario.fps * 1e3
-    print(f"real time {args.minutes:g} min: {len(receipts)} clouds, "
-          f"{(len(receipts) - 1) / (receipts[-1][0] - receipts[0][0]):.2f} fps")
-    print(f"latency frame -> PointCloud2 [ms]: median {np.median(latency):.1f}, "
-          f"p95 {np.percentile(latency, 95):.1f} (of which the Hampel window's "
-          f"{hampel_ms:.1f}); processing alone: median {np.median(latency) - hampel_ms:.1f}, "
-          f"p95 {np.percentile(latency, 95) - hampel_ms:.1f}")
-    for name, samples in memory.items():
-        if name.endswith(" peak") or len(samples) < 4:
+    for layout, compose in LAYOUTS.items():
+        receipts, memory, cpu = run_graph(
+            [*base, "camera.pacing=realtime", "camera.repeat=0",
+             f"recorder.output={args.out / 'long.mcap'}", "recorder.exclude=[/camera/image]"],
+            None, args.minutes, image_subscribers=1, compose=compose)
+        if len(receipts) < 60:
+            print(f"{layout}, real time: only {len(receipts)} clouds arrived")
             continue
-        t, rss = np.array(samples, dtype=float).T
-        half = len(t) // 2
-        slope = np.polyfit(t[half:] / 60, rss[half:] / 1024, 1)[0]
-        print(f"memory {name}: {rss[0] / 1024:.0f} -> {rss[-1] / 1024:.0f} MB RSS, "
-              f"second-half slope {slope:+.2f} MB/min")
+        latency = np.array([r - s for r, s in receipts[30:]]) * 1e3
+        median, p95 = np.median(latency), np.percentile(latency, 95)
+        print(f"{layout}, real time {args.minutes:g} min: {len(receipts)} clouds, "
+              f"{(len(receipts) - 1) / (receipts[-1][0] - receipts[0][0]):.2f} fps")
+        print(f"  latency frame -> PointCloud2 [ms]: median {median:.1f}, p95 {p95:.1f} "
+              f"(of which the Hampel window's {hampel_ms:.1f}); processing alone: "
+              f"median {median - hampel_ms:.1f}, p95 {p95 - hampel_ms:.1f}")
+        print("  CPU per frame [ms]: " + ", ".join(f"{k} {v:.1f}" for k, v in cpu.items()))
+        for name, samples in memory.items():
+            if name.endswith(" peak") or len(samples) < 4:
+                continue
+            t, rss = np.array(samples, dtype=float).T
+            half = len(t) // 2
+            slope = np.polyfit(t[half:] / 60, rss[half:] / 1024, 1)[0]
+            print(f"  memory {name}: {rss[0] / 1024:.0f} -> {rss[-1] / 1024:.0f} MB RSS, "
+                  f"second-half slope {slope:+.2f} MB/min")
 
 
 if __name__ == "__main__":
