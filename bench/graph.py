@@ -8,9 +8,10 @@ Prints, measured in one run on the same file:
   tracking, triangulation and fits, recording (MCAP write of the image);
 - whole-graph fps with `pacing: flood` (camera → tracker → reconstruction → recorder, every
   frame acknowledged; sloshing estimates) and its ratio to decode-only, with each process's
-  CPU time per frame, nodes in their own processes and composed;
+  CPU time per frame, in three layouts (`LAYOUTS`: every node in its own process, the chain
+  camera → tracker → reconstruction composed, everything composed);
 - frame → PointCloud2 latency in real time (median, p95; the Hampel window's own delay of
-  hampel_window // 2 frames is part of it and given apart), both layouts;
+  hampel_window // 2 frames is part of it and given apart), each layout;
 - peak memory per process, and resident memory over a `--minutes` real-time run
   (frame source `repeat: 0`; the recorder leaves the images out there to spare the disk).
 """
@@ -31,9 +32,13 @@ REPO = Path(__file__).resolve().parents[1]
 SCENARIO = REPO / "config" / "scenarios" / "drop_4p7s.yaml"
 HAMPEL_DELAY_FRAMES = 2
 IDLE_S = 10.0
-LAYOUTS = {"4 processes + sloshing": False, "composed + sloshing": True}
-"""The graph's nodes each in a process, or composed into one (the niced sloshing node keeps
-its own process in both)."""
+LAYOUTS = {
+    "own processes": {},
+    "chain composed": dict.fromkeys(("camera", "tracker", "recon"), "chain"),
+    "all composed": dict.fromkeys(("camera", "tracker", "recon", "recorder"), "graph"),
+}
+"""Process of each node: every node in its own, camera → tracker → reconstruction in one
+(the recorder apart), or all of them in one; the niced sloshing node keeps its own."""
 
 
 def simulate_once(out: Path, seconds: float):
@@ -97,17 +102,19 @@ def stage_times(video: Path, rig) -> dict[str, float]:
     return {k: 1e3 * statistics.mean(v[5:]) for k, v in times.items()}
 
 
-def decode_fps(video: Path, rig) -> float:
+def decode_only(video: Path, rig) -> tuple[float, float]:
+    """The frame source's own work alone: frames per second, and CPU ms per frame (the
+    decoder's threads included)."""
     from sds_camera.frame_source import Region, open_source, select
 
     region = Region(*rig.container_region_px(rig.camera))
     source = open_source(str(video))
-    start, count = time.perf_counter(), 0
+    start, cpu, count = time.perf_counter(), time.process_time(), 0
     for frame in source.frames():
         select(frame.image, region, "red")
         count += 1
     source.close()
-    return count / (time.perf_counter() - start)
+    return count / (time.perf_counter() - start), 1e3 * (time.process_time() - cpu) / count
 
 
 def memory_kb(pid: int, field: str) -> int:
@@ -124,10 +131,12 @@ def cpu_s(pid: int) -> float:
 
 
 def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
-              image_subscribers: int = 2, compose: bool = False):
+              image_subscribers: int = 2, processes: dict[str, str] | None = None):
     """The drop graph with a probe on /recon/points: receipt times and stamps, memory, and
     each process's CPU time between the first and the last cloud."""
-    from sds_bringup.graph import apply_overrides, composed, load_graph
+    from dataclasses import replace
+
+    from sds_bringup.graph import apply_overrides, load_graph
     from sds_bringup.launcher import Launcher
     from sds_bringup.ros_env import graph_environment, pick_domain_id
 
@@ -145,8 +154,7 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
     entries = apply_overrides(load_graph(REPO / "config" / "graphs" / "drop.yaml"),
                               [*overrides, f"camera.wait_for_subscribers={image_subscribers}",
                                "tracker.wait_for_consumers=3", "recon.wait_for_consumers=1"])
-    if compose:
-        entries = composed(entries)
+    entries = [replace(e, process=(processes or {}).get(e.name, e.process)) for e in entries]
     receipts: list[tuple[float, float]] = []
     memory: dict[str, list[tuple[float, int]]] = {}
     cpu: dict[str, list[float]] = {}
@@ -229,15 +237,16 @@ def main() -> None:
             f"recon.rig={rig_file}"]
     frames = scenario.frame_count
 
-    decode = decode_fps(video, rig)
+    decode, decode_cpu_ms = decode_only(video, rig)
     stages = stage_times(video, rig)
     print(f"frames: {frames} of 3840x2160 (region {region[2]}x{region[3]} red)")
-    print(f"decode-only: {decode:.1f} fps")
+    print(f"decode-only: {decode:.1f} fps, {decode_cpu_ms:.1f} ms CPU per frame "
+          f"({decode * decode_cpu_ms / 1e3:.2f} cores busy)")
     print("stages [ms/frame, mean]: " + ", ".join(f"{k} {v:.2f}" for k, v in stages.items()))
-    for layout, compose in LAYOUTS.items():
+    for layout, processes in LAYOUTS.items():
         receipts, memory, cpu = run_graph(
             [*base, f"recorder.output={args.out / 'flood.mcap'}",
-             f"camera.max_in_flight={args.in_flight}"], frames, None, compose=compose)
+             f"camera.max_in_flight={args.in_flight}"], frames, None, processes=processes)
         graph = (len(receipts) - 1) / (receipts[-1][0] - receipts[0][0])
         print(f"{layout}, flood ({args.in_flight} in flight, images recorded): {graph:.1f} fps, "
               f"ratio {graph / decode:.2f}, {len(receipts)}/{frames} frames")
@@ -248,11 +257,11 @@ def main() -> None:
         print("  peak memory [MB]: " + ", ".join(f"{k} {v:.0f}" for k, v in peaks.items()))
 
     hampel_ms = HAMPEL_DELAY_FRAMES / scenario.fps * 1e3
-    for layout, compose in LAYOUTS.items():
+    for layout, processes in LAYOUTS.items():
         receipts, memory, cpu = run_graph(
             [*base, "camera.pacing=realtime", "camera.repeat=0",
              f"recorder.output={args.out / 'long.mcap'}", "recorder.exclude=[/camera/image]"],
-            None, args.minutes, image_subscribers=1, compose=compose)
+            None, args.minutes, image_subscribers=1, processes=processes)
         if len(receipts) < 60:
             print(f"{layout}, real time: only {len(receipts)} clouds arrived")
             continue

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -75,10 +76,12 @@ class Rig:
     gravity_m_s2: float
     camera_file: Path
 
-    @property
+    @cached_property
     def camera_position_mm(self) -> np.ndarray:
-        """Camera centre in the world frame [mm]."""
-        return self.world_to_camera.inverse().translation_mm
+        """Camera centre in the world frame [mm] (computed once: every triangulation uses it)."""
+        position = self.world_to_camera.inverse().translation_mm.copy()
+        position.flags.writeable = False
+        return position
 
     def project(self, points_mm: ArrayLike) -> np.ndarray:
         """World points (N×3 mm) → image pixels (N×2); NaN where the camera does not see them."""

@@ -83,20 +83,23 @@ def triangulate_plane(rig: Rig, pixels: ArrayLike) -> np.ndarray:
 
 def _height_sigma(heights: Callable[[np.ndarray], np.ndarray], pixels: ArrayLike,
                   sigma_px: ArrayLike) -> np.ndarray:
-    """σ_Z = |∂Z/∂pixel| σ for an isotropic pixel uncertainty, by central differences."""
+    """σ_Z = |∂Z/∂pixel| σ for an isotropic pixel uncertainty, by central differences.
+
+    `heights` gets the N pixels shifted by +x, −x, +y, −y, stacked (4N×2) in one call.
+    """
     pixels = np.atleast_2d(np.asarray(pixels, dtype=float))
-    slopes = []
-    for axis in (0, 1):
-        step = np.zeros(2)
-        step[axis] = PIXEL_STEP_PX
-        slopes.append((heights(pixels + step) - heights(pixels - step)) / (2 * PIXEL_STEP_PX))
-    return np.hypot(*slopes) * np.asarray(sigma_px, dtype=float)
+    steps = PIXEL_STEP_PX * np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
+    shifted = heights((pixels[None, :, :] + steps[:, None, :]).reshape(-1, 2))
+    plus_x, minus_x, plus_y, minus_y = shifted.reshape(4, len(pixels))
+    slopes = (plus_x - minus_x, plus_y - minus_y)
+    return np.hypot(*slopes) / (2 * PIXEL_STEP_PX) * np.asarray(sigma_px, dtype=float)
 
 
 def beam_height_sigma(rig: Rig, pixels: ArrayLike, laser_ids: ArrayLike,
                       sigma_px: ArrayLike) -> np.ndarray:
     """Height uncertainty [mm] of beam points from an isotropic pixel uncertainty σ [px]."""
-    return _height_sigma(lambda p: triangulate_beams(rig, p, laser_ids).points_mm[:, 2],
+    shifted_ids = np.tile(np.atleast_1d(np.asarray(laser_ids, dtype=int)), 4)
+    return _height_sigma(lambda p: triangulate_beams(rig, p, shifted_ids).points_mm[:, 2],
                          pixels, sigma_px)
 
 
