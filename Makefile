@@ -42,7 +42,7 @@ demo: setup
 
 bench: setup
 	$(BIN)/python bench/frame_path.py
-	$(BIN)/python bench/graph.py
+	$(BIN)/python bench/graph.py --minutes 2
 
 clean:
 	rm -rf $(BUILD) .pytest_cache .ruff_cache demo_output

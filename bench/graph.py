@@ -8,8 +8,7 @@ Prints, measured in one run on the same file:
   tracking, triangulation and fits, recording (MCAP write of the image);
 - whole-graph fps with `pacing: flood` (camera → tracker → reconstruction → recorder, every
   frame acknowledged; sloshing estimates) and its ratio to decode-only, with each process's
-  CPU time per frame, in three layouts (`LAYOUTS`: every node in its own process, the chain
-  camera → tracker → reconstruction composed, everything composed);
+  CPU time per frame, in the process layouts of `LAYOUTS`;
 - frame → PointCloud2 latency in real time (median, p95; the Hampel window's own delay of
   hampel_window // 2 frames is part of it and given apart), each layout;
 - peak memory per process, and resident memory over a `--minutes` real-time run
@@ -33,12 +32,18 @@ SCENARIO = REPO / "config" / "scenarios" / "drop_4p7s.yaml"
 HAMPEL_DELAY_FRAMES = 2
 IDLE_S = 10.0
 LAYOUTS = {
-    "own processes": {},
-    "chain composed": dict.fromkeys(("camera", "tracker", "recon"), "chain"),
-    "all composed": dict.fromkeys(("camera", "tracker", "recon", "recorder"), "graph"),
+    "own processes": {"camera": "camera", "tracker": "tracker", "recon": "recon",
+                      "recorder": "recorder"},
+    "chain composed": {"camera": "chain", "tracker": "chain", "recon": "chain",
+                       "recorder": "recorder"},
+    "all composed": {"camera": "graph", "tracker": "graph", "recon": "graph",
+                     "recorder": "graph"},
+    "capture + analysis": {"camera": "capture", "tracker": "analysis", "recon": "analysis",
+                           "recorder": "capture"},
 }
-"""Process of each node: every node in its own, camera → tracker → reconstruction in one
-(the recorder apart), or all of them in one; the niced sloshing node keeps its own."""
+"""Process of each node: every node in its own; camera → tracker → reconstruction in one, the
+recorder apart (config/graphs/drop.yaml); all in one; camera and recorder in one, tracker and
+reconstruction in another. The niced sloshing node keeps its own process in each."""
 
 
 def simulate_once(out: Path, seconds: float):
@@ -227,6 +232,8 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("/tmp/bench_graph"))
     parser.add_argument("--in-flight", type=int, default=2,
                         help="frames the flooding source may have unacknowledged")
+    parser.add_argument("--layouts", nargs="+", choices=list(LAYOUTS), default=list(LAYOUTS),
+                        help="which process layouts to measure")
     args = parser.parse_args()
     sys.stdout.reconfigure(line_buffering=True)   # each result shows as soon as measured
     args.out.mkdir(parents=True, exist_ok=True)
@@ -243,7 +250,8 @@ def main() -> None:
     print(f"decode-only: {decode:.1f} fps, {decode_cpu_ms:.1f} ms CPU per frame "
           f"({decode * decode_cpu_ms / 1e3:.2f} cores busy)")
     print("stages [ms/frame, mean]: " + ", ".join(f"{k} {v:.2f}" for k, v in stages.items()))
-    for layout, processes in LAYOUTS.items():
+    for layout in args.layouts:
+        processes = LAYOUTS[layout]
         receipts, memory, cpu = run_graph(
             [*base, f"recorder.output={args.out / 'flood.mcap'}",
              f"camera.max_in_flight={args.in_flight}"], frames, None, processes=processes)
@@ -257,7 +265,8 @@ def main() -> None:
         print("  peak memory [MB]: " + ", ".join(f"{k} {v:.0f}" for k, v in peaks.items()))
 
     hampel_ms = HAMPEL_DELAY_FRAMES / scenario.fps * 1e3
-    for layout, processes in LAYOUTS.items():
+    for layout in args.layouts:
+        processes = LAYOUTS[layout]
         receipts, memory, cpu = run_graph(
             [*base, "camera.pacing=realtime", "camera.repeat=0",
              f"recorder.output={args.out / 'long.mcap'}", "recorder.exclude=[/camera/image]"],

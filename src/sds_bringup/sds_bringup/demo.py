@@ -67,11 +67,12 @@ def run_graph(overrides: list[str], out: Path, expected_frames: int | None,
     os.environ.update(environment)
     # The camera waits for tracker, recorder and viewer; the tracker for reconstruction,
     # recorder, viewer and the progress bar; the reconstruction and the running sloshing
-    # estimates for recorder and viewer.
+    # estimates for recorder and viewer (the fits also for the sloshing node).
     entries = graph_entries([*overrides, f"recorder.output={outputs.recording.resolve()}",
                              f"viewer.output={outputs.rerun.resolve()}",
                              "camera.wait_for_subscribers=3", "tracker.wait_for_consumers=4",
-                             "recon.wait_for_consumers=2", "sloshing.wait_for_consumers=2"])
+                             "recon.wait_for_consumers=2", "recon.wait_for_fit_consumers=3",
+                             "sloshing.wait_for_consumers=2"])
     cable = plug_in(port) if serial_lines is not None and port is not None else None
     with outputs.log.open("w") as log:
         launcher = Launcher(entries, environment, output=log)

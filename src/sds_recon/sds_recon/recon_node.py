@@ -70,6 +70,7 @@ class ReconstructionNode(Node):
         self.declare_parameter("default_sigma_px", 0.1)
         self.declare_parameter("frame_id", "world")
         self.declare_parameter("wait_for_consumers", 0)
+        self.declare_parameter("wait_for_fit_consumers", 0)
         try:
             self._rig: Rig = load_rig(self.get_parameter("rig").value)
         except (RigError, OSError) as error:
@@ -87,7 +88,9 @@ class ReconstructionNode(Node):
         self._fit_pub = self.create_publisher(SurfaceFit, "surface_fit", qos)
         self._qos = qos
         self._consumers = int(self.get_parameter("wait_for_consumers").value)
-        if self._consumers > 0:
+        self._fit_consumers = int(self.get_parameter("wait_for_fit_consumers").value) \
+            or self._consumers
+        if self._consumers > 0 or self._fit_consumers > 0:
             # No input is taken before every output has its consumers (e.g. the recorder).
             self._wait_timer = self.create_timer(0.05, self._subscribe_when_consumed)
         else:
@@ -96,8 +99,9 @@ class ReconstructionNode(Node):
                                f"{len(self._rig.diodes)} diodes")
 
     def _subscribe_when_consumed(self) -> None:
-        outputs = (self._points_pub, self._line_pub, self._fit_pub)
-        if all(p.get_subscription_count() >= self._consumers for p in outputs):
+        clouds = (self._points_pub, self._line_pub)
+        if all(p.get_subscription_count() >= self._consumers for p in clouds) \
+                and self._fit_pub.get_subscription_count() >= self._fit_consumers:
             self._wait_timer.cancel()
             self._subscribe_inputs()
 
