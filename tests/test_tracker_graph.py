@@ -27,6 +27,8 @@ from sensor_msgs.msg import Image, PointCloud2
 from sds_msgs.msg import LaserLineProfile, LaserSpot, LaserSpotArray, SurfaceFit, SyncEvent
 
 pytestmark = pytest.mark.ros
+EVERY_FRAME = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+"""Keeps all 30 frames' messages: flooding, the graph does not wait for this probe."""
 SYNC_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
@@ -42,6 +44,7 @@ class DropRun:
     spots: list
     lines: list
     clouds: list
+    line_clouds: list
     fits: list
     sync: list
     log: str
@@ -57,20 +60,25 @@ def drop_run(repo, tmp_path_factory) -> DropRun:
     rig = load_rig(rig_file)
     region = list(rig.container_region_px(rig.camera))
     probe = Probe("drop_probe")
-    spots = probe.collect(LaserSpotArray, "/tracker/spots")
-    lines = probe.collect(LaserLineProfile, "/tracker/line")
-    clouds = probe.collect(PointCloud2, "/recon/points")
-    fits = probe.collect(SurfaceFit, "/recon/surface_fit")
+    spots = probe.collect(LaserSpotArray, "/tracker/spots", EVERY_FRAME)
+    lines = probe.collect(LaserLineProfile, "/tracker/line", EVERY_FRAME)
+    clouds = probe.collect(PointCloud2, "/recon/points", EVERY_FRAME)
+    line_clouds = probe.collect(PointCloud2, "/recon/line_points", EVERY_FRAME)
+    fits = probe.collect(SurfaceFit, "/recon/surface_fit", EVERY_FRAME)
     sync = probe.collect(SyncEvent, "/camera/sync", SYNC_QOS)
     led_x, led_y = (int(v) for v in scenario.events.led_position_px)
     # The camera waits for three image subscribers: the tracker, the recorder and this probe
     # once it has found the tracker's and the reconstruction's publishers; the tracker takes
-    # no frame before its spots reach three (the reconstruction, the recorder and this probe).
+    # no frame before its spots reach three (the reconstruction, the recorder and this probe);
+    # the reconstruction waits for the recorder and this probe on each output, and for the
+    # sloshing node too on its fits.
     recording = tmp_path / "drop.mcap"
     graph = SdsGraphRun("drop.yaml", "--set", f"camera.source={output.video}",
                         "--set", f"camera.roi={region}", "--set", f"tracker.rig={rig_file}",
                         "--set", f"recon.rig={rig_file}", "--set", "camera.wait_for_subscribers=3",
                         "--set", "tracker.wait_for_consumers=3",
+                        "--set", "recon.wait_for_consumers=2",
+                        "--set", "recon.wait_for_fit_consumers=3",
                         "--set", f"recorder.output={recording}",
                         "--set", f"camera.led_roi={[led_x - 12, led_y - 12, 24, 24]}")
     try:
@@ -82,21 +90,23 @@ def drop_run(repo, tmp_path_factory) -> DropRun:
         time.sleep(0.5)
         probe.collect(Image, "/camera/image")
         deadline = time.monotonic() + 120
-        while time.monotonic() < deadline and (len(spots) < 30 or len(fits) < 30):
+        while time.monotonic() < deadline and (len(spots) < 30 or len(fits) < 30
+                                               or len(line_clouds) < 30):
             time.sleep(0.2)
         time.sleep(0.5)   # the recorder receives what the probe did
     finally:
         graph.stop()
         probe.close()
-    return DropRun(output, rig_file, recording, tmp_path, spots, lines, clouds, fits, sync,
-                   graph.output())
+    return DropRun(output, rig_file, recording, tmp_path, spots, lines, clouds, line_clouds, fits,
+                   sync, graph.output())
 
 
 def test_simulated_drop_is_tracked_and_reconstructed(drop_run: DropRun) -> None:
     output, spots, lines, clouds, fits = (drop_run.output, drop_run.spots, drop_run.lines,
                                           drop_run.clouds, drop_run.fits)
     assert sorted(m.frame_index for m in spots) == list(range(30)), drop_run.log
-    assert len(lines) == 30 and len(clouds) == 30 and len(fits) == 30
+    assert len(lines) == 30 and len(clouds) == 30 and len(fits) == 30, drop_run.log
+    assert len(drop_run.line_clouds) == 30
     with output.spots.open() as file:
         truth = {(int(r["frame"]), int(r["laser_id"])): r for r in csv.DictReader(file)}
     errors = []
