@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from ros_helpers import RELIABLE, Probe, SdsGraphRun, wait_until
 from sds_recon.recon_node import cloud_dtype
 from sds_recon.reconstruction import LINE_LASER_ID
@@ -115,14 +116,16 @@ def test_running_estimates_follow_a_decay(repo):
     probe = Probe("recon_probe")
     graph = SdsGraphRun("recon.yaml", "--set", f"recon.rig={rig_file}")
     try:
-        estimates = probe.collect(SloshingEstimate, "/recon/sloshing")
-        fits = probe.collect(SurfaceFit, "/recon/surface_fit")
+        every = QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE)  # all 120 fits
+        estimates = probe.collect(SloshingEstimate, "/recon/sloshing", every)
+        fits = probe.collect(SurfaceFit, "/recon/surface_fit", every)
         spots_pub = probe.node.create_publisher(LaserSpotArray, "/tracker/spots", RELIABLE)
         # The sloshing node (its own process) subscribes to the fits besides this probe.
         assert wait_until(lambda: spots_pub.get_subscription_count() > 0
                           and probe.node.count_publishers("/recon/sloshing") > 0
                           and probe.node.count_subscribers("/recon/surface_fit") >= 2), \
             graph.output()
+        time.sleep(0.5)   # a publisher counts a subscription before that reader has matched it
         for frame in range(120):
             time_s = frame / 30.0
             surface = Surface(55.0, (motion,))
