@@ -26,6 +26,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import psutil
 
 REPO = Path(__file__).resolve().parents[1]
 SCENARIO = REPO / "config" / "scenarios" / "drop_4p7s.yaml"
@@ -131,8 +132,8 @@ def memory_kb(pid: int, field: str) -> int:
 
 def cpu_s(pid: int) -> float:
     """User + system CPU time [s] a process has used so far."""
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    times = psutil.Process(pid).cpu_times()
+    return times.user + times.system
 
 
 def run_graph(overrides: list[str], expected: int | None, minutes: float | None,

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import numpy as np
+import psutil
 import pytest
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from ros_helpers import RELIABLE, Probe, SdsGraphRun, wait_until
@@ -139,8 +139,7 @@ def test_running_estimates_follow_a_decay(repo):
             time.sleep(0.005)
         assert wait_until(lambda: len(fits) == 120), graph.output()
         assert wait_until(lambda: any(e.window_end_s > 2.9 for e in estimates)), graph.output()
-        niceness = {int(Path(f"/proc/{pid}/stat").read_text().rsplit(") ", 1)[1].split()[16])
-                    for pid in graph.child_pids()}
+        niceness = {psutil.Process(pid).nice() for pid in graph.child_pids()}
         # The estimates' process runs 10 steps nicer than the reconstruction's (recon.yaml).
         assert len(niceness) == 2 and max(niceness) - min(niceness) == 10
     finally:

@@ -37,9 +37,9 @@ class SloshingNode(Node):
                                         window_s=float(values["estimate_window_s"]))
         self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="estimate")
         self._estimating: Future | None = None
-        self._qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE,
-                               history=HistoryPolicy.KEEP_LAST)
-        self._estimate_pub = self.create_publisher(SloshingEstimate, "sloshing", self._qos)
+        estimates_qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE,
+                                    history=HistoryPolicy.KEEP_LAST)
+        self._estimate_pub = self.create_publisher(SloshingEstimate, "sloshing", estimates_qos)
         self._consumers = int(values["wait_for_consumers"])
         if self._consumers > 0:
             # No fit is taken before the estimates have their consumers (e.g. the recorder).
