@@ -12,7 +12,9 @@ from ros_helpers import RELIABLE, Probe, SdsGraphRun, wait_until
 from sds_recon.recon_node import cloud_dtype
 from sds_recon.reconstruction import LINE_LASER_ID
 from sds_recon.rig import load_rig
+from sds_recon.sloshing.running import RunningAnalysis
 from sds_recon.sloshing.theory import ModeShape
+from sds_recon.sloshing_node import SloshingNode
 from sds_sim.optics import line_laser_rays, ray_surface_points
 from sds_sim.surface import ModeMotion, Surface
 from sensor_msgs.msg import PointCloud2
@@ -150,3 +152,41 @@ def test_running_estimates_follow_a_decay(repo):
     assert pencil.frequency_hz == pytest.approx(2.79, rel=1e-3)
     assert pencil.damping_ratio == pytest.approx(0.01, rel=0.05)
     assert 0.2 <= pencil.window_start_s <= 0.2 + 1 / 2.79 / 4 + 0.04   # the first crest
+
+
+def test_fits_that_come_during_an_estimate_get_their_own(monkeypatch):
+    """Fits that all arrive while an estimate runs (a loaded machine, a flooding replay) are
+    estimated once it ends: the drop's last period is not left waiting for a fit."""
+    slow = RunningAnalysis.estimate
+
+    def slow_estimate(self, series):
+        time.sleep(0.5)
+        return slow(self, series)
+
+    monkeypatch.setattr(RunningAnalysis, "estimate", slow_estimate)
+    probe = Probe("sloshing_probe")
+    node = SloshingNode("sloshing", context=probe.context)
+    probe.executor.add_node(node)
+    try:
+        every = QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE)
+        estimates = probe.collect(SloshingEstimate, "sloshing", every)
+        fits_pub = probe.node.create_publisher(SurfaceFit, "surface_fit", every)
+        assert wait_until(lambda: fits_pub.get_subscription_count() > 0)
+        names = ["mean", "lateral_1_cos", "lateral_1_sin"]
+        started = time.monotonic()
+        for frame in range(91):   # 3 s of data in much less than the first estimate's 0.5 s
+            time_s = frame / 30.0
+            omega_t = 2 * np.pi * 2.79 * time_s
+            wall = 3.0 * np.exp(-0.01 * omega_t) * np.cos(omega_t)
+            fit = SurfaceFit(frame_index=frame, mode_names=names,
+                             modal_amplitudes_mm=[0.0, wall, 0.0])
+            fit.header.stamp.sec, fit.header.stamp.nanosec = divmod(round(time_s * 1e9), 10**9)
+            fits_pub.publish(fit)
+        assert time.monotonic() - started < 0.3
+        assert wait_until(lambda: any(e.window_end_s > 2.9 for e in estimates), timeout=10)
+    finally:
+        probe.executor.remove_node(node)
+        node.destroy_node()
+        probe.close()
+    pencil = next(e for e in estimates if e.mode == "lateral_1" and e.method == "matrix_pencil")
+    assert pencil.frequency_hz == pytest.approx(2.79, rel=1e-3)

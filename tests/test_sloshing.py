@@ -30,6 +30,7 @@ from sds_recon.sloshing.estimators import (
     log_decrement,
 )
 from sds_recon.sloshing.recording import SurfaceRecording, read_mcap, recording_from_rows
+from sds_recon.sloshing.running import RunningAnalysis
 from sds_recon.sloshing.theory import theoretical_modes
 from sds_recon.triangulation import triangulate_beams
 from sds_sim.arduino import arduino_records
@@ -115,6 +116,28 @@ def test_pencil_resolves_close_modes_the_spectrum_cannot() -> None:
     np.testing.assert_allclose(found[:, 1], [0.03, 0.03], rtol=0.1)
     band = half_power(t, y, 2.0)
     assert band.note or band.damping_ratio > 1.5 * 0.03
+
+
+def test_running_estimates_each_period_on_the_last_window() -> None:
+    """Frame by frame: due every period of data, a sliding window, the decay's true values."""
+    running = RunningAnalysis(1.0, window_s=3.0)
+    names = ("mean", "lateral_1_cos", "lateral_1_sin")
+    snapshots = []
+    for t in np.arange(0, 6.0, 1 / 30):
+        running.add(t, names, np.array([0.0, damped(t, 2.79, 0.01, 3.0), 0.0]))
+        if running.due():
+            snapshots.append(running.snapshot())
+    assert [s.time_s[-1] for s in snapshots] == pytest.approx([0, 1, 2, 3, 4, 5], abs=1 / 60)
+    last = snapshots[-1]
+    assert last.time_s[-1] - last.time_s[0] <= 3.0
+    assert last.time_s[0] == pytest.approx(2.0, abs=1 / 60)   # the last 3 s only
+    (mode,) = running.estimate(last)
+    pencil = next(e for e in mode.estimates if e.method == "matrix_pencil")
+    assert mode.name == "lateral_1"
+    assert pencil.frequency_hz == pytest.approx(2.79, rel=1e-3)
+    assert pencil.damping_ratio == pytest.approx(0.01, rel=0.05)
+    running.add(6.0, ("mean", "axisymmetric_1"), np.zeros(2))   # another mode set: start over
+    assert len(running.snapshot().time_s) == 1
 
 
 def test_a_flat_record_is_refused_not_fitted() -> None:

@@ -90,8 +90,10 @@ def drop_run(repo, tmp_path_factory) -> DropRun:
         time.sleep(0.5)
         probe.collect(Image, "/camera/image")
         deadline = time.monotonic() + 120
+        # The LED's two switches too: a reliable sample dropped under load is only resent at
+        # the writer's next heartbeat, after the last frame's spots may have come.
         while time.monotonic() < deadline and (len(spots) < 30 or len(fits) < 30
-                                               or len(line_clouds) < 30):
+                                               or len(line_clouds) < 30 or len(sync) < 2):
             time.sleep(0.2)
         time.sleep(0.5)   # the recorder receives what the probe did
     finally:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
@@ -37,6 +38,9 @@ class SloshingNode(Node):
                                         window_s=float(values["estimate_window_s"]))
         self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="estimate")
         self._estimating: Future | None = None
+        self._lock = threading.Lock()   # fits arrive while an estimate ends in the worker
+        self._latest_header = None
+        self._closing = False
         estimates_qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE,
                                     history=HistoryPolicy.KEEP_LAST)
         self._estimate_pub = self.create_publisher(SloshingEstimate, "sloshing", estimates_qos)
@@ -61,16 +65,29 @@ class SloshingNode(Node):
     def _on_fit(self, fit: SurfaceFit) -> None:
         if not fit.mode_names:
             return
-        self._running.add(stamp_s(fit), tuple(fit.mode_names), np.array(fit.modal_amplitudes_mm))
-        if self._running.due() and (self._estimating is None or self._estimating.done()):
-            self._estimating = self._worker.submit(self._publish_estimates, fit.header,
-                                                   self._running.snapshot())
-            self._estimating.add_done_callback(self._report_failure)
+        with self._lock:
+            self._running.add(stamp_s(fit), tuple(fit.mode_names),
+                              np.array(fit.modal_amplitudes_mm))
+            self._latest_header = fit.header
+        self._estimate_if_due()
 
-    def _report_failure(self, future: Future) -> None:
-        """An estimate that raised is logged; the next period tries again."""
+    def _estimate_if_due(self) -> None:
+        """Start an estimate on the series so far when one is due and none is running."""
+        with self._lock:
+            busy = self._estimating is not None and not self._estimating.done()
+            if self._closing or busy or not self._running.due():
+                return
+            estimating = self._worker.submit(self._publish_estimates, self._latest_header,
+                                             self._running.snapshot())
+            self._estimating = estimating
+        estimating.add_done_callback(self._after_estimate)
+
+    def _after_estimate(self, future: Future) -> None:
+        """Log a failed estimate; start the next one if fits came meanwhile (the last ones of
+        a drop would otherwise wait for a fit that never comes)."""
         if not future.cancelled() and future.exception() is not None:
             self.get_logger().error(f"running sloshing estimate failed: {future.exception()!r}")
+        self._estimate_if_due()
 
     def _publish_estimates(self, header, series: ModalSeries) -> None:
         """The lateral modes' estimates (in the worker thread, so that fits keep arriving)."""
@@ -86,6 +103,8 @@ class SloshingNode(Node):
 
     def destroy_node(self) -> None:
         """Let a running estimate finish before the publisher goes."""
+        with self._lock:
+            self._closing = True
         self._worker.shutdown(wait=True, cancel_futures=True)
         super().destroy_node()
 
