@@ -42,8 +42,8 @@ LAYOUTS = {
     "capture + analysis": {"camera": "capture", "tracker": "analysis", "recon": "analysis",
                            "recorder": "capture"},
 }
-"""Process of each node: every node in its own (config/graphs/drop.yaml); camera → tracker →
-reconstruction in one, the recorder apart; all in one; camera and recorder in one, tracker and
+"""Process of each node: every node in its own; camera → tracker → reconstruction in one, the
+recorder apart (config/graphs/drop.yaml); all in one; camera and recorder in one, tracker and
 reconstruction in another. The niced sloshing node keeps its own process in each."""
 
 
@@ -152,7 +152,7 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sds_recon.qos import stream_qos
     from sensor_msgs.msg import PointCloud2
 
     from sds_msgs.msg import LaserSpotArray
@@ -178,13 +178,11 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
         executor.add_node(node)
         # Subscribing to the spots too makes the tracker wait for this probe (its third
         # consumer), so the probe's cloud subscription is in place before the first cloud.
-        node.create_subscription(LaserSpotArray, "/tracker/spots", lambda _: None,
-                                 QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        node.create_subscription(LaserSpotArray, "/tracker/spots", lambda _: None, stream_qos())
         node.create_subscription(
             PointCloud2, "/recon/points",
             lambda m: receipts.append((time.time(), m.header.stamp.sec
-                                       + m.header.stamp.nanosec * 1e-9)),
-            QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+                                       + m.header.stamp.nanosec * 1e-9)), stream_qos(100))
         start, last_sample, count, last_change = time.monotonic(), 0.0, 0, 0.0
         while not launcher.stopping:
             executor.spin_once(timeout_sec=0.05)

@@ -83,7 +83,13 @@ class SdsGraphRun:
             self.lines.append(line.rstrip())
 
     def wait(self, timeout: float) -> int:
-        code = self.popen.wait(timeout=timeout)
+        """The graph's exit code; a graph still running after `timeout` [s] fails the test
+        with its output."""
+        try:
+            code = self.popen.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            raise AssertionError(f"graph still running after {timeout} s:\n"
+                                 + self.output()) from None
         self._reader.join(timeout=2.0)
         return code
 
@@ -105,7 +111,11 @@ class SdsGraphRun:
     def stop(self) -> None:
         if self.popen.poll() is None:
             self.popen.send_signal(signal.SIGTERM)
-            self.wait(timeout=30)
+            try:
+                self.wait(timeout=30)
+            except AssertionError:
+                self.popen.kill()
+                raise
 
 
 def pid_alive(pid: int) -> bool:

@@ -7,8 +7,8 @@ import time
 import numpy as np
 import psutil
 import pytest
-from rclpy.qos import QoSProfile, ReliabilityPolicy
-from ros_helpers import RELIABLE, Probe, SdsGraphRun, wait_until
+from ros_helpers import Probe, SdsGraphRun, wait_until
+from sds_recon.qos import stream_qos
 from sds_recon.recon_node import cloud_dtype
 from sds_recon.reconstruction import LINE_LASER_ID
 from sds_recon.rig import load_rig
@@ -56,11 +56,11 @@ def test_spots_and_line_in_point_cloud_and_fit_out(repo):
     probe = Probe("recon_probe")
     graph = SdsGraphRun("recon.yaml", "--set", f"recon.rig={rig_file}")
     try:
-        clouds = probe.collect(PointCloud2, "/recon/points")
-        line_clouds = probe.collect(PointCloud2, "/recon/line_points")
-        fits = probe.collect(SurfaceFit, "/recon/surface_fit")
-        spots_pub = probe.node.create_publisher(LaserSpotArray, "/tracker/spots", RELIABLE)
-        line_pub = probe.node.create_publisher(LaserLineProfile, "/tracker/line", RELIABLE)
+        clouds = probe.collect(PointCloud2, "/recon/points", stream_qos())
+        line_clouds = probe.collect(PointCloud2, "/recon/line_points", stream_qos())
+        fits = probe.collect(SurfaceFit, "/recon/surface_fit", stream_qos())
+        spots_pub = probe.node.create_publisher(LaserSpotArray, "/tracker/spots", stream_qos())
+        line_pub = probe.node.create_publisher(LaserLineProfile, "/tracker/line", stream_qos())
         assert wait_until(lambda: spots_pub.get_subscription_count() > 0
                           and line_pub.get_subscription_count() > 0), graph.output()
         message = LaserSpotArray(frame_index=7)
@@ -118,16 +118,15 @@ def test_running_estimates_follow_a_decay(repo):
     probe = Probe("recon_probe")
     graph = SdsGraphRun("recon.yaml", "--set", f"recon.rig={rig_file}")
     try:
-        every = QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE)  # all 120 fits
+        every = stream_qos(200)   # all 120 fits
         estimates = probe.collect(SloshingEstimate, "/recon/sloshing", every)
         fits = probe.collect(SurfaceFit, "/recon/surface_fit", every)
-        spots_pub = probe.node.create_publisher(LaserSpotArray, "/tracker/spots", RELIABLE)
+        spots_pub = probe.node.create_publisher(LaserSpotArray, "/tracker/spots", stream_qos())
         # The sloshing node (its own process) subscribes to the fits besides this probe.
         assert wait_until(lambda: spots_pub.get_subscription_count() > 0
                           and probe.node.count_publishers("/recon/sloshing") > 0
                           and probe.node.count_subscribers("/recon/surface_fit") >= 2), \
             graph.output()
-        time.sleep(0.5)   # a publisher counts a subscription before that reader has matched it
         for frame in range(120):
             time_s = frame / 30.0
             surface = Surface(55.0, (motion,))
@@ -168,7 +167,7 @@ def test_fits_that_come_during_an_estimate_get_their_own(monkeypatch):
     node = SloshingNode("sloshing", context=probe.context)
     probe.executor.add_node(node)
     try:
-        every = QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE)
+        every = stream_qos(200)
         estimates = probe.collect(SloshingEstimate, "sloshing", every)
         fits_pub = probe.node.create_publisher(SurfaceFit, "surface_fit", every)
         assert wait_until(lambda: fits_pub.get_subscription_count() > 0)

@@ -17,6 +17,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from ros_helpers import Probe, SdsGraphRun
 from rosbags.highlevel import AnyReader
 from rrd_helpers import rrd_entities
+from sds_recon.qos import stream_qos
 from sds_recon.results import load_results
 from sds_recon.rig import load_rig
 from sds_record.mcap_files import read_messages
@@ -27,7 +28,7 @@ from sensor_msgs.msg import Image, PointCloud2
 from sds_msgs.msg import LaserLineProfile, LaserSpot, LaserSpotArray, SurfaceFit, SyncEvent
 
 pytestmark = pytest.mark.ros
-EVERY_FRAME = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+EVERY_FRAME = stream_qos(100)
 """Keeps all 30 frames' messages: flooding, the graph does not wait for this probe."""
 SYNC_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -87,7 +88,6 @@ def drop_run(repo, tmp_path_factory) -> DropRun:
                 probe.node.count_publishers(topic) for topic in
                 ("/tracker/spots", "/tracker/line", "/recon/points", "/recon/surface_fit")):
             time.sleep(0.1)
-        time.sleep(0.5)
         probe.collect(Image, "/camera/image")
         deadline = time.monotonic() + 120
         # The LED's two switches too: a reliable sample dropped under load is only resent at

@@ -96,7 +96,7 @@ def _watch(launcher: Launcher, expected_frames: int | None, serial_lines: list[b
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sds_recon.qos import stream_qos
 
     from sds_msgs.msg import LaserSpotArray
 
@@ -107,8 +107,7 @@ def _watch(launcher: Launcher, expected_frames: int | None, serial_lines: list[b
     executor.add_node(node)
     tracked: list[int] = []   # frames tracked (the tracker waits for this subscriber too)
     node.create_subscription(LaserSpotArray, "/tracker/spots",
-                             lambda msg: tracked.append(msg.frame_index),
-                             QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+                             lambda msg: tracked.append(msg.frame_index), stream_qos(100))
     bar = tqdm(total=expected_frames, desc="frames", unit="frame")
     written = threading.Event()
     try:

@@ -9,8 +9,9 @@ from pathlib import Path
 
 import numpy as np
 from rclpy.node import Node
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
+from sds_recon.qos import stream_qos
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 
@@ -27,11 +28,10 @@ class FrameMonitorNode(Node):
         self.declare_parameter("ack", True)
         self.declare_parameter("summary_path", "")
         self.declare_parameter("report_period_s", 2.0)
-        qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
-                         history=HistoryPolicy.KEEP_LAST)
         self._ack = self.get_parameter("ack").value
-        self._ack_pub = self.create_publisher(Header, "frame_ack", qos)
-        self.create_subscription(Image, "image", self._on_image, qos)
+        self._ack_pub = self.create_publisher(
+            Header, "frame_ack", QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        self.create_subscription(Image, "image", self._on_image, stream_qos(10))
         self._summary_path = self.get_parameter("summary_path").value
         self._stamps_ns: list[int] = []
         self._latencies_ms: list[float] = []

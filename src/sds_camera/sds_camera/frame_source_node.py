@@ -9,11 +9,12 @@ from pathlib import Path
 
 from rclpy.duration import Duration
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.subscription import RCLError
 from rclpy.time import Time
 from sds_recon.camera import CameraModel as CameraModelBase
 from sds_recon.camera import load_camera
+from sds_recon.qos import stream_qos
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 
@@ -62,17 +63,15 @@ class FrameSourceNode(Node):
         except (FrameSourceError, OSError, ValueError) as error:
             self._fail(str(error))
             return
-        reliable = QoSProfile(
-            depth=max(5, p["max_in_flight"] + 1),
-            reliability=ReliabilityPolicy.RELIABLE,
-            history=HistoryPolicy.KEEP_LAST,
-        )
+        depth = max(5, p["max_in_flight"] + 1)
         latched = QoSProfile(
             depth=1,
             reliability=ReliabilityPolicy.RELIABLE,
             durability=DurabilityPolicy.TRANSIENT_LOCAL,
         )
-        self._image_pub = self.create_publisher(Image, "image", reliable)
+        # Kept frames (transient-local) cost memory: 5 BGR 4K frames are 124 MB, 5 red-channel
+        # container regions a few MB.
+        self._image_pub = self.create_publisher(Image, "image", stream_qos(depth))
         self._model_pub = self.create_publisher(CameraModel, "camera_model", latched)
         # Kept for late subscribers (the bridge, a recorder): the blink comes at the start.
         self._sync_pub = self.create_publisher(SyncEvent, "sync", QoSProfile(
@@ -82,8 +81,8 @@ class FrameSourceNode(Node):
         self._led = LedDetector(tuple(led_roi)) if len(led_roi) == 4 and led_roi[2] > 0 else None
         self._led_switches: dict[int, bool] = {}
         self._ack_topic = self.create_subscription(
-            Header, "frame_ack", self._on_ack, reliable
-        ).topic_name
+            Header, "frame_ack", self._on_ack,
+            QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE)).topic_name
         self._publish_camera_model(p)
         self._decode_thread = threading.Thread(target=self._read_frames, name="decode", daemon=True)
         self._publish_thread = threading.Thread(

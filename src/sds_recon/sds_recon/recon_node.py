@@ -6,7 +6,6 @@ import threading
 
 import numpy as np
 from rclpy.node import Node
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2, PointField
 
 from sds_msgs.msg import (
@@ -15,6 +14,7 @@ from sds_msgs.msg import (
     LaserSpotArray,
     SurfaceFit,
 )
+from sds_recon.qos import start_when_consumed, stream_qos
 from sds_recon.reconstruction import (
     SurfacePoints,
     fit_surface,
@@ -81,33 +81,20 @@ class ReconstructionNode(Node):
         self._beam_weight = float(self.get_parameter("beam_weight").value)
         self._default_sigma = float(self.get_parameter("default_sigma_px").value)
         self._frame_id = self.get_parameter("frame_id").value
-        qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE,
-                         history=HistoryPolicy.KEEP_LAST)
-        self._points_pub = self.create_publisher(PointCloud2, "points", qos)
-        self._line_pub = self.create_publisher(PointCloud2, "line_points", qos)
-        self._fit_pub = self.create_publisher(SurfaceFit, "surface_fit", qos)
-        self._qos = qos
-        self._consumers = int(self.get_parameter("wait_for_consumers").value)
-        self._fit_consumers = int(self.get_parameter("wait_for_fit_consumers").value) \
-            or self._consumers
-        if self._consumers > 0 or self._fit_consumers > 0:
-            # No input is taken before every output has its consumers (e.g. the recorder).
-            self._wait_timer = self.create_timer(0.05, self._subscribe_when_consumed)
-        else:
-            self._subscribe_inputs()
+        self._points_pub = self.create_publisher(PointCloud2, "points", stream_qos())
+        self._line_pub = self.create_publisher(PointCloud2, "line_points", stream_qos())
+        self._fit_pub = self.create_publisher(SurfaceFit, "surface_fit", stream_qos())
+        consumers = int(self.get_parameter("wait_for_consumers").value)
+        fit_consumers = int(self.get_parameter("wait_for_fit_consumers").value) or consumers
+        # No input is taken before every output has its consumers (e.g. the recorder).
+        start_when_consumed(self, [(self._points_pub, consumers), (self._line_pub, consumers),
+                                   (self._fit_pub, fit_consumers)], self._subscribe_inputs)
         self.get_logger().info(f"rig {self.get_parameter('rig').value}: "
                                f"{len(self._rig.diodes)} diodes")
 
-    def _subscribe_when_consumed(self) -> None:
-        clouds = (self._points_pub, self._line_pub)
-        if all(p.get_subscription_count() >= self._consumers for p in clouds) \
-                and self._fit_pub.get_subscription_count() >= self._fit_consumers:
-            self._wait_timer.cancel()
-            self._subscribe_inputs()
-
     def _subscribe_inputs(self) -> None:
-        self.create_subscription(LaserSpotArray, "spots", self._on_spots, self._qos)
-        self.create_subscription(LaserLineProfile, "line", self._on_line, self._qos)
+        self.create_subscription(LaserSpotArray, "spots", self._on_spots, stream_qos())
+        self.create_subscription(LaserLineProfile, "line", self._on_line, stream_qos())
 
     def _on_spots(self, msg: LaserSpotArray) -> None:
         spots = [s for s in msg.spots if not s.flags & LaserSpot.FLAG_LOST]

@@ -7,9 +7,9 @@ from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
 from rclpy.node import Node
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from sds_msgs.msg import SloshingEstimate, SurfaceFit
+from sds_recon.qos import start_when_consumed, stream_qos
 from sds_recon.sloshing.modal import ModalSeries
 from sds_recon.sloshing.recording import stamp_s
 from sds_recon.sloshing.running import RunningAnalysis
@@ -41,26 +41,14 @@ class SloshingNode(Node):
         self._lock = threading.Lock()   # fits arrive while an estimate ends in the worker
         self._latest_header = None
         self._closing = False
-        estimates_qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE,
-                                    history=HistoryPolicy.KEEP_LAST)
-        self._estimate_pub = self.create_publisher(SloshingEstimate, "sloshing", estimates_qos)
-        self._consumers = int(values["wait_for_consumers"])
-        if self._consumers > 0:
-            # No fit is taken before the estimates have their consumers (e.g. the recorder).
-            self._wait_timer = self.create_timer(0.05, self._subscribe_when_consumed)
-        else:
-            self._subscribe()
-
-    def _subscribe_when_consumed(self) -> None:
-        if self._estimate_pub.get_subscription_count() >= self._consumers:
-            self._wait_timer.cancel()
-            self._subscribe()
+        self._estimate_pub = self.create_publisher(SloshingEstimate, "sloshing", stream_qos())
+        # No fit is taken before the estimates have their consumers (e.g. the recorder).
+        start_when_consumed(self, [(self._estimate_pub, int(values["wait_for_consumers"]))],
+                            self._subscribe)
 
     def _subscribe(self) -> None:
         self.create_subscription(SurfaceFit, "surface_fit", self._on_fit,
-                                 QoSProfile(depth=FIT_QUEUE_DEPTH,
-                                            reliability=ReliabilityPolicy.RELIABLE,
-                                            history=HistoryPolicy.KEEP_LAST))
+                                 stream_qos(FIT_QUEUE_DEPTH))
 
     def _on_fit(self, fit: SurfaceFit) -> None:
         if not fit.mode_names:

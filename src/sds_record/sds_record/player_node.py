@@ -8,9 +8,10 @@ from pathlib import Path
 
 from rclpy.duration import Duration
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
 from rosgraph_msgs.msg import Clock
+from sds_recon.qos import stream_qos
 from std_msgs.msg import Header
 
 from sds_record.mcap_files import header_stamp_ns, read_messages, recorded_topics
@@ -18,6 +19,11 @@ from sds_record.recorder_node import message_class
 
 EXIT_INPUT_ERROR = 2
 PACINGS = ("recorded", "flood")
+DEPTH = 100
+"""Messages kept per played topic, for readers that lag (3.3 s at 30 fps)."""
+IMAGE_TYPE = "sensor_msgs/msg/Image"
+IMAGE_DEPTH = 10
+"""Frames kept: a kept 4K BGR frame is 25 MB."""
 
 
 def parse_remaps(items: list[str]) -> dict[str, str]:
@@ -83,18 +89,17 @@ class PlayerNode(Node):
         self.finished.set()
 
     def _create_publishers(self) -> None:
-        """One publisher per played topic before anything is sent, latched ones transient-local,
-        so that subscribers (a recorder's discovery) can find them all first."""
+        """One publisher per played topic before anything is sent (so that subscribers, a
+        recorder's discovery, can find them all first). Every one is transient-local: it feeds
+        the chain's transient-local readers (`sds_recon.qos`) and volatile ones alike, also
+        from recordings made when a topic was volatile."""
         selected = {t for t in self._p["topics"] if t}
-        for topic, (type_name, latched) in recorded_topics(self._p["input"]).items():
+        for topic, (type_name, _latched) in recorded_topics(self._p["input"]).items():
             if selected and topic not in selected:
                 continue
-            durability = DurabilityPolicy.TRANSIENT_LOCAL if latched \
-                else DurabilityPolicy.VOLATILE
-            qos = QoSProfile(depth=100, history=HistoryPolicy.KEEP_LAST,
-                             reliability=ReliabilityPolicy.RELIABLE, durability=durability)
+            depth = IMAGE_DEPTH if type_name == IMAGE_TYPE else DEPTH
             self._outputs[topic] = self.create_publisher(
-                message_class(type_name), self._remaps.get(topic, topic), qos)
+                message_class(type_name), self._remaps.get(topic, topic), stream_qos(depth))
 
     def _wait_for_subscribers(self) -> bool:
         """Wait until every played topic has `wait_for_subscribers` subscribers."""

@@ -6,8 +6,9 @@ import threading
 from collections import deque
 
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sds_camera.image_msg import msg_to_image
+from sds_recon.qos import start_when_consumed, stream_qos
 from sds_recon.rig import load_rig
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
@@ -20,6 +21,8 @@ EXIT_CONFIG_ERROR = 2
 IDLE_FLUSH_S = 1.0
 """With no frame for this long, the spots still held by the Hampel window are published."""
 CHANNEL_INDEX = {"red": None, "bgr": 2}
+IMAGE_QUEUE_DEPTH = 10
+"""Frames queued for the tracker while it works on one."""
 WAITING_FRAMES = 30
 """Frames kept while the camera_model (region offset) has not arrived yet."""
 
@@ -44,21 +47,12 @@ class TrackerNode(Node):
             self.finished.set()
             return
         self._ack = bool(self._value("ack"))
-        reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
-                              history=HistoryPolicy.KEEP_LAST)
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self._spots_pub = self.create_publisher(LaserSpotArray, "spots", reliable)
-        self._line_pub = self.create_publisher(LaserLineProfile, "line", reliable)
-        self._ack_pub = self.create_publisher(Header, "frame_ack", reliable)
-        self._inputs = (latched, reliable)
-        self._consumers = int(self._value("wait_for_consumers"))
-        if self._consumers > 0:
-            # No frame is taken before the spots have their consumers: none is lost to them.
-            self.get_logger().info(f"waiting for {self._consumers} subscriber(s) on spots")
-            self._wait_timer = self.create_timer(0.05, self._subscribe_when_consumed)
-        else:
-            self._subscribe_inputs()
+        self._spots_pub = self.create_publisher(LaserSpotArray, "spots", stream_qos())
+        self._line_pub = self.create_publisher(LaserLineProfile, "line", stream_qos())
+        self._ack_pub = self.create_publisher(
+            Header, "frame_ack", QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
         self._offset: tuple[int, int] | None = None
         self._waiting: deque[Image] = deque(maxlen=WAITING_FRAMES)
         self._headers: deque[tuple[int, Header]] = deque(maxlen=64)
@@ -67,16 +61,13 @@ class TrackerNode(Node):
         self._flushed = True
         self._lost_streak: dict[int, int] = {}
         self.create_timer(0.25, self._flush_if_idle)
+        # No frame is taken before the spots have their consumers: none is lost to them.
+        start_when_consumed(self, [(self._spots_pub, int(self._value("wait_for_consumers")))],
+                            lambda: self._subscribe_inputs(latched))
 
-    def _subscribe_when_consumed(self) -> None:
-        if self._spots_pub.get_subscription_count() >= self._consumers:
-            self._wait_timer.cancel()
-            self._subscribe_inputs()
-
-    def _subscribe_inputs(self) -> None:
-        latched, reliable = self._inputs
+    def _subscribe_inputs(self, latched: QoSProfile) -> None:
         self.create_subscription(CameraModel, "camera_model", self._on_model, latched)
-        self.create_subscription(Image, "image", self._on_image, reliable)
+        self.create_subscription(Image, "image", self._on_image, stream_qos(IMAGE_QUEUE_DEPTH))
 
     def _value(self, name: str):
         return self.get_parameter(name).value

@@ -1,0 +1,46 @@
+"""QoS of the measuring chain's data topics, and the start-up wait for their consumers."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+from rclpy.node import Node
+from rclpy.publisher import Publisher
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+STREAM_DEPTH = 50
+"""Messages a stream's writer keeps (1.7 s at 30 fps): for readers that lag, and late ones."""
+
+
+def stream_qos(depth: int = STREAM_DEPTH) -> QoSProfile:
+    """Reliable, keep-last `depth`, transient-local: frames, spots, line, points, fits and
+    estimates, for writers and readers alike.
+
+    A writer counts a new reader a moment before that reader has matched the writer, and a
+    volatile Fast DDS reader never gets what was written in between (eProsima/Fast-DDS#2641):
+    the first frames of a drop slipped past the recorder. A transient-local reader asks for
+    the writer's kept messages when it matches, so none of the first `depth` is lost. A
+    volatile writer cannot feed these readers (incompatible durability, logged by rclpy).
+    """
+    return QoSProfile(depth=depth, history=HistoryPolicy.KEEP_LAST,
+                      reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+def start_when_consumed(node: Node, outputs: Sequence[tuple[Publisher, int]],
+                        start: Callable[[], None], period_s: float = 0.05) -> None:
+    """Call `start` (e.g. subscribe to the node's inputs) once every output publisher has at
+    least its count of subscriptions (e.g. the recorder): at once if no count is positive."""
+    wanted = [(publisher, count) for publisher, count in outputs if count > 0]
+    if not wanted:
+        start()
+        return
+    node.get_logger().info("waiting for " + ", ".join(
+        f"{count} subscriber(s) on {publisher.topic_name}" for publisher, count in wanted))
+
+    def check() -> None:
+        if all(publisher.get_subscription_count() >= count for publisher, count in wanted):
+            timer.cancel()
+            start()
+
+    timer = node.create_timer(period_s, check)

@@ -1,0 +1,52 @@
+"""The chain's stream QoS and start-up wait, on a real rclpy node over Fast DDS."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+from ros_helpers import RELIABLE, Probe, wait_until
+from sds_recon.qos import start_when_consumed, stream_qos
+from std_msgs.msg import Header
+
+pytestmark = pytest.mark.ros
+
+
+def test_a_stream_reader_that_joins_late_gets_the_first_messages():
+    """What a writer sent before a reader matched reaches that reader (the recorder's case)."""
+    probe = Probe("qos_probe")
+    try:
+        publisher = probe.node.create_publisher(Header, "/qos_test/late", stream_qos(10))
+        for index in range(12):
+            publisher.publish(Header(frame_id=str(index)))
+        late = probe.collect(Header, "/qos_test/late", stream_qos(10))
+        volatile = probe.collect(Header, "/qos_test/late", RELIABLE)
+        assert wait_until(lambda: len(late) == 10, timeout=10)
+        time.sleep(0.2)
+    finally:
+        probe.close()
+    assert [m.frame_id for m in late] == [str(i) for i in range(2, 12)]   # the last `depth`
+    assert volatile == []   # a volatile reader gets none of them: what the stream QoS avoids
+
+
+def test_inputs_start_once_every_output_has_its_consumers():
+    probe = Probe("qos_probe")
+    started: list[float] = []
+    try:
+        points = probe.node.create_publisher(Header, "/qos_test/points", stream_qos())
+        fits = probe.node.create_publisher(Header, "/qos_test/fits", stream_qos())
+        start_when_consumed(probe.node, [(points, 1), (fits, 2)],
+                            lambda: started.append(time.monotonic()))
+        probe.collect(Header, "/qos_test/points", stream_qos())
+        probe.collect(Header, "/qos_test/fits", stream_qos())
+        time.sleep(0.5)
+        assert started == []   # the fits have one consumer of two
+        probe.collect(Header, "/qos_test/fits", stream_qos())
+        assert wait_until(lambda: started, timeout=10)
+        time.sleep(0.3)
+        assert len(started) == 1   # once
+        nothing_wanted: list[int] = []
+        start_when_consumed(probe.node, [(points, 0)], lambda: nothing_wanted.append(1))
+        assert nothing_wanted == [1]   # at once
+    finally:
+        probe.close()
