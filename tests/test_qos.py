@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 import time
+import xml.etree.ElementTree as ElementTree
 
 import pytest
 from ros_helpers import RELIABLE, Probe, wait_until
+from sds_bringup.ros_env import graph_environment
 from sds_recon.qos import start_when_consumed, stream_qos
 from std_msgs.msg import Header
 
@@ -50,3 +54,16 @@ def test_inputs_start_once_every_output_has_its_consumers():
         assert nothing_wanted == [1]   # at once
     finally:
         probe.close()
+
+
+def test_graph_processes_load_the_fast_dds_profile_with_a_quick_heartbeat():
+    """The graph environment names a valid profiles file; rclpy loads it without an error."""
+    environment = graph_environment(7)
+    profiles = environment["FASTDDS_DEFAULT_PROFILES_FILE"]
+    period = ElementTree.parse(profiles).find(".//{*}data_writer/{*}times/{*}heartbeat_period")
+    assert (int(period.find("{*}sec").text), int(period.find("{*}nanosec").text)) == (0, 10**8)
+    script = ("import rclpy; from rclpy.node import Node; from std_msgs.msg import Header; "
+              "rclpy.init(); Node('profile_check').create_publisher(Header, 'x', 10)")
+    done = subprocess.run([sys.executable, "-c", script], env=environment, capture_output=True,
+                          text=True, timeout=60)
+    assert done.returncode == 0 and "XMLPARSER" not in done.stdout + done.stderr, done.stderr

@@ -144,7 +144,7 @@ def test_recording_reads_back_and_replays_identically(drop_run: DropRun) -> None
             if topic in ("/camera/image", "/camera/camera_model", "/tracker/spots",
                          "/recon/points", "/recon/surface_fit")} == {
         "/camera/image": 30, "/camera/camera_model": 1, "/tracker/spots": 30,
-        "/recon/points": 30, "/recon/surface_fit": 30}
+        "/recon/points": 30, "/recon/surface_fit": 30}, drop_run.log
     decoded = [m.ros_msg.frame_index for m in read_ros2_messages(recording)
                if m.channel.topic == "/tracker/spots"]
     assert decoded == list(range(30))

@@ -11,7 +11,6 @@ import numpy as np
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
-from sds_recon.qos import stream_qos
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 
@@ -31,7 +30,8 @@ class FrameMonitorNode(Node):
         self._ack = self.get_parameter("ack").value
         self._ack_pub = self.create_publisher(
             Header, "frame_ack", QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
-        self.create_subscription(Image, "image", self._on_image, stream_qos(10))
+        self.create_subscription(Image, "image", self._on_image,
+                                 QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
         self._summary_path = self.get_parameter("summary_path").value
         self._stamps_ns: list[int] = []
         self._latencies_ms: list[float] = []

@@ -14,7 +14,6 @@ from rclpy.subscription import RCLError
 from rclpy.time import Time
 from sds_recon.camera import CameraModel as CameraModelBase
 from sds_recon.camera import load_camera
-from sds_recon.qos import stream_qos
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 
@@ -69,9 +68,8 @@ class FrameSourceNode(Node):
             reliability=ReliabilityPolicy.RELIABLE,
             durability=DurabilityPolicy.TRANSIENT_LOCAL,
         )
-        # Kept frames (transient-local) cost memory: 5 BGR 4K frames are 124 MB, 5 red-channel
-        # container regions a few MB.
-        self._image_pub = self.create_publisher(Image, "image", stream_qos(depth))
+        reliable = QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE)
+        self._image_pub = self.create_publisher(Image, "image", reliable)
         self._model_pub = self.create_publisher(CameraModel, "camera_model", latched)
         # Kept for late subscribers (the bridge, a recorder): the blink comes at the start.
         self._sync_pub = self.create_publisher(SyncEvent, "sync", QoSProfile(
@@ -81,8 +79,7 @@ class FrameSourceNode(Node):
         self._led = LedDetector(tuple(led_roi)) if len(led_roi) == 4 and led_roi[2] > 0 else None
         self._led_switches: dict[int, bool] = {}
         self._ack_topic = self.create_subscription(
-            Header, "frame_ack", self._on_ack,
-            QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE)).topic_name
+            Header, "frame_ack", self._on_ack, reliable).topic_name
         self._publish_camera_model(p)
         self._decode_thread = threading.Thread(target=self._read_frames, name="decode", daemon=True)
         self._publish_thread = threading.Thread(
@@ -214,6 +211,11 @@ class FrameSourceNode(Node):
                 self.get_logger().info(f"waiting for {wanted} subscriber(s) on {topic}")
                 last_log = time.monotonic()
             time.sleep(0.02)
+        # The model first: a recorder that logged it after the first frames would replay the
+        # frames first, and a flooding replay would wait forever for a tracker without it.
+        if not self._model_pub.wait_for_all_acked(Duration(seconds=5)):
+            self.get_logger().warning("camera_model not acknowledged by every subscriber in "
+                                      "5 s; publishing frames anyway")
         return not self._stop.is_set()
 
     def _on_ack(self, msg: Header) -> None:

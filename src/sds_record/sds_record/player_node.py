@@ -22,8 +22,6 @@ PACINGS = ("recorded", "flood")
 DEPTH = 100
 """Messages kept per played topic, for readers that lag (3.3 s at 30 fps)."""
 IMAGE_TYPE = "sensor_msgs/msg/Image"
-IMAGE_DEPTH = 10
-"""Frames kept: a kept 4K BGR frame is 25 MB."""
 
 
 def parse_remaps(items: list[str]) -> dict[str, str]:
@@ -90,16 +88,19 @@ class PlayerNode(Node):
 
     def _create_publishers(self) -> None:
         """One publisher per played topic before anything is sent (so that subscribers, a
-        recorder's discovery, can find them all first). Every one is transient-local: it feeds
-        the chain's transient-local readers (`sds_recon.qos`) and volatile ones alike, also
-        from recordings made when a topic was volatile."""
+        recorder's discovery, can find them all first). Frames are volatile, as the frame
+        source's; every other topic is transient-local: it feeds the chain's transient-local
+        readers (`sds_recon.qos`) and volatile ones alike, also from recordings made when the
+        topic was volatile."""
         selected = {t for t in self._p["topics"] if t}
         for topic, (type_name, _latched) in recorded_topics(self._p["input"]).items():
             if selected and topic not in selected:
                 continue
-            depth = IMAGE_DEPTH if type_name == IMAGE_TYPE else DEPTH
+            qos = stream_qos(DEPTH)
+            if type_name == IMAGE_TYPE:
+                qos = QoSProfile(depth=DEPTH, reliability=ReliabilityPolicy.RELIABLE)
             self._outputs[topic] = self.create_publisher(
-                message_class(type_name), self._remaps.get(topic, topic), stream_qos(depth))
+                message_class(type_name), self._remaps.get(topic, topic), qos)
 
     def _wait_for_subscribers(self) -> bool:
         """Wait until every played topic has `wait_for_subscribers` subscribers."""
@@ -124,7 +125,11 @@ class PlayerNode(Node):
             while not self._acks.wait_for(
                     lambda: len(self._pending) < self._p["max_in_flight"] or self._stop.is_set(),
                     timeout=5.0):
-                self.get_logger().warning(f"{len(self._pending)} message(s) still await acks")
+                oldest = min(self._pending)
+                self.get_logger().warning(
+                    f"{len(self._pending)} message(s) still await acks; the oldest (stamp "
+                    f"{oldest} ns) awaits {self._pending[oldest]} of "
+                    f"{self._p['ack_consumers']} consumer(s)")
 
     def _play(self) -> None:
         """Publish thread: every selected message between the start and stop offsets."""

@@ -80,6 +80,8 @@ class RecorderNode(Node):
                 continue
             type_name = types[0]
             qos = self._qos_for(topic)
+            if qos is None:
+                continue   # a subscriber's topic with no publisher yet: its QoS is unknown
             try:
                 self._recorder.add_topic(topic, type_name,
                                          qos.durability == DurabilityPolicy.TRANSIENT_LOCAL)
@@ -92,10 +94,13 @@ class RecorderNode(Node):
                 msg_type, topic, self._writer_for(topic), qos, raw=True)
             self.get_logger().info(f"recording {topic} ({type_name})")
 
-    def _qos_for(self, topic: str) -> QoSProfile:
-        """Reliable, keep-last `queue_depth`; transient-local when every publisher latches."""
+    def _qos_for(self, topic: str) -> QoSProfile | None:
+        """Reliable, keep-last `queue_depth`; transient-local when every publisher is (a
+        latched topic, a stream of `sds_recon.qos`); None while the topic has no publisher."""
         publishers = self.get_publishers_info_by_topic(topic)
-        latched = bool(publishers) and all(
+        if not publishers:
+            return None
+        latched = all(
             p.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in publishers)
         best_effort = any(p.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT
                           for p in publishers)

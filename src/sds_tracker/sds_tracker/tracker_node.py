@@ -21,8 +21,6 @@ EXIT_CONFIG_ERROR = 2
 IDLE_FLUSH_S = 1.0
 """With no frame for this long, the spots still held by the Hampel window are published."""
 CHANNEL_INDEX = {"red": None, "bgr": 2}
-IMAGE_QUEUE_DEPTH = 10
-"""Frames queued for the tracker while it works on one."""
 WAITING_FRAMES = 30
 """Frames kept while the camera_model (region offset) has not arrived yet."""
 
@@ -67,7 +65,8 @@ class TrackerNode(Node):
 
     def _subscribe_inputs(self, latched: QoSProfile) -> None:
         self.create_subscription(CameraModel, "camera_model", self._on_model, latched)
-        self.create_subscription(Image, "image", self._on_image, stream_qos(IMAGE_QUEUE_DEPTH))
+        self.create_subscription(Image, "image", self._on_image,
+                                 QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
 
     def _value(self, name: str):
         return self.get_parameter(name).value
