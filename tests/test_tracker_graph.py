@@ -20,7 +20,7 @@ from rrd_helpers import rrd_entities
 from sds_recon.qos import stream_qos
 from sds_recon.results import load_results
 from sds_recon.rig import load_rig
-from sds_record.mcap_files import read_messages
+from sds_record.mcap_files import McapRecorder, read_messages
 from sds_sim.scenario import load_scenario
 from sds_sim.simulate import SimulationOutput, simulate
 from sensor_msgs.msg import Image, PointCloud2
@@ -175,6 +175,35 @@ def test_recording_reads_back_and_replays_identically(drop_run: DropRun) -> None
     for entity in ("/camera/image", "/camera/image/spots", "/camera/image/line",
                    "/world/points", "/world/line_points", "/world/fitted_plane"):
         assert entity in entities, sorted(entities)
+
+
+def test_a_replay_whose_camera_model_comes_after_the_first_frames_finishes(
+        drop_run: DropRun) -> None:
+    """A recorder may log the latched camera model after the first frames: the flooding
+    replay of such a file ends with every frame tracked (it used to wait forever)."""
+    messages = list(read_messages(drop_run.recording, ["/camera/image", "/camera/camera_model"]))
+    (model,) = [m for m in messages if m.topic == "/camera/camera_model"]
+    frames = [m for m in messages if m.topic == "/camera/image"]
+    late = drop_run.folder / "late_model.mcap"
+    recorder = McapRecorder(late)
+    recorder.add_topic("/camera/image", "sensor_msgs/msg/Image")
+    recorder.add_topic("/camera/camera_model", "sds_msgs/msg/CameraModel", latched=True)
+    for index, frame in enumerate(frames):
+        recorder.write(frame.topic, frame.data, frame.log_time_ns, frame.publish_time_ns)
+        if index == 11:
+            recorder.write(model.topic, model.data, frame.log_time_ns + 1, model.publish_time_ns)
+    recorder.close()
+    replayed = drop_run.folder / "late_model_replay.mcap"
+    graph = SdsGraphRun("replay.yaml", "--set", f"player.input={late}",
+                        "--set", f"tracker.rig={drop_run.rig_file}",
+                        "--set", f"recon.rig={drop_run.rig_file}",
+                        "--set", f"recorder.output={replayed}")
+    try:
+        assert graph.wait(timeout=180) == 0, graph.output()
+    finally:
+        graph.stop()
+    spots = topic_data(drop_run.recording)["/tracker/spots"]
+    assert topic_data(replayed)["/tracker/spots"] == spots
 
 
 def sds(*args: str) -> subprocess.CompletedProcess:

@@ -211,8 +211,8 @@ class FrameSourceNode(Node):
                 self.get_logger().info(f"waiting for {wanted} subscriber(s) on {topic}")
                 last_log = time.monotonic()
             time.sleep(0.02)
-        # The model first: a recorder that logged it after the first frames would replay the
-        # frames first, and a flooding replay would wait forever for a tracker without it.
+        # The model first, where its readers have matched (not a guarantee: a reader that
+        # matches later gets it after the first frames; the tracker keeps those frames).
         if not self._model_pub.wait_for_all_acked(Duration(seconds=5)):
             self.get_logger().warning("camera_model not acknowledged by every subscriber in "
                                       "5 s; publishing frames anyway")

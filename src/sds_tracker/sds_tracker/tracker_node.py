@@ -89,21 +89,24 @@ class TrackerNode(Node):
         if msg.channel not in CHANNEL_INDEX:
             self.get_logger().error(f"frames carry channel {msg.channel!r}; the tracker needs "
                                     "'red' (mono8) or 'bgr'")
-        while self._waiting:   # frames that arrived before the model, in order
-            self._track(self._waiting.popleft())
+        while self._waiting:   # frames that arrived before the model, in order (acked)
+            self._track(self._waiting.popleft(), acknowledge=False)
 
     def _on_image(self, msg: Image) -> None:
         if self._offset is None:
-            # The latched camera_model can arrive just after the first frames: keep them.
+            # The latched camera_model can arrive after the first frames (a replay plays it
+            # where the recorder logged it): keep them, and acknowledge them now, or a
+            # flooding source would wait for these acks before it sends the model.
             if len(self._waiting) == self._waiting.maxlen:
                 self.get_logger().warning("no camera_model: region offset unknown, oldest "
                                           "waiting frame dropped", throttle_duration_sec=5.0)
-                self._acknowledge(self._waiting.popleft())
+                self._waiting.popleft()
             self._waiting.append(msg)
+            self._acknowledge(msg)
             return
         self._track(msg)
 
-    def _track(self, msg: Image) -> None:
+    def _track(self, msg: Image, acknowledge: bool = True) -> None:
         image = msg_to_image(msg)
         red = image[..., 2] if image.ndim == 3 else image
         frame = self._frame
@@ -117,7 +120,8 @@ class TrackerNode(Node):
             peak_intensity=line.peak.astype(float).tolist(), flags=line.flags.tolist()))
         self._last_frame_time = self.get_clock().now()
         self._flushed = False
-        self._acknowledge(msg)
+        if acknowledge:
+            self._acknowledge(msg)
 
     def _acknowledge(self, msg: Image) -> None:
         if self._ack:
