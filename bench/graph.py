@@ -42,8 +42,8 @@ LAYOUTS = {
     "capture + analysis": {"camera": "capture", "tracker": "analysis", "recon": "analysis",
                            "recorder": "capture"},
 }
-"""Process of each node: every node in its own; camera → tracker → reconstruction in one, the
-recorder apart (config/graphs/drop.yaml); all in one; camera and recorder in one, tracker and
+"""Process of each node: every node in its own (config/graphs/drop.yaml); camera → tracker →
+reconstruction in one, the recorder apart; all in one; camera and recorder in one, tracker and
 reconstruction in another. The niced sloshing node keeps its own process in each."""
 
 
