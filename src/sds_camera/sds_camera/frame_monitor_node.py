@@ -27,11 +27,10 @@ class FrameMonitorNode(Node):
         self.declare_parameter("ack", True)
         self.declare_parameter("summary_path", "")
         self.declare_parameter("report_period_s", 2.0)
+        reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         self._ack = self.get_parameter("ack").value
-        self._ack_pub = self.create_publisher(
-            Header, "frame_ack", QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
-        self.create_subscription(Image, "image", self._on_image,
-                                 QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        self._ack_pub = self.create_publisher(Header, "frame_ack", reliable)
+        self.create_subscription(Image, "image", self._on_image, reliable)
         self._summary_path = self.get_parameter("summary_path").value
         self._stamps_ns: list[int] = []
         self._latencies_ms: list[float] = []

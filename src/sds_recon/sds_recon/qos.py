@@ -14,12 +14,12 @@ niced process on a busy machine matched 2.4 s late; a line profile is 45 kB, 13 
 
 
 def stream_qos(depth: int = STREAM_DEPTH) -> QoSProfile:
-    """Reliable, keep-last `depth`, transient-local: frames, spots, line, points, fits and
-    estimates, for writers and readers alike.
+    """Reliable, keep-last `depth`, transient-local: spots, line, points, fits and estimates
+    (not frames: README "The graph"), for writers and readers alike.
 
     A writer counts a new reader a moment before that reader has matched the writer, and a
     volatile Fast DDS reader never gets what was written in between (eProsima/Fast-DDS#2641):
-    the first frames of a drop slipped past the recorder. A transient-local reader asks for
+    the first results of a drop slipped past the recorder. A transient-local reader asks for
     the writer's kept messages when it matches, so none of the first `depth` is lost. A
     volatile writer cannot feed these readers (incompatible durability, logged by rclpy).
     """

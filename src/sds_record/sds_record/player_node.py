@@ -96,9 +96,8 @@ class PlayerNode(Node):
         for topic, (type_name, _latched) in recorded_topics(self._p["input"]).items():
             if selected and topic not in selected:
                 continue
-            qos = stream_qos(DEPTH)
-            if type_name == IMAGE_TYPE:
-                qos = QoSProfile(depth=DEPTH, reliability=ReliabilityPolicy.RELIABLE)
+            qos = QoSProfile(depth=DEPTH, reliability=ReliabilityPolicy.RELIABLE) \
+                if type_name == IMAGE_TYPE else stream_qos(DEPTH)
             self._outputs[topic] = self.create_publisher(
                 message_class(type_name), self._remaps.get(topic, topic), qos)
 

@@ -45,12 +45,12 @@ class TrackerNode(Node):
             self.finished.set()
             return
         self._ack = bool(self._value("ack"))
+        reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self._spots_pub = self.create_publisher(LaserSpotArray, "spots", stream_qos())
         self._line_pub = self.create_publisher(LaserLineProfile, "line", stream_qos())
-        self._ack_pub = self.create_publisher(
-            Header, "frame_ack", QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        self._ack_pub = self.create_publisher(Header, "frame_ack", reliable)
         self._offset: tuple[int, int] | None = None
         self._waiting: deque[Image] = deque(maxlen=WAITING_FRAMES)
         self._headers: deque[tuple[int, Header]] = deque(maxlen=64)
@@ -61,12 +61,11 @@ class TrackerNode(Node):
         self.create_timer(0.25, self._flush_if_idle)
         # No frame is taken before the spots have their consumers: none is lost to them.
         start_when_consumed(self, [(self._spots_pub, int(self._value("wait_for_consumers")))],
-                            lambda: self._subscribe_inputs(latched))
+                            lambda: self._subscribe_inputs(latched, reliable))
 
-    def _subscribe_inputs(self, latched: QoSProfile) -> None:
+    def _subscribe_inputs(self, latched: QoSProfile, reliable: QoSProfile) -> None:
         self.create_subscription(CameraModel, "camera_model", self._on_model, latched)
-        self.create_subscription(Image, "image", self._on_image,
-                                 QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        self.create_subscription(Image, "image", self._on_image, reliable)
 
     def _value(self, name: str):
         return self.get_parameter(name).value
