@@ -84,7 +84,8 @@ def _run_run(args: argparse.Namespace) -> int:
 
 
 def _add_calibrate(commands: argparse._SubParsersAction) -> None:
-    parser = commands.add_parser("calibrate", help="calibrate the camera (and, later, the lasers)")
+    parser = commands.add_parser("calibrate",
+                                 help="calibrate the camera, the whole rig, or the beams alone")
     targets = parser.add_subparsers(title="targets", required=True, metavar="TARGET")
     camera = targets.add_parser(
         "camera", help="intrinsic calibration from checkerboard images",
@@ -116,6 +117,62 @@ def _add_calibrate(commands: argparse._SubParsersAction) -> None:
                         help="also move each emitter onto its fitted beam")
     lasers.add_argument("--out", type=Path, required=True, help="rig file to write")
     lasers.set_defaults(run=_run_calibrate_lasers)
+    rig = targets.add_parser(
+        "rig", help="self-calibrate camera pose, beams and line plane from images of known "
+                    "surfaces",
+        description="Find every spot in each image without trusting the rig file's beams, "
+                    "identify the diodes over the whole series (a beam through its emitter), "
+                    "and fit camera pose, beams and the line laser's plane jointly; write the "
+                    "calibrated rig with uncertainties, a report and one overlay per image.")
+    rig.add_argument("--rig", type=Path, required=True, help="the rig file as designed")
+    rig.add_argument("--images", type=Path, nargs="+", required=True,
+                     help="images of known surfaces (image k is frame k of --surfaces)")
+    rig.add_argument("--surfaces", type=Path, required=True,
+                     help="CSV: frame, tilt_x_deg, tilt_y_deg[, offset_mm]")
+    rig.add_argument("--out", type=Path, required=True, help="calibrated rig file to write")
+    rig.add_argument("--cone-deg", type=float, default=3.0,
+                     help="farthest a beam may lean from the rig file's direction [deg]")
+    rig.add_argument("--camera-turn-deg", type=float, default=2.0,
+                     help="farthest the camera may be turned from the rig file [deg]")
+    rig.add_argument("--fit-emitters", action="store_true",
+                     help="also fit each emitter's position across its beam")
+    rig.add_argument("--overwrite", action="store_true", help="replace an existing --out")
+    rig.set_defaults(run=_run_calibrate_rig)
+
+
+def _run_calibrate_rig(args: argparse.Namespace) -> int:
+    from sds_camera.frame_source import FrameSourceError
+    from sds_recon.calibration.laser_files import read_surfaces
+    from sds_recon.calibration.rig_calibration import CalibrationSettings
+    from sds_recon.calibration.rig_report import report_text, rig_report
+    from sds_recon.rig import load_rig
+
+    from sds_bringup.offline import read_images
+    from sds_bringup.rig_calibration import calibrate_images, write_calibration
+
+    if args.out.exists() and not args.overwrite:
+        print(f"sds calibrate rig: {args.out} exists (--overwrite replaces it)", file=sys.stderr)
+        return 2
+    try:
+        rig = load_rig(args.rig)
+        known = read_surfaces(args.surfaces)
+        missing = [str(p) for k, p in enumerate(args.images) if k not in known]
+        if missing:
+            raise ValueError(f"{args.surfaces}: no known surface for {', '.join(missing[:3])}")
+        images = read_images(args.images)
+        settings = CalibrationSettings(cone_deg=args.cone_deg,
+                                       camera_turn_deg=args.camera_turn_deg,
+                                       fit_emitters=args.fit_emitters)
+        result, found = calibrate_images(rig, images, [known[k] for k in range(len(images))],
+                                         settings)
+    except (OSError, ValueError, FrameSourceError) as error:  # RigError is a ValueError
+        print(f"sds calibrate rig: {error}", file=sys.stderr)
+        return 2
+    write_calibration(rig, result, found, images, [str(p) for p in args.images], args.out,
+                      f"`sds calibrate rig` from {args.rig}")
+    print(report_text(rig_report(rig, result)))
+    print(f"wrote {args.out} and its report, {args.out.with_suffix('')}.report.html")
+    return 0
 
 
 def _run_calibrate_lasers(args: argparse.Namespace) -> int:

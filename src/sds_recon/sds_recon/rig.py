@@ -26,12 +26,16 @@ class RigError(ValueError):
 
 @dataclass(frozen=True)
 class LaserDiode:
-    """One laser diode: emitter position [mm, world], unit beam direction (to the liquid)."""
+    """One laser diode: emitter position [mm, world], unit beam direction (to the liquid),
+    the direction's one-sigma uncertainty [deg] once calibrated, and whether it is tracked
+    (a diode that calibration could not identify is kept in the file but not tracked)."""
 
     laser_id: int
     ring: int
     emitter_mm: np.ndarray
     direction: np.ndarray
+    direction_sigma_deg: float | None = None
+    tracked: bool = True
 
     def point_at(self, distance_mm: ArrayLike) -> np.ndarray:
         """Points on the beam `distance_mm` from the emitter (N×3, mm)."""
@@ -75,6 +79,12 @@ class Rig:
     fluid: Fluid
     gravity_m_s2: float
     camera_file: Path
+    calibration: dict[str, Any] | None = None   # what `sds calibrate rig` found (uncertainties)
+
+    @property
+    def tracked_diodes(self) -> tuple[LaserDiode, ...]:
+        """The diodes the tracker follows (calibration may leave unidentified ones out)."""
+        return tuple(d for d in self.diodes if d.tracked)
 
     @cached_property
     def camera_position_mm(self) -> np.ndarray:
@@ -190,9 +200,13 @@ def rig_from_dict(content: Any, base: Path) -> Rig:
         where = f"diodes[{index}]"
         if not isinstance(entry, dict) or "id" not in entry:
             raise RigError(f"{where} must be a mapping with an id")
+        sigma = entry.get("direction_sigma_deg")
         diodes.append(LaserDiode(int(entry["id"]), int(entry.get("ring", 0)),
                                  _vector(entry, "emitter_mm", where),
-                                 _vector(entry, "direction", where, unit=True)))
+                                 _vector(entry, "direction", where, unit=True),
+                                 None if sigma is None else _number(entry, "direction_sigma_deg",
+                                                                    where, positive=False),
+                                 bool(entry.get("tracked", True))))
     ids = [d.laser_id for d in diodes]
     if len(set(ids)) != len(ids):
         raise RigError(f"diode ids must be unique, got {ids}")
@@ -214,7 +228,15 @@ def rig_from_dict(content: Any, base: Path) -> Rig:
                     _number(fluid, "surface_tension_n_m", "fluid", positive=False)),
         gravity_m_s2=_number(content, "gravity_m_s2", "rig", positive=False),
         camera_file=camera_file,
+        calibration=_calibration(content),
     )
+
+
+def _calibration(content: dict) -> dict[str, Any] | None:
+    calibration = content.get("calibration")
+    if calibration is not None and not isinstance(calibration, dict):
+        raise RigError("calibration must be a mapping")
+    return calibration
 
 
 def load_rig(path: str | Path) -> Rig:
@@ -257,10 +279,21 @@ def rig_to_dict(rig: Rig, directory: Path) -> dict[str, Any]:
     if rig.line_laser is not None:
         content["line_laser"] = {"emitter_mm": _numbers(rig.line_laser.emitter_mm),
                                  "normal": _numbers(rig.line_laser.normal)}
-    content["diodes"] = [{"id": d.laser_id, "ring": d.ring,
-                          "emitter_mm": _numbers(d.emitter_mm),
-                          "direction": _numbers(d.direction)} for d in rig.diodes]
+    content["diodes"] = [_diode_entry(d) for d in rig.diodes]
+    if rig.calibration is not None:
+        content["calibration"] = rig.calibration
     return content
+
+
+def _diode_entry(diode: LaserDiode) -> dict[str, Any]:
+    entry: dict[str, Any] = {"id": diode.laser_id, "ring": diode.ring,
+                             "emitter_mm": _numbers(diode.emitter_mm),
+                             "direction": _numbers(diode.direction)}
+    if diode.direction_sigma_deg is not None:
+        entry["direction_sigma_deg"] = float(f"{diode.direction_sigma_deg:.3g}")
+    if not diode.tracked:
+        entry["tracked"] = False
+    return entry
 
 
 def save_rig(rig: Rig, path: str | Path, comment: str = "") -> Path:

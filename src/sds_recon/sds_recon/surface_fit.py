@@ -69,6 +69,25 @@ def fit_plane(points_mm: ArrayLike) -> PlaneFit:
                     r_squared, float(np.sqrt(sse / len(points))), sse, len(points))
 
 
+def fit_plane_rejecting(points_mm: ArrayLike, height_sigma_mm: ArrayLike,
+                        limit_sigma: float = 4.0, floor_mm: float = 0.05
+                        ) -> tuple[PlaneFit, np.ndarray]:
+    """Eq. 12's plane with outliers rejected against each point's own height σ (floored at
+    `floor_mm`): refit without the worst point while it lies beyond `limit_sigma`. Returns the
+    fit and the mask of rejected points (one wrong point cannot pull the plane)."""
+    points = np.atleast_2d(np.asarray(points_mm, dtype=float))
+    sigma = np.maximum(np.asarray(height_sigma_mm, dtype=float), floor_mm)
+    rejected = ~np.isfinite(points).all(axis=1)
+    while True:
+        fit = fit_plane(points[~rejected])
+        predicted = fit.p00_mm + fit.p10 * points[:, 0] + fit.p01 * points[:, 1]
+        normalised = np.where(rejected, 0.0, np.abs(points[:, 2] - predicted) / sigma)
+        worst = int(np.argmax(normalised))
+        if normalised[worst] <= limit_sigma or np.sum(~rejected) <= 3:
+            return fit, rejected
+        rejected[worst] = True
+
+
 def fit_modes(points_mm: ArrayLike, radius_mm: float,
               modes: tuple[tuple[int, int], ...] = DEFAULT_MODES) -> ModalFit:
     """Mean level plus J_m(ξ r/R)/J_m(ξ) · (cos mθ, sin mθ) per mode (cos alone for m = 0)."""

@@ -80,7 +80,8 @@ class FrameTracker:
         self.config = config or TrackerConfig()
         low, high = self.config.path_heights_mm
         heights = np.linspace(low, high, 15)
-        self.paths = {d.laser_id: beam_image_path(rig, d.laser_id, heights) for d in rig.diodes}
+        self.paths = {d.laser_id: beam_image_path(rig, d.laser_id, heights)
+                      for d in rig.tracked_diodes}
         self.spots = SpotTracker(self.paths, self.config.spots)
         for laser_id, position in (seeds or {}).items():
             if laser_id not in self.paths:

@@ -1,0 +1,165 @@
+"""`sds calibrate rig`: images of known surfaces → identified spots → the self-calibrated rig.
+
+Reads each image, finds every spot-like blob in the container's region (sds_tracker.discovery)
+and the line laser's centre per row, identifies and fits the rig (sds_recon.calibration.
+rig_calibration), and writes the calibrated rig file, its report (JSON, text, HTML) and one
+diagnostic overlay per image in the manner of seed Figs. 5/6.
+"""
+
+from __future__ import annotations
+
+import html
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+from sds_camera.frame_source import Region, select
+from sds_recon.calibration.lasers import KnownSurface
+from sds_recon.calibration.rig_calibration import (
+    CalibrationSettings,
+    RigCalibration,
+    calibrate_rig,
+)
+from sds_recon.calibration.rig_report import calibrated_rig, report_text, rig_report
+from sds_recon.calibration.self_calibration import LineObservations
+from sds_recon.rig import Rig, save_rig
+from sds_recon.triangulation import beam_image_path, line_image_path
+from sds_tracker.discovery import SpotCandidates, find_spots
+from sds_tracker.line import LineSettings, track_line
+
+REGION_MARGIN_MM = 8.0
+"""The search region reaches this far beyond the rim (a turned camera moves the image)."""
+LINE_BAND_4K_PX = 80
+"""Columns searched on each side of the rig file's line at 3840 px width (scaled with it)."""
+LINE_SAMPLES_PER_FRAME = 60
+"""Line rows per image that enter the joint fit (evenly spaced; more add time, not accuracy)."""
+OVERLAY_WIDTH_PX = 1200
+
+
+@dataclass(frozen=True)
+class CalibrationImages:
+    """What was found in each calibration image: blobs and line pixels."""
+
+    spots: list[SpotCandidates]
+    line: LineObservations
+    region: Region
+
+
+def observe(rig: Rig, images: list[np.ndarray]) -> CalibrationImages:
+    """Blobs and line centres in each image (BGR, full frame), inside the container region."""
+    scale_px = rig.camera.width_px / 3840
+    margin = int(np.ceil(REGION_MARGIN_MM * _px_per_mm(rig)))
+    region = Region(*rig.container_region_px(rig.camera, margin))
+    rows, expected = _flat_line(rig)
+    settings = LineSettings(band_px=max(10, round(LINE_BAND_4K_PX * scale_px)))
+    spots, line_frame, line_pixels, line_sigma = [], [], [], []
+    for index, image in enumerate(images):
+        region.check_inside(image.shape[1], image.shape[0])
+        red = select(image, region, "red")
+        spots.append(find_spots(red, (region.x, region.y)))
+        if len(rows):
+            profile = track_line(red, (region.x, region.y), expected, rows, settings)
+            keep = np.linspace(0, len(profile.x_px) - 1,
+                               min(LINE_SAMPLES_PER_FRAME, len(profile.x_px))).astype(int)
+            line_frame += [index] * len(keep)
+            line_pixels += list(zip(profile.x_px[keep], profile.y_px[keep], strict=True))
+            line_sigma += list(profile.sigma_px[keep])
+    line = LineObservations(np.array(line_frame, int), np.array(line_pixels).reshape(-1, 2),
+                            np.array(line_sigma, float))
+    return CalibrationImages(spots, line, region)
+
+
+def _px_per_mm(rig: Rig) -> float:
+    pixels = rig.project(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]))
+    return float(np.linalg.norm(pixels[1] - pixels[0]))
+
+
+def _flat_line(rig: Rig) -> tuple[np.ndarray, np.ndarray]:
+    if rig.line_laser is None:
+        return np.zeros(0, int), np.zeros(0)
+    pixels = line_image_path(rig, 0.0)
+    pixels = pixels[np.isfinite(pixels).all(axis=1)]
+    order = np.argsort(pixels[:, 1])
+    rows = np.arange(int(np.ceil(pixels[order[0], 1])), int(pixels[order[-1], 1]) + 1)
+    return rows, np.interp(rows, pixels[order, 1], pixels[order, 0])
+
+
+def calibrate_images(rig: Rig, images: list[np.ndarray], surfaces: list[KnownSurface],
+                     settings: CalibrationSettings | None = None
+                     ) -> tuple[RigCalibration, CalibrationImages]:
+    """Self-calibrate the rig from images of the known surfaces (one surface per image)."""
+    if len(images) != len(surfaces):
+        raise ValueError(f"{len(images)} images but {len(surfaces)} known surfaces")
+    found = observe(rig, images)
+    line = found.line if len(found.line.frame) else None
+    result = calibrate_rig(rig, surfaces, [s.pixels for s in found.spots],
+                           [s.sigma_px for s in found.spots], line, settings)
+    return result, found
+
+
+def write_calibration(nominal: Rig, result: RigCalibration, found: CalibrationImages,
+                      images: list[np.ndarray], names: list[str], rig_path: Path,
+                      source: str) -> Rig:
+    """Write the calibrated rig, `<rig>.report.json`/`.txt`/`.html` and overlays beside it."""
+    rig = calibrated_rig(nominal, result)
+    report = rig_report(nominal, result)
+    text = report_text(report)
+    save_rig(rig, rig_path, comment=f"Self-calibrated by {source}:\n{text}")
+    stem = rig_path.with_suffix("")
+    Path(f"{stem}.report.json").write_text(json.dumps(report, indent=2) + "\n")
+    Path(f"{stem}.report.txt").write_text(text + "\n")
+    overlays = []
+    for index, image in enumerate(images):
+        path = Path(f"{stem}.overlay_{index:02d}.png")
+        cv2.imwrite(str(path), overlay(nominal, rig, result, found, index, image))
+        overlays.append(path)
+    figures = "".join(f"<figure><img src='{p.name}' width='900'><figcaption>{html.escape(n)}"
+                      "</figcaption></figure>" for p, n in zip(overlays, names, strict=True))
+    Path(f"{stem}.report.html").write_text(
+        "<html><head><meta charset='utf-8'><title>SDS rig calibration</title></head><body>"
+        f"<h1>Rig calibration</h1><pre>{html.escape(text)}</pre>"
+        "<p>Overlays: green crosses, the rig file's spot positions; red circles, spots "
+        "identified (with ids); red lines, the calibrated beams' image paths (surface heights "
+        "−30…40 mm); yellow circles, blobs no diode claimed (wall reflections, noise).</p>"
+        f"{figures}</body></html>\n")
+    return rig
+
+
+def overlay(nominal: Rig, calibrated: Rig, result: RigCalibration, found: CalibrationImages,
+            index: int, image: np.ndarray) -> np.ndarray:
+    """One calibration image's region with what the calibration saw and decided."""
+    r = found.region
+    crop = image[r.y:r.y + r.height, r.x:r.x + r.width].copy()
+    factor = min(1.0, OVERLAY_WIDTH_PX / r.width)
+    picture = cv2.resize(crop, None, fx=factor, fy=factor, interpolation=cv2.INTER_AREA)
+
+    def point(pixel: np.ndarray) -> tuple[int, int]:
+        return round((pixel[0] - r.x) * factor), round((pixel[1] - r.y) * factor)
+
+    surface = result.fit.model.surfaces[index]
+    for diode in nominal.diodes:
+        hit = surface.intersect(diode.emitter_mm, diode.direction[None])
+        pixel = nominal.project(hit)[0]
+        if np.isfinite(pixel).all():
+            cv2.drawMarker(picture, point(pixel), (0, 255, 0), cv2.MARKER_CROSS, 14, 1)
+    heights = np.linspace(-30.0, 40.0, 15)
+    for laser_id in result.laser_ids:
+        path = beam_image_path(calibrated, laser_id, heights)
+        path = path[np.isfinite(path).all(axis=1)]
+        if len(path) > 1:
+            cv2.polylines(picture, [np.array([point(p) for p in path], np.int32)], False,
+                          (0, 0, 200), 1, cv2.LINE_AA)
+    blobs = found.spots[index].pixels
+    for k in np.flatnonzero(result.frame == index):
+        pixel = blobs[result.blob[k]]
+        cv2.circle(picture, point(pixel), 9, (0, 0, 255), 2, cv2.LINE_AA)
+        cv2.putText(picture, str(result.laser_ids[result.diode[k]]),
+                    (point(pixel)[0] + 10, point(pixel)[1] - 10), cv2.FONT_HERSHEY_SIMPLEX, 0.5,
+                    (255, 255, 255), 1, cv2.LINE_AA)
+    used = set(result.blob[result.frame == index].tolist())
+    for j, pixel in enumerate(blobs):
+        if j not in used:
+            cv2.circle(picture, point(pixel), 9, (0, 255, 255), 1, cv2.LINE_AA)
+    return picture

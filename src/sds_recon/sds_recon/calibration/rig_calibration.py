@@ -1,0 +1,130 @@
+"""Self-calibration of a whole rig from blobs on known surfaces: identify, fit, verify.
+
+1. Identify every diode's spots with the rig file's geometry, in a cone wide enough for the
+   beams' leans plus the camera's unknown turn (identification.py).
+2. Fit camera pose and beams jointly (self_calibration.py).
+3. Identify again with the fitted rig, in a narrow cone and gate (diodes the rig file's
+   camera pose hid come back), and fit again.
+4. Spots whose residual exceeds `outlier_sigma` are left out, and a diode whose spots do not
+   fit its own beam is named unidentified, never calibrated on a wrong blob.
+5. The line laser's plane is fitted (robustly) to the line's pixels on the known surfaces,
+   seen through the fitted camera.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from sds_recon.calibration.identification import (
+    Identification,
+    IdentificationSettings,
+    identify_spots,
+)
+from sds_recon.calibration.lasers import KnownSurface, calibrate_line_plane
+from sds_recon.calibration.self_calibration import (
+    LineObservations,
+    SelfCalibration,
+    self_calibrate,
+)
+from sds_recon.rig import LineLaser, Rig
+
+
+@dataclass(frozen=True)
+class CalibrationSettings:
+    """Search and acceptance settings of the rig calibration."""
+
+    cone_deg: float = 3.0                   # beams may lean this far from the rig file
+    camera_turn_deg: float = 2.0            # the camera may be turned this far from the file
+    gate_mm: float = 1.5                    # first identification's verification gate
+    refined_gate_mm: float = 0.4            # after the first fit
+    outlier_sigma: float = 6.0              # a spot this many σ off its prediction is dropped
+    diode_rms_sigma: float = 4.0            # a diode whose spots fit this badly is dropped
+    fit_emitters: bool = False
+    fit_camera: bool = True
+
+
+@dataclass(frozen=True)
+class RigCalibration:
+    """The outcome: the joint fit, the final identification and every dropped spot."""
+
+    fit: SelfCalibration
+    identification: Identification
+    laser_ids: list[int]
+    diode: np.ndarray           # per used spot: index into laser_ids
+    frame: np.ndarray           # per used spot: frame
+    blob: np.ndarray            # per used spot: blob index in its frame
+    outliers: list[tuple[int, int, float]]   # (laser id, frame, residual in σ)
+    unidentified: dict[int, str]
+
+
+def _observations(identification: Identification, blobs: list[np.ndarray],
+                  sigmas: list[np.ndarray]):
+    ids = sorted(identification.assigned)
+    diode, frame, blob, pixels, sigma = [], [], [], [], []
+    for index, laser_id in enumerate(ids):
+        for f, b in sorted(identification.assigned[laser_id].items()):
+            diode.append(index)
+            frame.append(f)
+            blob.append(b)
+            pixels.append(blobs[f][b])
+            sigma.append(sigmas[f][b])
+    return (ids, np.array(diode, int), np.array(frame, int), np.array(blob, int),
+            np.array(pixels).reshape(-1, 2), np.array(sigma, float))
+
+
+def calibrate_rig(rig: Rig, surfaces: list[KnownSurface], blobs: list[np.ndarray],
+                  blob_sigma_px: list[np.ndarray], line: LineObservations | None = None,
+                  settings: CalibrationSettings | None = None) -> RigCalibration:
+    """Identify the spots and fit the rig (camera pose, beams, line plane) to them."""
+    s = settings or CalibrationSettings()
+    wide = IdentificationSettings(cone_deg=s.cone_deg + s.camera_turn_deg, gate_mm=s.gate_mm)
+    identification = identify_spots(rig, surfaces, blobs, wide)
+    if not identification.assigned:
+        raise ValueError("no diode could be identified on these surfaces: "
+                         + "; ".join(f"{i}: {why}" for i, why in
+                                     sorted(identification.unidentified.items())[:3]))
+    ids, diode, frame, blob, pixels, sigma = _observations(identification, blobs, blob_sigma_px)
+    fit = self_calibrate(rig, ids, surfaces, diode, frame, pixels, sigma, None,
+                         s.fit_emitters, s.fit_camera)
+    narrow = IdentificationSettings(cone_deg=s.cone_deg, gate_mm=s.refined_gate_mm)
+    identification = identify_spots(fit.rig, surfaces, blobs, narrow)
+    ids, diode, frame, blob, pixels, sigma = _observations(identification, blobs, blob_sigma_px)
+    unidentified = dict(identification.unidentified)
+    outliers: list[tuple[int, int, float]] = []
+    while True:
+        fit = self_calibrate(rig, ids, surfaces, diode, frame, pixels, sigma, None,
+                             s.fit_emitters, s.fit_camera)
+        scale = np.sqrt(max(fit.chi2_per_dof, 1.0))
+        normalised = np.linalg.norm(fit.spot_residuals_px, axis=1) / (sigma * scale)
+        keep = normalised <= s.outlier_sigma
+        bad_diodes = [i for k, i in enumerate(ids)
+                      if np.sqrt(np.mean(normalised[diode == k] ** 2)) > s.diode_rms_sigma
+                      * np.sqrt(2)]
+        if keep.all() and not bad_diodes:
+            break
+        for k, i in enumerate(ids):
+            if i in bad_diodes:
+                unidentified[i] = ("its spots do not fit one beam (RMS "
+                                   f"{np.sqrt(np.mean(normalised[diode == k] ** 2)):.1f} σ)")
+                keep &= diode != k
+        outliers += [(ids[diode[k]], int(frame[k]), float(normalised[k]))
+                     for k in np.flatnonzero(~keep) if ids[diode[k]] not in bad_diodes]
+        remaining = sorted({ids[d] for d in diode[keep]})
+        remap = {ids.index(i): n for n, i in enumerate(remaining)}
+        diode = np.array([remap[d] for d in diode[keep]], int)
+        frame, blob, pixels, sigma = frame[keep], blob[keep], pixels[keep], sigma[keep]
+        ids = remaining
+    if line is not None and len(line.frame) >= 3 and rig.line_laser is not None:
+        fit = replace(fit, rig=_with_line_plane(fit.rig, surfaces, line))
+    return RigCalibration(fit, identification, ids, diode, frame, blob, outliers, unidentified)
+
+
+def _with_line_plane(rig: Rig, surfaces: list[KnownSurface], line: LineObservations) -> Rig:
+    """The rig with its line laser's plane fitted (robustly) to the line's pixels on the known
+    surfaces, seen through the fitted camera."""
+    plane = calibrate_line_plane(rig, line.pixels, [surfaces[f] for f in line.frame])
+    emitter = rig.line_laser.emitter_mm
+    emitter = emitter - ((emitter - plane.point_mm) @ plane.normal) * plane.normal
+    return replace(rig, line_laser=LineLaser(emitter, plane.normal))

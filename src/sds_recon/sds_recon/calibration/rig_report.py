@@ -1,0 +1,128 @@
+"""The calibrated rig file and the report of a self-calibration (what was fitted, how well)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from sds_recon.calibration.rig_calibration import RigCalibration
+from sds_recon.calibration.rig_model import CAMERA_ROTATION, CAMERA_SHIFT
+from sds_recon.rig import Rig
+
+
+def _deg(value: float) -> float:
+    return float(f"{np.degrees(value):.4g}")
+
+
+def _mm(value: float) -> float:
+    return float(f"{value:.4g}")
+
+
+def beam_sigma_deg(result: RigCalibration, laser_id: int) -> float:
+    """One-sigma uncertainty of a beam's direction [deg] (the larger of its two tilts)."""
+    fit = result.fit
+    return float(np.degrees(max(fit.sigma_of(f"beam {laser_id} tilt a"),
+                                fit.sigma_of(f"beam {laser_id} tilt b"))))
+
+
+def calibrated_rig(nominal: Rig, result: RigCalibration) -> Rig:
+    """The fitted rig with every beam's σ, unidentified diodes untracked, and the camera's and
+    plane's uncertainties in its `calibration` record."""
+    fitted = result.fit.rig
+    diodes = tuple(
+        replace(d, direction_sigma_deg=beam_sigma_deg(result, d.laser_id), tracked=True)
+        if d.laser_id in result.laser_ids else replace(nominal.diode(d.laser_id), tracked=False)
+        for d in fitted.diodes)
+    report = rig_report(nominal, result)
+    record = {key: report[key] for key in ("method", "frames", "spots", "rms_px",
+                                           "camera", "line_laser", "unidentified",
+                                           "not_determined")}
+    return replace(fitted, diodes=diodes, calibration=record)
+
+
+def rig_report(nominal: Rig, result: RigCalibration) -> dict[str, Any]:
+    """Every parameter with its σ, residuals per beam and per frame, what was not determined."""
+    fit = result.fit
+    sigma = dict(zip(fit.names, fit.sigmas, strict=True))
+    value = dict(zip(fit.names, fit.values, strict=True))
+    rotation = Rotation.from_matrix(fit.rig.world_to_camera.rotation.T)
+    camera = {
+        "position_mm": [_mm(v) for v in fit.rig.camera_position_mm],
+        "position_change_mm": [_mm(value[n]) for n in CAMERA_SHIFT],
+        "position_sigma_mm": [_mm(sigma[n]) for n in CAMERA_SHIFT],
+        "orientation_xyz_deg": [float(f"{v:.6g}") for v in rotation.as_euler("xyz",
+                                                                             degrees=True)],
+        "rotation_change_deg": [_deg(value[n]) for n in CAMERA_ROTATION],
+        "rotation_sigma_deg": [_deg(sigma[n]) for n in CAMERA_ROTATION],
+    }
+    residual = np.linalg.norm(fit.spot_residuals_px, axis=1)
+    beams = []
+    for index, laser_id in enumerate(result.laser_ids):
+        mine = result.diode == index
+        d = fit.rig.diode(laser_id)
+        before = nominal.diode(laser_id).direction
+        beams.append({
+            "id": laser_id, "spots": int(mine.sum()),
+            "direction": [float(f"{v:.8g}") for v in d.direction],
+            "direction_sigma_deg": float(f"{beam_sigma_deg(result, laser_id):.3g}"),
+            "lean_from_vertical_deg": _deg(np.arccos(np.clip(-d.direction[2], -1, 1))),
+            "change_deg": _deg(np.arccos(np.clip(d.direction @ before, -1, 1))),
+            "rms_px": float(f"{np.sqrt(np.mean(residual[mine] ** 2)):.3g}"),
+            "frames": sorted(int(f) for f in result.frame[mine])})
+    frames = [{"frame": int(f), "spots": int(np.sum(result.frame == f)),
+               "rms_px": float(f"{np.sqrt(np.mean(residual[result.frame == f] ** 2)):.3g}")}
+              for f in sorted(set(result.frame.tolist()))]
+    line: dict[str, Any] | None = None
+    if "line plane offset" in fit.names and fit.rig.line_laser is not None:
+        line = {"normal": [float(f"{v:.8g}") for v in fit.rig.line_laser.normal],
+                "tilt_sigma_deg": [_deg(sigma["line plane tilt a"]),
+                                   _deg(sigma["line plane tilt b"])],
+                "offset_sigma_mm": _mm(sigma["line plane offset"]),
+                "points": len(fit.line_residuals_mm),
+                "rms_mm": _mm(float(np.sqrt(np.mean(fit.line_residuals_mm**2))))}
+    return {
+        "method": "joint least squares: camera pose, beams, line plane (sds calibrate rig)",
+        "frames": len(result.fit.model.surfaces), "spots": len(result.diode),
+        "rms_px": float(f"{fit.rms_px:.3g}"), "chi2_per_dof": float(f"{fit.chi2_per_dof:.3g}"),
+        "condition_number": float(f"{fit.condition_number:.3g}"),
+        "camera": camera, "line_laser": line, "beams": beams, "per_frame": frames,
+        "unidentified": {str(k): v for k, v in sorted(result.unidentified.items())},
+        "outliers": [{"id": i, "frame": f, "sigma": float(f"{s:.3g}")}
+                     for i, f, s in result.outliers],
+        "not_determined": dict(fit.fixed),
+    }
+
+
+def report_text(report: dict[str, Any]) -> str:
+    """The report as a few tables for the terminal and the rig file's header."""
+    camera = report["camera"]
+    lines = [f"{report['spots']} spots on {report['frames']} known surfaces: RMS "
+             f"{report['rms_px']} px, chi2/dof {report['chi2_per_dof']}, condition number "
+             f"{report['condition_number']:.3g}",
+             "camera position [mm] " + ", ".join(
+                 f"{p:.3f} ± {s:.3f}" for p, s in zip(camera["position_mm"],
+                                                      camera["position_sigma_mm"], strict=True)),
+             "camera turned [deg] about X, Y, Z " + ", ".join(
+                 f"{c:+.3f} ± {s:.3f}" for c, s in zip(camera["rotation_change_deg"],
+                                                       camera["rotation_sigma_deg"], strict=True)),
+             f"{'beam':>4} {'spots':>5} {'lean deg':>9} {'change deg':>10} {'sigma deg':>9} "
+             f"{'rms px':>7}"]
+    for beam in report["beams"]:
+        lines.append(f"{beam['id']:>4} {beam['spots']:>5} {beam['lean_from_vertical_deg']:>9.3f} "
+                     f"{beam['change_deg']:>10.3f} {beam['direction_sigma_deg']:>9.4f} "
+                     f"{beam['rms_px']:>7.3f}")
+    if report["line_laser"]:
+        line = report["line_laser"]
+        lines.append(f"line laser plane: {line['points']} points, RMS {line['rms_mm']} mm, "
+                     f"tilt σ {max(line['tilt_sigma_deg']):.3g} deg")
+    for laser_id, why in report["unidentified"].items():
+        lines.append(f"diode {laser_id} not identified, not calibrated, not tracked: {why}")
+    for name, advice in report["not_determined"].items():
+        lines.append(f"not determined by these surfaces, kept from the rig file: {name} "
+                     f"(needs {advice})")
+    if report["outliers"]:
+        lines.append(f"{len(report['outliers'])} spots left out as outliers")
+    return "\n".join(lines)
