@@ -43,6 +43,7 @@ demo: setup
 bench: setup
 	$(BIN)/python bench/frame_path.py
 	$(BIN)/python bench/graph.py --minutes 2
+	$(BIN)/python bench/self_calibration.py
 
 clean:
 	rm -rf $(BUILD) .pytest_cache .ruff_cache demo_output
