@@ -147,8 +147,7 @@ def _run_calibrate_rig(args: argparse.Namespace) -> int:
     from sds_recon.calibration.rig_report import report_text, rig_report
     from sds_recon.rig import load_rig
 
-    from sds_bringup.offline import read_images
-    from sds_bringup.rig_calibration import calibrate_images, write_calibration
+    from sds_bringup.rig_calibration import calibrate_images, read_images, write_calibration
 
     if args.out.exists() and not args.overwrite:
         print(f"sds calibrate rig: {args.out} exists (--overwrite replaces it)", file=sys.stderr)

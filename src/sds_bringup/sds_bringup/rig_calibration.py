@@ -47,6 +47,17 @@ class CalibrationImages:
     region: Region
 
 
+def read_images(paths: list[Path]) -> list[np.ndarray]:
+    """BGR images from files; a one-line error (ValueError) for one that cannot be read."""
+    images = []
+    for path in paths:
+        image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+        if image is None:
+            raise ValueError(f"{path}: not a readable image")
+        images.append(image)
+    return images
+
+
 def observe(rig: Rig, images: list[np.ndarray]) -> CalibrationImages:
     """Blobs and line centres in each image (BGR, full frame), inside the container region."""
     scale_px = rig.camera.width_px / 3840
