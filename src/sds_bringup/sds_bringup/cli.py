@@ -122,8 +122,9 @@ def _add_calibrate(commands: argparse._SubParsersAction) -> None:
                     "surfaces",
         description="Find every spot in each image without trusting the rig file's beams, "
                     "identify the diodes over the whole series (a beam through its emitter), "
-                    "and fit camera pose, beams and the line laser's plane jointly; write the "
-                    "calibrated rig with uncertainties, a report and one overlay per image.")
+                    "fit camera pose and beams jointly, then the line laser's plane through "
+                    "the fitted camera; write the calibrated rig with uncertainties, a report "
+                    "and one overlay per image.")
     rig.add_argument("--rig", type=Path, required=True, help="the rig file as designed")
     rig.add_argument("--images", type=Path, nargs="+", required=True,
                      help="images of known surfaces (image k is frame k of --surfaces)")

@@ -19,15 +19,16 @@ from sds_camera.frame_source import Region, select
 from sds_recon.calibration.lasers import KnownSurface
 from sds_recon.calibration.rig_calibration import (
     CalibrationSettings,
+    LineObservations,
     RigCalibration,
     calibrate_rig,
 )
 from sds_recon.calibration.rig_report import calibrated_rig, report_text, rig_report
-from sds_recon.calibration.self_calibration import LineObservations
 from sds_recon.rig import Rig, save_rig
-from sds_recon.triangulation import beam_image_path, line_image_path
+from sds_recon.triangulation import beam_image_path
 from sds_tracker.discovery import SpotCandidates, find_spots
 from sds_tracker.line import LineSettings, track_line
+from sds_tracker.tracker import flat_line_px
 
 REGION_MARGIN_MM = 8.0
 """The search region reaches this far beyond the rim (a turned camera moves the image)."""
@@ -61,9 +62,9 @@ def read_images(paths: list[Path]) -> list[np.ndarray]:
 def observe(rig: Rig, images: list[np.ndarray]) -> CalibrationImages:
     """Blobs and line centres in each image (BGR, full frame), inside the container region."""
     scale_px = rig.camera.width_px / 3840
-    margin = int(np.ceil(REGION_MARGIN_MM * _px_per_mm(rig)))
+    margin = int(np.ceil(REGION_MARGIN_MM * rig.surface_px_per_mm()))
     region = Region(*rig.container_region_px(rig.camera, margin))
-    rows, expected = _flat_line(rig)
+    rows, expected = flat_line_px(rig)
     settings = LineSettings(band_px=max(10, round(LINE_BAND_4K_PX * scale_px)))
     spots, line_frame, line_pixels, line_sigma = [], [], [], []
     for index, image in enumerate(images):
@@ -80,21 +81,6 @@ def observe(rig: Rig, images: list[np.ndarray]) -> CalibrationImages:
     line = LineObservations(np.array(line_frame, int), np.array(line_pixels).reshape(-1, 2),
                             np.array(line_sigma, float))
     return CalibrationImages(spots, line, region)
-
-
-def _px_per_mm(rig: Rig) -> float:
-    pixels = rig.project(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]))
-    return float(np.linalg.norm(pixels[1] - pixels[0]))
-
-
-def _flat_line(rig: Rig) -> tuple[np.ndarray, np.ndarray]:
-    if rig.line_laser is None:
-        return np.zeros(0, int), np.zeros(0)
-    pixels = line_image_path(rig, 0.0)
-    pixels = pixels[np.isfinite(pixels).all(axis=1)]
-    order = np.argsort(pixels[:, 1])
-    rows = np.arange(int(np.ceil(pixels[order[0], 1])), int(pixels[order[-1], 1]) + 1)
-    return rows, np.interp(rows, pixels[order, 1], pixels[order, 0])
 
 
 def calibrate_images(rig: Rig, images: list[np.ndarray], surfaces: list[KnownSurface],

@@ -97,6 +97,11 @@ class Rig:
         """World points (N×3 mm) → image pixels (N×2); NaN where the camera does not see them."""
         return self.camera.project(self.world_to_camera.apply(points_mm))
 
+    def surface_px_per_mm(self) -> float:
+        """Image scale [px per mm along X] at the centre of the flat surface."""
+        pixels = self.project(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]))
+        return float(np.linalg.norm(pixels[1] - pixels[0]))
+
     def pixel_rays(self, pixels: ArrayLike) -> np.ndarray:
         """Unit rays (N×3) in the world frame from the camera centre through the pixels."""
         return self.camera.pixel_to_ray(pixels) @ self.world_to_camera.rotation

@@ -72,6 +72,17 @@ def parse_seeds(values: list[float]) -> dict[int, tuple[float, float]]:
             for i in range(0, len(values), 3)}
 
 
+def flat_line_px(rig: Rig) -> tuple[np.ndarray, np.ndarray]:
+    """Rows and columns of the line on the flat surface: where to look for it first."""
+    if rig.line_laser is None:
+        return np.zeros(0, int), np.zeros(0)
+    pixels = line_image_path(rig, 0.0)
+    pixels = pixels[np.isfinite(pixels).all(axis=1)]
+    order = np.argsort(pixels[:, 1])
+    rows = np.arange(int(np.ceil(pixels[order[0], 1])), int(pixels[order[-1], 1]) + 1)
+    return rows, np.interp(rows, pixels[order, 1], pixels[order, 0])
+
+
 class FrameTracker:
     """Spots and line per frame; spots come out `hampel_window // 2` frames late, filtered."""
 
@@ -91,19 +102,8 @@ class FrameTracker:
         self.hampel = HampelBank(self.config.hampel_window, self.config.hampel_k,
                                  self.config.hampel_floor_px)
         self._pending: dict[int, dict[int, SpotEstimate]] = {}
-        self._line_rows, self._line_x = self._flat_line(rig)
+        self._line_rows, self._line_x = flat_line_px(rig)
         warm_up()
-
-    @staticmethod
-    def _flat_line(rig: Rig) -> tuple[np.ndarray, np.ndarray]:
-        """Rows and columns of the line on the flat surface: where to look first."""
-        if rig.line_laser is None:
-            return np.zeros(0, int), np.zeros(0)
-        pixels = line_image_path(rig, 0.0)
-        pixels = pixels[np.isfinite(pixels).all(axis=1)]
-        order = np.argsort(pixels[:, 1])
-        rows = np.arange(int(np.ceil(pixels[order[0], 1])), int(pixels[order[-1], 1]) + 1)
-        return rows, np.interp(rows, pixels[order, 1], pixels[order, 0])
 
     def process(self, frame: int, red: np.ndarray, offset: tuple[int, int]
                 ) -> tuple[list[tuple[int, list[TrackedSpot]]], LineProfile]:

@@ -66,9 +66,7 @@ def identify_spots(rig: Rig, surfaces: list[KnownSurface], blobs: list[np.ndarra
                    settings: IdentificationSettings | None = None) -> Identification:
     """Assign blobs (per frame, N_k×2 px) to the rig's diodes over the frames' known surfaces."""
     s = settings or IdentificationSettings()
-    centre = rig.project(np.zeros((1, 3)))[0]
-    px_per_mm = float(np.linalg.norm(rig.project(np.array([[1.0, 0, 0]]))[0] - centre))
-    gate_px = s.gate_mm * px_per_mm
+    gate_px = s.gate_mm * rig.surface_px_per_mm()
     radius = rig.container.radius_mm
     points = [surface_points(rig, b, surf) if len(b) else np.zeros((0, 3))
               for b, surf in zip(blobs, surfaces, strict=True)]

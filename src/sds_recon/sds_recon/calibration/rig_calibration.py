@@ -22,13 +22,18 @@ from sds_recon.calibration.identification import (
     IdentificationSettings,
     identify_spots,
 )
-from sds_recon.calibration.lasers import KnownSurface, calibrate_line_plane
-from sds_recon.calibration.self_calibration import (
-    LineObservations,
-    SelfCalibration,
-    self_calibrate,
-)
+from sds_recon.calibration.lasers import KnownSurface, PlaneFitResult, calibrate_line_plane
+from sds_recon.calibration.self_calibration import SelfCalibration, self_calibrate
 from sds_recon.rig import LineLaser, Rig
+
+
+@dataclass(frozen=True)
+class LineObservations:
+    """Line pixels on known surfaces: frame index, pixel (N×2), σ [px]."""
+
+    frame: np.ndarray
+    pixels: np.ndarray
+    sigma_px: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -57,6 +62,7 @@ class RigCalibration:
     blob: np.ndarray            # per used spot: blob index in its frame
     outliers: list[tuple[int, int, float]]   # (laser id, frame, residual in σ)
     unidentified: dict[int, str]
+    line_plane: PlaneFitResult | None        # the line laser's plane, through the fitted camera
 
 
 def _observations(identification: Identification, blobs: list[np.ndarray],
@@ -86,7 +92,7 @@ def calibrate_rig(rig: Rig, surfaces: list[KnownSurface], blobs: list[np.ndarray
                          + "; ".join(f"{i}: {why}" for i, why in
                                      sorted(identification.unidentified.items())[:3]))
     ids, diode, frame, blob, pixels, sigma = _observations(identification, blobs, blob_sigma_px)
-    fit = self_calibrate(rig, ids, surfaces, diode, frame, pixels, sigma, None,
+    fit = self_calibrate(rig, ids, surfaces, diode, frame, pixels, sigma,
                          s.fit_emitters, s.fit_camera)
     narrow = IdentificationSettings(cone_deg=s.cone_deg, gate_mm=s.refined_gate_mm)
     identification = identify_spots(fit.rig, surfaces, blobs, narrow)
@@ -94,7 +100,7 @@ def calibrate_rig(rig: Rig, surfaces: list[KnownSurface], blobs: list[np.ndarray
     unidentified = dict(identification.unidentified)
     outliers: list[tuple[int, int, float]] = []
     while True:
-        fit = self_calibrate(rig, ids, surfaces, diode, frame, pixels, sigma, None,
+        fit = self_calibrate(rig, ids, surfaces, diode, frame, pixels, sigma,
                              s.fit_emitters, s.fit_camera)
         scale = np.sqrt(max(fit.chi2_per_dof, 1.0))
         normalised = np.linalg.norm(fit.spot_residuals_px, axis=1) / (sigma * scale)
@@ -116,15 +122,11 @@ def calibrate_rig(rig: Rig, surfaces: list[KnownSurface], blobs: list[np.ndarray
         diode = np.array([remap[d] for d in diode[keep]], int)
         frame, blob, pixels, sigma = frame[keep], blob[keep], pixels[keep], sigma[keep]
         ids = remaining
+    plane = None
     if line is not None and len(line.frame) >= 3 and rig.line_laser is not None:
-        fit = replace(fit, rig=_with_line_plane(fit.rig, surfaces, line))
-    return RigCalibration(fit, identification, ids, diode, frame, blob, outliers, unidentified)
-
-
-def _with_line_plane(rig: Rig, surfaces: list[KnownSurface], line: LineObservations) -> Rig:
-    """The rig with its line laser's plane fitted (robustly) to the line's pixels on the known
-    surfaces, seen through the fitted camera."""
-    plane = calibrate_line_plane(rig, line.pixels, [surfaces[f] for f in line.frame])
-    emitter = rig.line_laser.emitter_mm
-    emitter = emitter - ((emitter - plane.point_mm) @ plane.normal) * plane.normal
-    return replace(rig, line_laser=LineLaser(emitter, plane.normal))
+        plane = calibrate_line_plane(fit.rig, line.pixels, [surfaces[f] for f in line.frame])
+        emitter = rig.line_laser.emitter_mm
+        emitter = emitter - ((emitter - plane.point_mm) @ plane.normal) * plane.normal
+        fit = replace(fit, rig=replace(fit.rig, line_laser=LineLaser(emitter, plane.normal)))
+    return RigCalibration(fit, identification, ids, diode, frame, blob, outliers, unidentified,
+                          plane)

@@ -3,23 +3,21 @@
 Parameters (natural units, each a small change from the rig file's value):
 camera rotation about the world X, Y, Z axes [rad] and centre shift [mm]; per beam two tilts
 of its direction [rad] and (optionally) two shifts of its emitter across the beam [mm] (along
-the beam an emitter shift changes nothing); the line laser's plane: two tilts of its normal
-[rad] and a shift along it [mm]. Spots are predicted as the beam's hit on the frame's known
-surface (Eq. 9 with Z = g(X, Y) known), projected through the camera (Eq. 1 and the camera
-model); line pixels give the distance of their ray's hit on the known surface from the plane
-(Eqs. 10-11).
+the beam an emitter shift changes nothing). Spots are predicted as the beam's hit on the
+frame's known surface (Eq. 9 with Z = g(X, Y) known), projected through the camera (Eq. 1 and
+the camera model).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from sds_recon.calibration.lasers import KnownSurface
 from sds_recon.geometry import RigidTransform
-from sds_recon.rig import LineLaser, Rig
+from sds_recon.rig import Rig
 
 CAMERA_ROTATION = ("camera rotation about X", "camera rotation about Y",
                    "camera rotation about Z")
@@ -34,31 +32,16 @@ def _across(direction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return first, np.cross(direction, first)
 
 
-@dataclass(frozen=True)
-class Observations:
-    """Spot observations: diode index (into the model's diodes), frame index, pixel, σ [px];
-    and line pixels: frame index, pixel, σ [px]."""
-
-    diode: np.ndarray
-    frame: np.ndarray
-    pixels: np.ndarray
-    sigma_px: np.ndarray
-    line_frame: np.ndarray
-    line_pixels: np.ndarray
-    line_sigma_px: np.ndarray
-
-
 class RigModel:
     """Maps a parameter vector to a rig and to the weighted residuals of observations."""
 
     def __init__(self, rig: Rig, laser_ids: list[int], surfaces: list[KnownSurface],
-                 fit_emitters: bool = False, fit_plane: bool = True) -> None:
+                 fit_emitters: bool = False) -> None:
         self.rig = rig
         self.laser_ids = laser_ids
         self.diodes = [rig.diode(i) for i in laser_ids]
         self.surfaces = surfaces
         self.fit_emitters = fit_emitters
-        self.fit_plane = fit_plane and rig.line_laser is not None
         self._axes = [_across(d.direction) for d in self.diodes]
         normals = np.array([[np.tan(s.tilt_x_rad), np.tan(s.tilt_y_rad), 1.0] for s in surfaces])
         self._normals = normals.reshape(-1, 3)
@@ -71,10 +54,6 @@ class RigModel:
             if fit_emitters:
                 self.names += [f"emitter {i} a", f"emitter {i} b"]
                 self.scales += [1.0, 1.0]
-        if self.fit_plane:
-            self.names += ["line plane tilt a", "line plane tilt b", "line plane offset"]
-            self.scales += [np.radians(1.0), np.radians(1.0), 1.0]
-            self._plane_axes = _across(rig.line_laser.normal)
         self._per_beam = 4 if fit_emitters else 2
 
     @property
@@ -99,16 +78,6 @@ class RigModel:
             emitters.append(emitter)
         return np.array(emitters).reshape(-1, 3), np.array(directions).reshape(-1, 3)
 
-    def plane(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The line laser's unit normal and a point of its plane [mm]."""
-        line = self.rig.line_laser
-        if not self.fit_plane:
-            return line.normal, line.emitter_mm
-        a, b, shift = x[-3:]
-        u, v = self._plane_axes
-        normal = line.normal + a * u + b * v
-        return normal / np.linalg.norm(normal), line.emitter_mm + shift * line.normal
-
     def hits(self, x: np.ndarray, diode: np.ndarray, frame: np.ndarray) -> np.ndarray:
         """Where each (diode, frame) beam meets that frame's known surface (N×3 mm)."""
         emitters, directions = self.beams(x)
@@ -123,17 +92,6 @@ class RigModel:
         points = self.hits(x, diode, frame)
         return self.rig.camera.project((points - centre) @ rotation)
 
-    def line_distances(self, x: np.ndarray, rays_camera: np.ndarray,
-                       frame: np.ndarray) -> np.ndarray:
-        """Signed distance [mm] from the laser plane of each line pixel's hit on its surface."""
-        rotation, centre = self.camera(x)
-        rays = rays_camera @ rotation.T
-        m, offset = self._normals[frame], self._offsets[frame]
-        t = (offset - m @ centre) / np.sum(rays * m, axis=1)
-        points = centre + t[:, None] * rays
-        normal, point = self.plane(x)
-        return (points - point) @ normal
-
     def to_rig(self, x: np.ndarray) -> Rig:
         """The rig with these parameters (diodes not in the model stay as they were)."""
         rotation, centre = self.camera(x)
@@ -144,10 +102,5 @@ class RigModel:
         diodes = tuple(replace(d, emitter_mm=fitted[d.laser_id][0],
                                direction=fitted[d.laser_id][1]) if d.laser_id in fitted else d
                        for d in self.rig.diodes)
-        line = self.rig.line_laser
-        if self.fit_plane:
-            normal, point = self.plane(x)
-            emitter = line.emitter_mm - ((line.emitter_mm - point) @ normal) * normal
-            line = LineLaser(emitter, normal)
-        return replace(self.rig, world_to_camera=pose, diodes=diodes, line_laser=line)
+        return replace(self.rig, world_to_camera=pose, diodes=diodes)
 

@@ -76,15 +76,13 @@ def rig_report(nominal: Rig, result: RigCalibration) -> dict[str, Any]:
                "rms_px": float(f"{np.sqrt(np.mean(residual[result.frame == f] ** 2)):.3g}")}
               for f in sorted(set(result.frame.tolist()))]
     line: dict[str, Any] | None = None
-    if "line plane offset" in fit.names and fit.rig.line_laser is not None:
-        line = {"normal": [float(f"{v:.8g}") for v in fit.rig.line_laser.normal],
-                "tilt_sigma_deg": [_deg(sigma["line plane tilt a"]),
-                                   _deg(sigma["line plane tilt b"])],
-                "offset_sigma_mm": _mm(sigma["line plane offset"]),
-                "points": len(fit.line_residuals_mm),
-                "rms_mm": _mm(float(np.sqrt(np.mean(fit.line_residuals_mm**2))))}
+    if result.line_plane is not None:
+        plane = result.line_plane
+        line = {"normal": [float(f"{v:.8g}") for v in plane.normal],
+                "points": plane.point_count, "rms_mm": _mm(plane.rms_mm)}
     return {
-        "method": "joint least squares: camera pose, beams, line plane (sds calibrate rig)",
+        "method": "joint least squares of camera pose and beams, then the line plane "
+                  "through the fitted camera (sds calibrate rig)",
         "frames": len(result.fit.model.surfaces), "spots": len(result.diode),
         "rms_px": float(f"{fit.rms_px:.3g}"), "chi2_per_dof": float(f"{fit.chi2_per_dof:.3g}"),
         "condition_number": float(f"{fit.condition_number:.3g}"),
@@ -116,8 +114,7 @@ def report_text(report: dict[str, Any]) -> str:
                      f"{beam['rms_px']:>7.3f}")
     if report["line_laser"]:
         line = report["line_laser"]
-        lines.append(f"line laser plane: {line['points']} points, RMS {line['rms_mm']} mm, "
-                     f"tilt σ {max(line['tilt_sigma_deg']):.3g} deg")
+        lines.append(f"line laser plane: {line['points']} points, RMS {line['rms_mm']} mm")
     for laser_id, why in report["unidentified"].items():
         lines.append(f"diode {laser_id} not identified, not calibrated, not tracked: {why}")
     for name, advice in report["not_determined"].items():
