@@ -165,11 +165,11 @@ def _run_calibrate_rig(args: argparse.Namespace) -> int:
                                        fit_emitters=args.fit_emitters)
         result, found = calibrate_images(rig, images, [known[k] for k in range(len(images))],
                                          settings)
+        write_calibration(rig, result, found, images, [str(p) for p in args.images], args.out,
+                          f"`sds calibrate rig` from {args.rig}")
     except (OSError, ValueError, FrameSourceError) as error:  # RigError is a ValueError
         print(f"sds calibrate rig: {error}", file=sys.stderr)
         return 2
-    write_calibration(rig, result, found, images, [str(p) for p in args.images], args.out,
-                      f"`sds calibrate rig` from {args.rig}")
     print(report_text(rig_report(rig, result)))
     print(f"wrote {args.out} and its report, {args.out.with_suffix('')}.report.html")
     return 0
