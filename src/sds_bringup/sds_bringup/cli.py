@@ -139,6 +139,50 @@ def _add_calibrate(commands: argparse._SubParsersAction) -> None:
                      help="also fit each emitter's position across its beam")
     rig.add_argument("--overwrite", action="store_true", help="replace an existing --out")
     rig.set_defaults(run=_run_calibrate_rig)
+    plane = targets.add_parser(
+        "line-plane", help="camera and line laser plane from a checkerboard crossed by the line",
+        description="Calibrate the camera on the board, find the red line's centre per row "
+                    "inside each board, put it on that board's plane and fit one plane to all "
+                    "(camera frame, n.X + d = 0, mm); write it as JSON with its residuals.")
+    plane.add_argument("--images", nargs="+", type=Path, required=True,
+                       help="colour images, one board pose each, the line crossing the board")
+    plane.add_argument("--board", required=True, metavar="COLSxROWS",
+                       help="inner corners per row x per column, e.g. 11x7")
+    plane.add_argument("--square", type=float, required=True, metavar="MM",
+                       help="checkerboard square size [mm]")
+    plane.add_argument("--model", choices=["pinhole", "scaramuzza"], default="pinhole")
+    plane.add_argument("--out", type=Path, required=True, help="JSON file to write")
+    plane.add_argument("--overwrite", action="store_true", help="replace an existing --out")
+    plane.set_defaults(run=_run_calibrate_line_plane)
+
+
+def _run_calibrate_line_plane(args: argparse.Namespace) -> int:
+    import json
+
+    import numpy as np
+    from sds_recon.calibration.board import Checkerboard
+
+    from sds_bringup.line_plane_calibration import calibrate_line_plane, line_plane_report
+
+    if args.out.exists() and not args.overwrite:
+        print(f"sds calibrate line-plane: {args.out} exists (--overwrite replaces it)",
+              file=sys.stderr)
+        return 2
+    try:
+        result = calibrate_line_plane(sorted(args.images),
+                                      Checkerboard.parse(args.board, args.square), args.model)
+        args.out.write_text(json.dumps(line_plane_report(result), indent=2) + "\n")
+    except (OSError, ValueError) as error:
+        print(f"sds calibrate line-plane: {error}", file=sys.stderr)
+        return 2
+    residuals = result.residuals_mm()
+    normal = result.plane.normal
+    print(f"line plane (camera frame): n = [{normal[0]:.6f}, {normal[1]:.6f}, {normal[2]:.6f}], "
+          f"d = {-normal @ result.plane.point_mm:.3f} mm; {len(residuals)} points, "
+          f"mean |residual| {np.mean(np.abs(residuals)):.3f} mm; camera RMS "
+          f"{result.camera_run.calibration.rms_px:.3f} px")
+    print(f"wrote {args.out}")
+    return 0
 
 
 def _run_calibrate_rig(args: argparse.Namespace) -> int:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 from scipy.ndimage import median_filter
 
@@ -11,6 +12,8 @@ from sds_tracker.kernels import line_rows
 
 INTERPOLATED, SATURATED_LINE, LOW_SIGNAL = 1, 2, 4
 """Flag bits, the same as sds_msgs/LaserLineProfile's."""
+SEED_MEDIAN_ROWS = 31
+"""Rows in the running median that turns per-row brightest columns into the search centre."""
 
 
 @dataclass(frozen=True)
@@ -83,3 +86,31 @@ def _continuous(x: np.ndarray, s: LineSettings) -> np.ndarray:
     result = x.copy()
     result[np.abs(x - median) > s.continuity_px] = np.nan
     return result
+
+
+def redness(bgr: np.ndarray) -> np.ndarray:
+    """R − (G + B)/2, floored at 0 (float32): a red laser on a white or grey target.
+
+    On white paper the red channel alone sits near saturation with or without the laser;
+    subtracting the other channels leaves the laser and removes the target's print.
+    """
+    blue, green, red = cv2.split(bgr.astype(np.float32))
+    return np.maximum(red - 0.5 * (green + blue), 0.0)
+
+
+def find_line(image: np.ndarray, mask: np.ndarray, settings: LineSettings | None = None
+              ) -> LineProfile:
+    """The line's centre per row inside `mask` (same shape, nonzero = searched), no prior.
+
+    For calibration images, where nothing says where the line is: each row's brightest masked
+    column, smoothed by a running median over SEED_MEDIAN_ROWS rows (so a stray bright pixel
+    cannot move the search), is the centre that `track_line` refines.
+    """
+    searched = np.where(mask > 0, image, 0)
+    rows = np.flatnonzero((mask > 0).any(axis=1))
+    if len(rows) == 0:
+        empty = np.zeros(0)
+        return LineProfile(empty, empty, empty, empty, np.zeros(0, np.uint8))
+    brightest = np.argmax(searched[rows], axis=1).astype(float)
+    centre = median_filter(brightest, size=SEED_MEDIAN_ROWS, mode="nearest")
+    return track_line(searched, (0, 0), centre, rows, settings)

@@ -7,6 +7,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from sds_recon.camera.model import CameraModel
+from sds_recon.geometry import RigidTransform
 from sds_recon.rig import Rig
 
 HUBER_MM = 0.2
@@ -128,3 +130,30 @@ def calibrate_line_plane(rig: Rig, pixels: ArrayLike, surfaces: list[KnownSurfac
         result = PlaneFitResult(-result.normal, result.point_mm, result.rms_mm,
                                 result.point_count)
     return result
+
+
+def board_points(camera: CameraModel, board_to_camera: RigidTransform, pixels: ArrayLike
+                 ) -> np.ndarray:
+    """Camera rays through the pixels, ended on a board's plane Z = 0 (N×3 mm, camera frame)."""
+    rays = camera.pixel_to_ray(np.atleast_2d(np.asarray(pixels, dtype=float)))
+    normal = board_to_camera.rotation[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        distance = (normal @ board_to_camera.translation_mm) / (rays @ normal)
+    distance[~(distance > 0)] = np.nan
+    return distance[:, None] * rays
+
+
+def calibrate_line_plane_on_boards(camera: CameraModel, poses: list[RigidTransform],
+                                   pixels: list[np.ndarray]) -> PlaneFitResult:
+    """The line laser's plane in the camera frame from its pixels on boards of known pose.
+
+    The seed's known-surface calibration (Sec. 3.3.1) with a checkerboard as the surface:
+    each board pose (from the camera calibration) puts the line's pixels in 3-D.
+    """
+    if len(poses) != len(pixels):
+        raise ValueError(f"{len(poses)} board poses but {len(pixels)} line pixel sets")
+    if len(poses) < 2:
+        raise ValueError("a line plane needs the line on 2 or more board poses")
+    points = np.vstack([board_points(camera, pose, p) for pose, p in zip(poses, pixels,
+                                                                          strict=True)])
+    return fit_plane_robust(points)
