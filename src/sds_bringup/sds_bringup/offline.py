@@ -9,23 +9,17 @@ the same files from a recording of the graph.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
 import numpy as np
 from mcap.exceptions import McapError
 from mcap_ros2.reader import read_ros2_messages
 from sds_camera.frame_source import FrameSource, FrameSourceError, Region, open_source, select
 from sds_camera.image_msg import msg_to_image
-from sds_recon.calibration.laser_files import (
-    calibrate_from_observations,
-    read_surfaces,
-    report_text,
-)
+from sds_recon.calibration.laser_files import read_surfaces
 from sds_recon.reconstruction import (
     SurfaceFits,
     SurfacePoints,
@@ -34,7 +28,7 @@ from sds_recon.reconstruction import (
     reconstruct_spots,
 )
 from sds_recon.results import ResultsWriter
-from sds_recon.rig import Rig, RigError, load_rig, save_rig
+from sds_recon.rig import Rig, RigError, load_rig
 from sds_recon.sloshing.analysis import AnalysisOptions, analyze
 from sds_recon.sloshing.estimators import DecayError
 from sds_recon.sloshing.recording import (
@@ -52,6 +46,7 @@ from tqdm import tqdm
 
 from sds_bringup.graph import GraphFileError, node_parameters
 from sds_bringup.paths import CONFIG
+from sds_bringup.rig_calibration import calibrate_images, read_images, write_calibration
 
 GRAPH = CONFIG / "graphs" / "drop.yaml"
 """The graph whose tracker and reconstruction parameters the offline pipeline uses."""
@@ -116,43 +111,21 @@ def _recorded_frames(path: Path) -> Iterator[RedFrame]:
             index += 1
 
 
-CALIBRATION_PATH_TOLERANCE_PX = 25.0
-"""Spots of uncalibrated (leaning) beams sit off their nominal image paths: look wider."""
-
-
 def calibrate_from_images(rig: Rig, images: list[Path], surfaces: Path, out: Path
                           ) -> tuple[Rig, Path]:
-    """Track the spots and line on images of known surfaces (image k is frame k of the
-    surfaces CSV), calibrate the beams and the line plane, write the rig and its report."""
+    """Self-calibrate the rig from images of known surfaces (image k is frame k of the
+    surfaces CSV), as `sds calibrate rig` does; write the rig, its report and overlays."""
     known = read_surfaces(surfaces)
-    values = node_parameters(GRAPH, "tracker")
-    config = tracker_config({**values, "path_tolerance_px": CALIBRATION_PATH_TOLERANCE_PX})
-    region = Region(*rig.container_region_px(rig.camera))
-    frames, ids, pixels, line_frames, line_pixels = [], [], [], [], []
-    for frame, path in enumerate(images):
-        if frame not in known:
-            raise RecordingError(f"{surfaces}: no known surface for frame {frame} ({path})")
-        image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-        if image is None:
-            raise RecordingError(f"{path}: not a readable image")
-        region.check_inside(image.shape[1], image.shape[0])
-        tracker = FrameTracker(rig, config, parse_seeds(values["seeds"]))
-        _, line = tracker.process(0, select(image, region, "red"), (region.x, region.y))
-        (_, spots), = tracker.flush()
-        for spot in (s for s in spots if not s.flags & LOST):
-            frames.append(frame)
-            ids.append(spot.laser_id)
-            pixels.append((spot.x_raw_px, spot.y_raw_px))
-        line_frames += [frame] * len(line.x_px)
-        line_pixels += list(zip(line.x_px, line.y_px, strict=True))
-    calibrated, report = calibrate_from_observations(
-        rig, known, np.array(frames), np.array(ids), np.array(pixels).reshape(-1, 2),
-        (np.array(line_frames), np.array(line_pixels).reshape(-1, 2)))
+    missing = [str(p) for k, p in enumerate(images) if k not in known]
+    if missing:
+        raise RecordingError(f"{surfaces}: no known surface for {', '.join(missing[:3])}")
+    pictures = read_images(images)
+    result, found = calibrate_images(rig, pictures, [known[k] for k in range(len(images))])
     out.mkdir(parents=True, exist_ok=True)
     rig_path = out / "rig_calibrated.yaml"
-    save_rig(calibrated, rig_path, comment=f"Calibrated by `sds process --calibrate-lasers` "
-                                           f"from {len(images)} images:\n{report_text(report)}")
-    rig_path.with_suffix(".report.json").write_text(json.dumps(report, indent=2) + "\n")
+    calibrated = write_calibration(rig, result, found, pictures, [str(p) for p in images],
+                                   rig_path, f"`sds process --calibrate-lasers` from "
+                                             f"{len(images)} images")
     return calibrated, rig_path
 
 

@@ -147,11 +147,16 @@ class Scenario:
         return tuple(motions)
 
     def tilt_at(self, time_s: float) -> tuple[float, float]:
-        """Tilt table angles (x, y) [rad] at a time: fixed, or the series' current step."""
+        """Tilt table angles (x, y) [rad] at a time: fixed, or the series' current step.
+
+        Step k holds from (k − ½)·T to (k + ½)·T (T = duration / steps; the first from the
+        start, the last to the end), so a frame at k·T, e.g. one per step at fps = 1/T, sees
+        one tilt over its whole exposure rather than a blend of two.
+        """
         if not self.tilt_series_deg:
             return float(np.radians(self.tilt_deg[0])), float(np.radians(self.tilt_deg[1]))
         step = self.duration_s / len(self.tilt_series_deg)
-        index = min(int(time_s / step), len(self.tilt_series_deg) - 1)
+        index = min(max(int(np.floor(time_s / step + 0.5)), 0), len(self.tilt_series_deg) - 1)
         angle = float(np.radians(self.tilt_series_deg[index]))
         return (angle, 0.0) if self.tilt_series_axis == "x" else (0.0, angle)
 

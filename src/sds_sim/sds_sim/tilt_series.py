@@ -35,7 +35,7 @@ def render_tilt_series(rig: Rig, angles_deg: list[float], axis: str = "x", scale
     renderer = FrameRenderer(series)
     images, surfaces, truths = [], [], []
     for step in range(len(angles_deg)):
-        image, truth = renderer.render(30 * step + 15)
+        image, truth = renderer.render(30 * step)
         tilt_x, tilt_y = series.tilt_at(truth.time_s)
         images.append(image)
         surfaces.append(KnownSurface(series.offset_mm, tilt_x, tilt_y))
