@@ -30,9 +30,9 @@ def test_results_round_trip_with_missing_values(tmp_path: Path) -> None:
     writer.add("spots", [(0, 0.0, 3, 10.5, 20.25, 10.5, 20.25, 0.04, 250.0, 1, 0),
                          (0, 0.0, 4, float("nan"), float("nan"), float("nan"), float("nan"),
                           0.0, 0.0, 0, 1)])
-    writer.add_fit((0, 0.0, 0.1, 0.0, 0.0, 0.0, 0.0, 0.99, 0.02, 0.008, 20),
+    writer.add_fit((0, 0.0, 0.1, 0.0, 0.0, 0.0, 0.0, 0.99, 0.02, 0.008, 20, 1),
                    ("mean", "lateral_1_cos"), [0.1, 2.5])
-    writer.add_fit((1, 0.0333, *(float("nan"),) * 8, 2), (), [])
+    writer.add_fit((1, 0.0333, *(float("nan"),) * 8, 2, 0), (), [])
     writer.close()
     results = load_results(tmp_path)
     assert results.spots["x_px"][0] == 10.5 and np.isnan(results.spots["x_px"][1])

@@ -77,6 +77,16 @@ def test_spots_and_line_in_point_cloud_and_fit_out(repo):
                                           peak_intensity=[200.0] * len(line_pixels),
                                           flags=[0] * len(line_pixels)))
         assert wait_until(lambda: clouds and line_clouds and fits), graph.output()
+        # frame 8: diode 5's blob is a reflection on its own image path, 3 mm high
+        wrong = LaserSpotArray(frame_index=8, spots=list(message.spots))
+        index = [d.laser_id for d in rig.diodes].index(5)
+        hit = truth[index]
+        beam = rig.diodes[index]
+        along = (hit[2] + 3.0 - beam.emitter_mm[2]) / beam.direction[2]
+        x, y = rig.project((beam.emitter_mm + along * beam.direction)[None])[0]
+        wrong.spots[index] = LaserSpot(laser_id=5, x_px=x, y_px=y, sigma_px=0.05)
+        spots_pub.publish(wrong)
+        assert wait_until(lambda: len(clouds) > 1 and len(fits) > 1), graph.output()
     finally:
         probe.close()
         graph.stop()
@@ -100,6 +110,13 @@ def test_spots_and_line_in_point_cloud_and_fit_out(repo):
     assert np.degrees(fit.tilt_x_rad) == pytest.approx(TILT_DEG, abs=1e-6)
     assert fit.p00_mm == pytest.approx(2.0, abs=1e-6) and fit.rmse_mm < 1e-6
     assert "lateral_1_cos" in fit.mode_names
+    assert fit.rejected_count == 0 and not points["rejected"].any()
+    flagged = fits[1]
+    assert flagged.rejected_count == 1 and list(flagged.rejected_laser_ids) == [5]
+    assert flagged.point_count == 18
+    assert np.degrees(flagged.tilt_x_rad) == pytest.approx(TILT_DEG, abs=1e-6)
+    second = cloud_points(clouds[1])
+    assert second["laser_id"][second["rejected"] == 1].tolist() == [5]
 
 
 def test_missing_rig_is_a_clear_error():

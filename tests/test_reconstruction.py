@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from sds_recon.calibration.lasers import KnownSurface, calibrate_beams, calibrate_line_plane
+from sds_recon.reconstruction import SurfacePoints, fit_surface
 from sds_recon.rig import LaserDiode, Rig, load_rig
 from sds_recon.sloshing.theory import ModeShape
 from sds_recon.surface_fit import fit_modes, fit_plane, radial_profile
@@ -252,3 +253,51 @@ def test_free_beam_fit_moves_the_emitter_onto_the_beam(rig: Rig) -> None:
         assert np.linalg.norm(fit.direction - beam.direction) < 1e-9
         offset = fit.emitter_mm - beam.emitter_mm
         assert np.linalg.norm(np.cross(offset, beam.direction)) < 1e-9   # on the true beam
+
+
+def _sloshing_points(rng: np.random.Generator, count: int, radius_mm: float) -> np.ndarray:
+    """Points on a surface sloshing in its first lateral mode (4 mm), tilted, with noise."""
+    radius = radius_mm * np.sqrt(rng.uniform(0, 0.95, count))
+    azimuth = rng.uniform(0, 2 * np.pi, count)
+    x, y = radius * np.cos(azimuth), radius * np.sin(azimuth)
+    shape = ModeShape(1, 1, 0.3)
+    z = 0.5 - 0.1 * x + 4.0 * shape.height(x, y, radius_mm) + rng.normal(0, 0.03, count)
+    return np.column_stack([x, y, z])
+
+
+def test_surface_fits_leave_out_a_wrong_point_and_keep_every_sloshing_one() -> None:
+    rng = np.random.default_rng(0)
+    radius_mm = 75.0
+    points = _sloshing_points(rng, 20, radius_mm)
+    sigma, miss = np.full(20, 0.03), np.full(20, 0.005)
+    truth = fit_surface(SurfacePoints(np.arange(20), points, sigma, miss), radius_mm)
+    assert truth.rejected_count == 0            # 4 mm of sloshing is no outlier
+    wrong = points.copy()
+    wrong[7, 2] += 3.0                          # a reflection taken for the spot
+    fits = fit_surface(SurfacePoints(np.arange(20), wrong, sigma, miss), radius_mm)
+    assert fits.rejected.tolist() == [k == 7 for k in range(20)]
+    clean = fit_modes(np.delete(points, 7, axis=0), radius_mm)
+    assert fits.modal is not None and fits.plane is not None
+    np.testing.assert_allclose(fits.modal.amplitudes_mm, clean.amplitudes_mm, atol=1e-12)
+    plain = fit_modes(wrong, radius_mm)
+    assert np.max(np.abs(plain.amplitudes_mm - clean.amplitudes_mm)) > 0.1
+    assert fits.plane.point_count == 19
+    # a spot whose ray misses its beam by far more than its σ (Eq. 9) is not on that beam
+    far = miss.copy()
+    far[3] = 0.5
+    fits = fit_surface(SurfacePoints(np.arange(20), points, sigma, far), radius_mm)
+    assert fits.rejected.tolist() == [k == 3 for k in range(20)]
+
+
+def test_surface_fits_keep_the_points_a_model_error_spreads_over() -> None:
+    radius_mm = 75.0
+    for seed in range(5):
+        points = _sloshing_points(np.random.default_rng(seed), 200, radius_mm)
+        # a meniscus the modes do not contain: 0.8 mm at the wall, decaying over 3 mm
+        radius = np.hypot(points[:, 0], points[:, 1])
+        points[:, 2] += 0.8 * np.exp(-(radius_mm - radius) / 3.0)
+        sigma = np.full(200, 0.03)
+        fits = fit_surface(SurfacePoints(np.arange(200), points, sigma, sigma / 5), radius_mm)
+        # only points in the steep band by the wall (14 σ off the modes) may go
+        assert fits.rejected_count <= 8
+        assert np.all(radius[fits.rejected] > radius_mm - 6.0)

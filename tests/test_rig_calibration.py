@@ -17,7 +17,6 @@ from sds_recon.calibration.lasers import KnownSurface
 from sds_recon.calibration.rig_model import RigModel
 from sds_recon.calibration.self_calibration import self_calibrate
 from sds_recon.rig import load_rig, save_rig
-from sds_recon.surface_fit import fit_plane, fit_plane_rejecting
 from sds_sim.tilt_series import render_tilt_series
 from sds_sim.true_rig import RigErrors, random_layout, true_rig
 from sds_tracker.tracker import FrameTracker
@@ -118,21 +117,6 @@ def test_the_rig_file_keeps_beam_uncertainties_and_untracked_diodes(tmp_path: Pa
     assert loaded.calibration == record
     assert rig.diodes[3].laser_id not in FrameTracker(loaded).paths
     assert all(d.tracked and d.direction_sigma_deg is None for d in rig.diodes)
-
-
-def test_robust_plane_fit_is_not_moved_by_one_wrong_point() -> None:
-    rng = np.random.default_rng(0)
-    xy = rng.uniform(-50, 50, (20, 2))
-    z = 1.0 - 0.2 * xy[:, 0] + 0.05 * xy[:, 1] + rng.normal(0, 0.03, 20)
-    points = np.column_stack([xy, z])
-    sigma = np.full(20, 0.03)
-    clean = fit_plane(np.delete(points, 7, axis=0))
-    points[7, 2] += 5.0     # a reflection taken for the spot
-    plain = fit_plane(points)
-    robust, rejected = fit_plane_rejecting(points, sigma)
-    assert rejected.tolist() == [k == 7 for k in range(20)]
-    assert abs(robust.p10 - clean.p10) < 1e-12 and abs(robust.p00_mm - clean.p00_mm) < 1e-12
-    assert abs(plain.p10 - clean.p10) > 10 * 0.03 / 50
 
 
 def test_sds_calibrate_rig_writes_rig_report_and_overlays(tmp_path: Path) -> None:

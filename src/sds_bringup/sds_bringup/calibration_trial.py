@@ -17,9 +17,8 @@ from scipy.spatial.transform import Rotation
 from sds_camera.frame_source import Region, select
 from sds_recon.calibration.lasers import calibrate_beams
 from sds_recon.calibration.rig_report import calibrated_rig
-from sds_recon.reconstruction import reconstruct_spots
+from sds_recon.reconstruction import fit_surface, reconstruct_spots
 from sds_recon.rig import Rig, load_rig
-from sds_recon.surface_fit import fit_plane_rejecting
 from sds_sim.tilt_series import TiltSeries, render_tilt_series
 from sds_sim.true_rig import RigErrors, random_layout, true_rig
 from sds_tracker.spots import LOST
@@ -55,7 +54,10 @@ def unseen(rig: Rig, series: TiltSeries) -> UnseenSeries:
         points = reconstruct_spots(rig, [s.laser_id for s in spots],
                                    [(s.x_raw_px, s.y_raw_px) for s in spots],
                                    [s.sigma_px for s in spots], beam_weight=1.0)
-        plane, rejected = fit_plane_rejecting(points.points_mm, points.height_sigma_mm)
+        fits = fit_surface(points, rig.container.radius_mm)
+        plane, rejected = fits.plane, fits.rejected
+        if plane is None:
+            raise ValueError(f"too few points ({len(points.laser_ids)}) for a plane")
         tilt_err.append(max(abs(np.degrees(np.arctan(-plane.p10) - surface.tilt_x_rad)),
                             abs(np.degrees(np.arctan(-plane.p01) - surface.tilt_y_rad))))
         error = points.points_mm[:, 2] - truth.spot_mm[points.laser_ids, 2]

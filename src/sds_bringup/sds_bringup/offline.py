@@ -34,6 +34,7 @@ from sds_recon.sloshing.estimators import DecayError
 from sds_recon.sloshing.recording import (
     RecordingError,
     cloud_points,
+    cloud_rejected,
     cloud_xyz,
     recording_from_rows,
     stamp_s,
@@ -142,25 +143,32 @@ class RunTables:
         self.writer.add("spots", [(frame, time_s, i, x, y, xr, yr, s, p, int(not f & LOST),
                                    f) for i, x, y, xr, yr, s, p, f in rows])
 
-    def add_points(self, frame: int, time_s: float, points: SurfacePoints) -> None:
-        rows = [(frame, time_s, int(i), *p, s, m) for i, p, s, m in zip(
+    def add_points(self, frame: int, time_s: float, points: SurfacePoints,
+                   rejected: np.ndarray | None = None) -> None:
+        """Point rows; `rejected` marks those left out of the frame's fits (and the analysis)."""
+        flags = np.zeros(len(points.laser_ids), int) if rejected is None else \
+            np.asarray(rejected, dtype=int)
+        rows = [(frame, time_s, int(i), *p, s, m, r) for i, p, s, m, r in zip(
             points.laser_ids, points.points_mm, points.height_sigma_mm,
-            points.miss_distance_mm, strict=True)]
+            points.miss_distance_mm, flags, strict=True)]
         self.writer.add("points", rows)
-        self.point_rows += rows
+        self.point_rows += [row for row in rows if not row[-1]]
 
     def add_line(self, frame: int, time_s: float, x, y, sigma, peak, flags) -> None:
         self.writer.add("line", [(frame, time_s, *row) for row in zip(
             x, y, sigma, peak, flags, strict=True)])
 
-    def add_fit(self, frame: int, time_s: float, fits: SurfaceFits, count: int) -> None:
+    def add_fit(self, frame: int, time_s: float, fits: SurfaceFits) -> None:
+        """One frame's fits row: plane, points used and rejected, modal amplitudes."""
         plane = fits.plane
         values = (np.nan,) * 8 if plane is None else (
             plane.p00_mm, plane.p10, plane.p01, np.degrees(plane.tilt_x_rad),
             np.degrees(plane.tilt_y_rad), plane.r_squared, plane.rmse_mm, plane.sse_mm2)
+        used = len(fits.rejected) - fits.rejected_count
         names = fits.modal.names if fits.modal is not None else ()
         amplitudes = list(fits.modal.amplitudes_mm) if fits.modal is not None else []
-        self.writer.add_fit((frame, time_s, *values, count), names, amplitudes)
+        self.writer.add_fit((frame, time_s, *values, used, fits.rejected_count), names,
+                            amplitudes)
 
     def recording(self, source: str):
         """The points as the analysis reads them."""
@@ -190,10 +198,9 @@ def process_frames(frames: Iterator[RedFrame], rig: Rig, tables: RunTables,
             points = reconstruct_spots(rig, [s.laser_id for s in found],
                                        [[s.x_px, s.y_px] for s in found],
                                        [s.sigma_px for s in found], beam_weight, default_sigma)
-            tables.add_points(frame, time_s, points)
-            tables.add_fit(frame, time_s, fit_surface(points.points_mm,
-                                                      rig.container.radius_mm),
-                           len(points.laser_ids))
+            fits = fit_surface(points, rig.container.radius_mm)
+            tables.add_points(frame, time_s, points, fits.rejected)
+            tables.add_fit(frame, time_s, fits)
 
     count = 0
     for frame in tqdm(frames, desc="frames", unit="frame", disable=not progress):
@@ -214,7 +221,7 @@ def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:
     first: float | None = None
     frames = 0
     frame_of: dict[float, int] = {}   # header stamp [s] -> frame index (clouds carry none)
-    clouds: list[tuple[float, float, SurfacePoints]] = []
+    clouds: list[tuple[float, float, SurfacePoints, np.ndarray]] = []
     for message in read_ros2_messages(str(path)):
         name, msg = (message.schema.name if message.schema else ""), message.ros_msg
         if not hasattr(msg, "header"):
@@ -240,7 +247,7 @@ def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:
                 clouds.append((stamp, time_s, SurfacePoints(
                     cloud["laser_id"].astype(int), cloud_xyz(cloud),
                     cloud["height_sigma_mm"].astype(float),
-                    cloud["miss_distance_mm"].astype(float))))
+                    cloud["miss_distance_mm"].astype(float)), cloud_rejected(cloud)))
         elif name == "sds_msgs/msg/SurfaceFit":
             _add_fit_message(tables, msg, time_s)
         elif name == "sensor_msgs/msg/Imu":
@@ -250,8 +257,8 @@ def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:
             tables.writer.add("tof", [(time_s, msg.range * 1e3)])
     if frames == 0:
         raise RecordingError(f"{path}: no laser spots (sds_msgs/LaserSpotArray) recorded")
-    for stamp, time_s, points in clouds:
-        tables.add_points(frame_of.get(stamp, -1), time_s, points)
+    for stamp, time_s, points, rejected in clouds:
+        tables.add_points(frame_of.get(stamp, -1), time_s, points, rejected)
     return frames
 
 
@@ -259,7 +266,8 @@ def _add_fit_message(tables: RunTables, msg, time_s: float) -> None:
     """A recorded SurfaceFit as a fits row."""
     tables.writer.add_fit((msg.frame_index, time_s, msg.p00_mm, msg.p10, msg.p01,
                            np.degrees(msg.tilt_x_rad), np.degrees(msg.tilt_y_rad),
-                           msg.r_squared, msg.rmse_mm, msg.sse_mm2, msg.point_count),
+                           msg.r_squared, msg.rmse_mm, msg.sse_mm2, msg.point_count,
+                           msg.rejected_count),
                           tuple(msg.mode_names), list(msg.modal_amplitudes_mm))
 
 

@@ -16,6 +16,7 @@ from sds_msgs.msg import (
 )
 from sds_recon.qos import start_when_consumed, stream_qos
 from sds_recon.reconstruction import (
+    SurfaceFits,
     SurfacePoints,
     fit_surface,
     reconstruct_line,
@@ -25,8 +26,9 @@ from sds_recon.rig import Rig, RigError, load_rig
 
 CLOUD_FIELDS = (("x", np.float32), ("y", np.float32), ("z", np.float32),
                 ("laser_id", np.uint16), ("height_sigma_mm", np.float32),
-                ("miss_distance_mm", np.float32))
-DATATYPES = {np.float32: PointField.FLOAT32, np.uint16: PointField.UINT16}
+                ("miss_distance_mm", np.float32), ("rejected", np.uint8))
+DATATYPES = {np.float32: PointField.FLOAT32, np.uint16: PointField.UINT16,
+             np.uint8: PointField.UINT8}
 EXIT_CONFIG_ERROR = 2
 
 
@@ -35,14 +37,17 @@ def cloud_dtype() -> np.dtype:
     return np.dtype([(name, kind) for name, kind in CLOUD_FIELDS])
 
 
-def cloud_of(points: SurfacePoints) -> np.ndarray:
-    """The cloud rows (`cloud_dtype`) of reconstructed points."""
+def cloud_of(points: SurfacePoints, rejected: np.ndarray | None = None) -> np.ndarray:
+    """The cloud rows (`cloud_dtype`) of reconstructed points; `rejected` marks those left
+    out of the frame's fits."""
     cloud = np.zeros(len(points.laser_ids), cloud_dtype())
     for axis, name in enumerate("xyz"):
         cloud[name] = points.points_mm[:, axis]
     cloud["laser_id"] = points.laser_ids
     cloud["height_sigma_mm"] = points.height_sigma_mm
     cloud["miss_distance_mm"] = points.miss_distance_mm
+    if rejected is not None:
+        cloud["rejected"] = rejected
     return cloud
 
 
@@ -56,6 +61,27 @@ def points_to_cloud(header, points: np.ndarray) -> PointCloud2:
                              count=1) for name, kind in CLOUD_FIELDS]
     msg.data = points.astype(dtype).tobytes()
     return msg
+
+
+def surface_fit_msg(msg: LaserSpotArray, points: SurfacePoints, fits: SurfaceFits
+                    ) -> SurfaceFit:
+    """The frame's SurfaceFit: plane, modal amplitudes and the rejected points' lasers."""
+    fit = SurfaceFit(header=msg.header, frame_index=msg.frame_index,
+                     point_count=len(points.laser_ids) - fits.rejected_count,
+                     rejected_count=fits.rejected_count,
+                     rejected_laser_ids=[int(i) for i in points.laser_ids[fits.rejected]])
+    nan = float("nan")
+    fit.p00_mm = fit.p10 = fit.p01 = fit.tilt_x_rad = fit.tilt_y_rad = nan
+    fit.r_squared = fit.rmse_mm = fit.sse_mm2 = nan
+    if fits.plane is not None:
+        plane = fits.plane
+        fit.p00_mm, fit.p10, fit.p01 = plane.p00_mm, plane.p10, plane.p01
+        fit.tilt_x_rad, fit.tilt_y_rad = plane.tilt_x_rad, plane.tilt_y_rad
+        fit.r_squared, fit.rmse_mm, fit.sse_mm2 = plane.r_squared, plane.rmse_mm, plane.sse_mm2
+    if fits.modal is not None:
+        fit.mode_names = list(fits.modal.names)
+        fit.modal_amplitudes_mm = [float(a) for a in fits.modal.amplitudes_mm]
+    return fit
 
 
 class ReconstructionNode(Node):
@@ -101,26 +127,11 @@ class ReconstructionNode(Node):
         result = reconstruct_spots(
             self._rig, [s.laser_id for s in spots], [[s.x_px, s.y_px] for s in spots],
             [s.sigma_px for s in spots], self._beam_weight, self._default_sigma)
+        fits = fit_surface(result, self._rig.container.radius_mm)
         header = msg.header
         header.frame_id = self._frame_id
-        self._points_pub.publish(points_to_cloud(header, cloud_of(result)))
-        self._publish_fit(msg, result.points_mm)
-
-    def _publish_fit(self, msg: LaserSpotArray, points: np.ndarray) -> None:
-        fit = SurfaceFit(header=msg.header, frame_index=msg.frame_index, point_count=len(points))
-        nan = float("nan")
-        fit.p00_mm = fit.p10 = fit.p01 = fit.tilt_x_rad = fit.tilt_y_rad = nan
-        fit.r_squared = fit.rmse_mm = fit.sse_mm2 = nan
-        fits = fit_surface(points, self._rig.container.radius_mm)
-        if fits.plane is not None:
-            plane = fits.plane
-            fit.p00_mm, fit.p10, fit.p01 = plane.p00_mm, plane.p10, plane.p01
-            fit.tilt_x_rad, fit.tilt_y_rad = plane.tilt_x_rad, plane.tilt_y_rad
-            fit.r_squared, fit.rmse_mm, fit.sse_mm2 = plane.r_squared, plane.rmse_mm, plane.sse_mm2
-        if fits.modal is not None:
-            fit.mode_names = list(fits.modal.names)
-            fit.modal_amplitudes_mm = [float(a) for a in fits.modal.amplitudes_mm]
-        self._fit_pub.publish(fit)
+        self._points_pub.publish(points_to_cloud(header, cloud_of(result, fits.rejected)))
+        self._fit_pub.publish(surface_fit_msg(msg, result, fits))
 
     def _on_line(self, msg: LaserLineProfile) -> None:
         result = reconstruct_line(self._rig, np.column_stack([msg.x_px, msg.y_px]),

@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from sds_recon.rig import Rig
-from sds_recon.surface_fit import ModalFit, PlaneFit, fit_modes, fit_plane
+from sds_recon.surface_fit import ModalFit, PlaneFit, fit_modes, fit_plane, surface_outliers
 from sds_recon.triangulation import (
     beam_height_sigma,
     plane_height_sigma,
@@ -37,10 +37,17 @@ class SurfacePoints:
 
 @dataclass(frozen=True)
 class SurfaceFits:
-    """The plane of Eq. 12 and the modal fit of one frame (None where too few points)."""
+    """The plane of Eq. 12 and the modal fit of one frame (None where too few points), and
+    which points were left out of both as not on the surface (`surface_outliers`)."""
 
     plane: PlaneFit | None
     modal: ModalFit | None
+    rejected: np.ndarray           # (N,) bool, True = left out
+
+    @property
+    def rejected_count(self) -> int:
+        """How many points were left out."""
+        return int(np.count_nonzero(self.rejected))
 
 
 def _sigmas(sigma_px: ArrayLike, default_sigma_px: float) -> np.ndarray:
@@ -77,11 +84,15 @@ def reconstruct_line(rig: Rig, pixels: ArrayLike, sigma_px: ArrayLike,
                          heights_sigma[keep], np.full(int(keep.sum()), np.nan))
 
 
-def fit_surface(points_mm: np.ndarray, radius_mm: float) -> SurfaceFits:
-    """Plane (three or more points) and modes (as many points as terms) of one frame."""
-    plane = fit_plane(points_mm) if len(points_mm) >= MIN_PLANE_POINTS else None
+def fit_surface(points: SurfacePoints, radius_mm: float) -> SurfaceFits:
+    """Plane (three or more points) and modes (as many points as terms) of one frame, both
+    without the points that are not on the surface (one wrong blob cannot move them)."""
+    rejected = surface_outliers(points.points_mm, points.height_sigma_mm, radius_mm,
+                                points.miss_distance_mm)
+    kept = points.points_mm[~rejected]
+    plane = fit_plane(kept) if len(kept) >= MIN_PLANE_POINTS else None
     try:
-        modal = fit_modes(points_mm, radius_mm)
+        modal = fit_modes(kept, radius_mm)
     except ValueError:
         modal = None   # too few points: no amplitudes rather than invented ones
-    return SurfaceFits(plane, modal)
+    return SurfaceFits(plane, modal, rejected)

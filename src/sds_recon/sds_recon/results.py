@@ -41,6 +41,8 @@ COLUMNS: dict[str, dict[str, str]] = {
         "Z_mm": "surface height above the flat fill level [mm]",
         "sigma_Z_mm": "one-sigma height uncertainty from the pixel uncertainty [mm]",
         "miss_mm": "distance between camera ray and beam (Eq. 9); empty for the line [mm]",
+        "rejected": "1 left out of the frame's fits as not on the surface (a ray missing its "
+                    "beam or a height off the modal surface by > 4 of its sigma), else 0",
     },
     "line": {
         "frame": "frame index, from 0",
@@ -62,7 +64,8 @@ COLUMNS: dict[str, dict[str, str]] = {
         "r_squared": "coefficient of determination of the plane",
         "rmse_mm": "root mean square residual of the plane [mm]",
         "sse_mm2": "sum of squared residuals of the plane [mm²]",
-        "point_count": "laser-spot points in the fit",
+        "point_count": "laser-spot points in the fit (after the rejected ones)",
+        "rejected_count": "laser-spot points left out as not on the surface (points.rejected)",
         "<mode>_mm": "modal amplitude (mean level, lateral_n_cos/sin, axisymmetric_n) [mm]",
     },
     "imu": {

@@ -11,6 +11,12 @@ from sds_recon.sloshing.theory import ModeShape, mode_name
 
 DEFAULT_MODES = ((1, 1), (1, 2), (0, 1))
 """Lateral modes ξ = 1.8412, 5.3314 and the first axisymmetric mode ξ = 3.8317."""
+OUTLIER_LIMIT_SIGMA = 4.0
+"""A point this many of its own σ off the frame's surface (or its beam) is rejected."""
+HEIGHT_SIGMA_FLOOR_MM = 0.05
+"""Floor under a point's height σ in that test: what the models leave (meniscus, modes)."""
+MODAL_REDUNDANCY = 4
+"""Points beyond the modal terms' count before the modal fit is the outlier reference."""
 
 
 @dataclass(frozen=True)
@@ -69,29 +75,21 @@ def fit_plane(points_mm: ArrayLike) -> PlaneFit:
                     r_squared, float(np.sqrt(sse / len(points))), sse, len(points))
 
 
-def fit_plane_rejecting(points_mm: ArrayLike, height_sigma_mm: ArrayLike,
-                        limit_sigma: float = 4.0, floor_mm: float = 0.05
-                        ) -> tuple[PlaneFit, np.ndarray]:
-    """Eq. 12's plane with outliers rejected against each point's own height σ (floored at
-    `floor_mm`): refit without the worst point while it lies beyond `limit_sigma`. Returns the
-    fit and the mask of rejected points (one wrong point cannot pull the plane)."""
-    points = np.atleast_2d(np.asarray(points_mm, dtype=float))
-    sigma = np.maximum(np.asarray(height_sigma_mm, dtype=float), floor_mm)
-    rejected = ~np.isfinite(points).all(axis=1)
-    while True:
-        fit = fit_plane(points[~rejected])
-        predicted = fit.p00_mm + fit.p10 * points[:, 0] + fit.p01 * points[:, 1]
-        normalised = np.where(rejected, 0.0, np.abs(points[:, 2] - predicted) / sigma)
-        worst = int(np.argmax(normalised))
-        if normalised[worst] <= limit_sigma or np.sum(~rejected) <= 3:
-            return fit, rejected
-        rejected[worst] = True
-
-
 def fit_modes(points_mm: ArrayLike, radius_mm: float,
               modes: tuple[tuple[int, int], ...] = DEFAULT_MODES) -> ModalFit:
     """Mean level plus J_m(ξ r/R)/J_m(ξ) · (cos mθ, sin mθ) per mode (cos alone for m = 0)."""
     points = _finite(points_mm)
+    design, names = _modal_design(points, radius_mm, modes)
+    if len(points) < design.shape[1]:
+        raise ValueError(f"{design.shape[1]} modal terms need as many points, got {len(points)}")
+    amplitudes, *_ = np.linalg.lstsq(design, points[:, 2], rcond=None)
+    residual = points[:, 2] - design @ amplitudes
+    return ModalFit(tuple(names), amplitudes, float(np.sqrt(np.mean(residual**2))), len(points))
+
+
+def _modal_design(points: np.ndarray, radius_mm: float, modes: tuple[tuple[int, int], ...]
+                  ) -> tuple[np.ndarray, list[str]]:
+    """The modal fit's design matrix (one column per term) at the points, and the terms' names."""
     columns, names = [np.ones(len(points))], ["mean"]
     for order, index in modes:
         for label, azimuth in (("cos", 0.0), ("sin", np.pi / 2)):
@@ -100,12 +98,7 @@ def fit_modes(points_mm: ArrayLike, radius_mm: float,
             shape = ModeShape(order, index, azimuth / max(order, 1))
             columns.append(shape.height(points[:, 0], points[:, 1], radius_mm))
             names.append(f"{mode_name(order, index)}_{label}" if order else mode_name(order, index))
-    design = np.column_stack(columns)
-    if len(points) < design.shape[1]:
-        raise ValueError(f"{design.shape[1]} modal terms need as many points, got {len(points)}")
-    amplitudes, *_ = np.linalg.lstsq(design, points[:, 2], rcond=None)
-    residual = points[:, 2] - design @ amplitudes
-    return ModalFit(tuple(names), amplitudes, float(np.sqrt(np.mean(residual**2))), len(points))
+    return np.column_stack(columns), names
 
 
 def radial_profile(points_mm: ArrayLike, radius_mm: float, bins: int = 22
@@ -119,3 +112,42 @@ def radial_profile(points_mm: ArrayLike, radius_mm: float, bins: int = 22
     with np.errstate(invalid="ignore", divide="ignore"):
         mean = total / count
     return (edges[:-1] + edges[1:]) / 2, mean, count
+
+
+def surface_outliers(points_mm: ArrayLike, height_sigma_mm: ArrayLike, radius_mm: float,
+                     miss_distance_mm: ArrayLike | None = None,
+                     limit_sigma: float = OUTLIER_LIMIT_SIGMA,
+                     floor_mm: float = HEIGHT_SIGMA_FLOOR_MM) -> np.ndarray:
+    """Mask of the points that are not on this frame's surface (True = rejected).
+
+    A spot whose camera ray misses its beam (Eq. 9) by more than `limit_sigma` of its height σ
+    (floored at `floor_mm`) is not on that beam. Of the others, the one farthest off the
+    surface is rejected, the surface refitted, and so on while one lies beyond `limit_sigma`
+    of its σ. The surface is the modal fit (it follows the sloshing, which the plane does not)
+    where the points over-determine it, else Eq. 12's plane. The σ-normalised residuals are
+    scaled by their robust spread (1.4826 × median |r|) where that exceeds 1, so a surface the
+    model only nearly describes loses no points, while a wrong blob, millimetres off, does.
+    """
+    points = np.atleast_2d(np.asarray(points_mm, dtype=float))
+    sigma = np.maximum(np.asarray(height_sigma_mm, dtype=float), floor_mm)
+    rejected = ~np.isfinite(points).all(axis=1) | ~np.isfinite(sigma)
+    if miss_distance_mm is not None:
+        miss = np.nan_to_num(np.asarray(miss_distance_mm, dtype=float), nan=0.0)
+        rejected |= miss > limit_sigma * sigma
+    modal_terms = 1 + sum(2 if order else 1 for order, _ in DEFAULT_MODES)
+    while np.sum(~rejected) > 3:
+        kept = points[~rejected]
+        if len(kept) >= modal_terms + MODAL_REDUNDANCY:
+            design = _modal_design(points, radius_mm, DEFAULT_MODES)[0]
+            coefficients, *_ = np.linalg.lstsq(design[~rejected], kept[:, 2], rcond=None)
+        else:
+            design = np.column_stack([np.ones(len(points)), points[:, :2]])
+            coefficients, *_ = np.linalg.lstsq(design[~rejected], kept[:, 2], rcond=None)
+        normalised = np.abs(points[:, 2] - np.nan_to_num(design) @ coefficients) / sigma
+        normalised[rejected] = 0.0
+        spread = max(1.0, 1.4826 * float(np.median(normalised[~rejected])))
+        worst = int(np.argmax(normalised))
+        if normalised[worst] <= limit_sigma * spread:
+            break
+        rejected[worst] = True
+    return rejected

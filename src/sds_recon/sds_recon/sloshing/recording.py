@@ -59,14 +59,16 @@ def recording_from_rows(time_s: np.ndarray, laser_ids: np.ndarray, points_mm: np
 
 
 def read_points_csv(path: str | Path) -> SurfaceRecording:
-    """A points CSV (`sds export` layout; lines starting with # are comments)."""
+    """A points CSV (`sds export` layout; lines starting with # are comments), without the
+    points marked rejected."""
     path = Path(path)
     with path.open(newline="") as stream:
         reader = csv.DictReader(line for line in stream if not line.startswith("#"))
         missing = [c for c in POINTS_COLUMNS if c not in (reader.fieldnames or ())]
         if missing:
             raise RecordingError(f"{path}: missing columns {', '.join(missing)}")
-        rows = list(reader)
+        # points the run left out of its fits (column `rejected`) stay out of the analysis
+        rows = [r for r in reader if r.get("rejected", "0") != "1"]
     try:
         times = np.array([float(r["t_s"]) for r in rows])
         ids = np.array([int(r["laser_id"]) for r in rows])
@@ -86,6 +88,14 @@ def cloud_points(msg) -> np.ndarray | None:
                       "formats": [POINT_FIELD_TYPES[f.datatype] for f in msg.fields],
                       "itemsize": msg.point_step})
     return np.frombuffer(bytes(msg.data), dtype, count=msg.width * msg.height)
+
+
+def cloud_rejected(cloud: np.ndarray) -> np.ndarray:
+    """Per point: left out of its frame's fits (the cloud's `rejected` field; clouds recorded
+    before that field existed reject nothing)."""
+    if cloud.dtype.names is not None and "rejected" in cloud.dtype.names:
+        return cloud["rejected"].astype(bool)
+    return np.zeros(len(cloud), dtype=bool)
 
 
 def cloud_xyz(cloud: np.ndarray) -> np.ndarray:
@@ -113,6 +123,8 @@ def read_mcap(path: str | Path) -> SurfaceRecording:
             for schema, _, _, msg in reader.iter_decoded_messages():
                 if schema.name == "sensor_msgs/msg/PointCloud2":
                     cloud = cloud_points(msg)
+                    if cloud is not None:
+                        cloud = cloud[~cloud_rejected(cloud)]
                     if cloud is not None and len(cloud):
                         rows["time"].append(np.full(len(cloud), stamp_s(msg)))
                         rows["id"].append(cloud["laser_id"].astype(int))
