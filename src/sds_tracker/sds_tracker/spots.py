@@ -60,15 +60,20 @@ class SpotTracker:
 
     Per spot and frame only a window is read (no full-frame work): background = median of the
     window's border, connected blobs above `threshold`, the blob chosen by brightness times a
-    Gaussian prior around the previous position among those within `path_tolerance_px` of the
-    beam's path, and the position = intensity centroid of the background-subtracted signal in
-    a round aperture (re-centred once). A spot not found is reported lost, with no position,
+    Gaussian prior around the previous position among those within the spot's path tolerance
+    (`path_tolerance_px`, or `tolerances_px` where wider) of the beam's path, and the
+    position = intensity centroid of the background-subtracted signal in a round aperture
+    (re-centred once). A spot not found is reported lost, with no position,
     and searched for along its whole path in the next frame.
     """
 
-    def __init__(self, paths: dict[int, np.ndarray], settings: SpotSettings | None = None) -> None:
+    def __init__(self, paths: dict[int, np.ndarray], settings: SpotSettings | None = None,
+                 tolerances_px: dict[int, float] | None = None) -> None:
         self.settings = settings or SpotSettings()
         self.paths = {i: np.asarray(p, dtype=float) for i, p in paths.items()}
+        # Per spot: `path_tolerance_px`, or wider where its beam is known less well.
+        self.tolerance_px = {i: max(self.settings.path_tolerance_px,
+                                    (tolerances_px or {}).get(i, 0.0)) for i in self.paths}
         self.previous: dict[int, np.ndarray | None] = dict.fromkeys(self.paths)
         # All paths in one array for the batched pass; shorter ones repeat their last point
         # (a zero-length segment, which changes no distance).
@@ -120,7 +125,8 @@ class SpotTracker:
             s.clip_fraction, s.read_noise)
         full = centre + corner + origin
         paths = self._stacked_paths[[self._row[i] for i in ids]]
-        ok &= distances_to_paths(full, paths) <= s.path_tolerance_px
+        tolerance = np.array([self.tolerance_px[i] for i in ids])
+        ok &= distances_to_paths(full, paths) <= tolerance
         settled = {}
         for k, laser_id in enumerate(ids):
             if not ok[k]:
@@ -155,7 +161,7 @@ class SpotTracker:
         candidates = []
         for label in range(1, count):
             centre = centroids[label] + [x0, y0] + origin
-            if distance_to_path(centre, path) > s.path_tolerance_px + 2 * np.sqrt(
+            if distance_to_path(centre, path) > self.tolerance_px[laser_id] + 2 * np.sqrt(
                     stats[label, cv2.CC_STAT_AREA] / np.pi):
                 continue
             mass = float(signal[labels == label].sum())
@@ -183,7 +189,7 @@ class SpotTracker:
             if total <= 0:
                 return lost
             centre = np.array([np.sum(weights * xs), np.sum(weights * ys)]) / total
-        if distance_to_path(centre, path) > s.path_tolerance_px:
+        if distance_to_path(centre, path) > self.tolerance_px[laser_id]:
             return SpotEstimate(laser_id, np.nan, np.nan, np.nan, 0.0, LOST | OFF_PATH)
         variance = np.clip(raw, 0, None) + s.read_noise**2
         sigma = float(np.sqrt(np.sum(variance * ((xs - centre[0]) ** 2 +
