@@ -19,6 +19,7 @@ from sds_recon.calibration.self_calibration import self_calibrate
 from sds_recon.rig import load_rig, save_rig
 from sds_sim.tilt_series import render_tilt_series
 from sds_sim.true_rig import RigErrors, random_layout, true_rig
+from sds_tracker.plateaus import find_plateaus
 from sds_tracker.tracker import FrameTracker
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -147,3 +148,43 @@ def test_sds_calibrate_rig_writes_rig_report_and_overlays(tmp_path: Path) -> Non
     # An existing rig file is not replaced unless asked.
     again = subprocess.run(command, capture_output=True, text=True, timeout=300)
     assert again.returncode == 2 and "exists" in again.stderr and "Traceback" not in again.stderr
+
+
+def test_plateaus_are_the_still_stretches_long_enough() -> None:
+    # frame k's change against frame k − 1: still, a jump at 6, sloshing 12–15, still again
+    changes = np.array([0, 0, 1, 0, 0, 0, 900, 0, 0, 2, 0, 0, 40, 300, 80, 30, 0, 0, 0, 0, 0])
+    plateaus = find_plateaus(changes, min_frames=5, still_px=4)
+    assert [(p.first, p.last) for p in plateaus] == [(0, 5), (6, 11), (15, 20)]
+    assert [p.middle for p in plateaus] == [2, 8, 17]
+    assert find_plateaus(changes, min_frames=7, still_px=4) == []
+
+
+def test_sds_calibrate_rig_takes_the_still_stretches_of_a_video(tmp_path: Path) -> None:
+    """A 4K H.264 tilt-table video at 10 fps, six one-second steps (the simulator's)."""
+    scenario = tmp_path / "tilt.yaml"
+    scenario.write_text(
+        f"name: tilt video\nrig: {STELIUM}\nseed: 3\nduration_s: 6.0\nfps: 10.0\n"
+        "tilt_series_deg: [0, 7, 14, 21, 28, 35]\ntilt_series_axis: x\n"
+        "meniscus_height_mm: 0.0\nkick_s: 0.0\ndisturbances: {reflection_strength: 0.3}\n")
+    subprocess.run([SDS, "simulate", str(scenario), "--out", str(tmp_path / "sim"), "--codec",
+                    "h264"], check=True, capture_output=True)
+    surfaces = tmp_path / "surfaces.csv"
+    surfaces.write_text("frame,tilt_x_deg,tilt_y_deg\n" + "".join(
+        f"{k},{angle},0\n" for k, angle in enumerate([0, 7, 14, 21, 28, 35])))
+    command = [SDS, "calibrate", "rig", "--rig", str(STELIUM), "--video",
+               str(tmp_path / "sim" / "video.mp4"), "--surfaces", str(surfaces)]
+    done = subprocess.run([*command, "--out", str(tmp_path / "rig.yaml")],
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    rig = load_rig(tmp_path / "rig.yaml")
+    assert all(d.tracked for d in rig.diodes)
+    # the rig file's own geometry is the truth: no beam may come out leaning beyond 3 σ
+    assert all(np.degrees(np.arccos(-d.direction[2])) < 3 * d.direction_sigma_deg + 0.05
+               for d in rig.diodes)
+    report = (tmp_path / "rig.report.html").read_text()
+    assert "frame 10 (still 0.60" in report        # the second step's middle frame
+    surfaces.write_text("frame,tilt_x_deg,tilt_y_deg\n0,0,0\n1,7,0\n")
+    wrong = subprocess.run([*command, "--out", str(tmp_path / "other.yaml")],
+                           capture_output=True, text=True)
+    assert wrong.returncode == 2 and len(wrong.stderr.strip().splitlines()) == 1
+    assert "6 still stretches" in wrong.stderr and "2 known surfaces" in wrong.stderr

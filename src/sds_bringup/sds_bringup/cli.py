@@ -126,8 +126,12 @@ def _add_calibrate(commands: argparse._SubParsersAction) -> None:
                     "the fitted camera; write the calibrated rig with uncertainties, a report "
                     "and one overlay per image.")
     rig.add_argument("--rig", type=Path, required=True, help="the rig file as designed")
-    rig.add_argument("--images", type=Path, nargs="+", required=True,
-                     help="images of known surfaces (image k is frame k of --surfaces)")
+    source = rig.add_mutually_exclusive_group(required=True)
+    source.add_argument("--images", type=Path, nargs="+",
+                        help="images of known surfaces (image k is frame k of --surfaces)")
+    source.add_argument("--video", type=Path,
+                        help="video of the tilt table: its still stretches (0.5 s or more), "
+                             "in order, are the frames of --surfaces")
     rig.add_argument("--surfaces", type=Path, required=True,
                      help="CSV: frame, tilt_x_deg, tilt_y_deg[, offset_mm]")
     rig.add_argument("--out", type=Path, required=True, help="calibrated rig file to write")
@@ -187,29 +191,29 @@ def _run_calibrate_line_plane(args: argparse.Namespace) -> int:
 
 def _run_calibrate_rig(args: argparse.Namespace) -> int:
     from sds_camera.frame_source import FrameSourceError
-    from sds_recon.calibration.laser_files import read_surfaces
     from sds_recon.calibration.rig_calibration import CalibrationSettings
     from sds_recon.calibration.rig_report import report_text, rig_report
     from sds_recon.rig import load_rig
 
-    from sds_bringup.rig_calibration import calibrate_images, read_images, write_calibration
+    from sds_bringup.rig_calibration import (
+        calibrate_images,
+        calibration_frames,
+        known_surfaces,
+        write_calibration,
+    )
 
     if args.out.exists() and not args.overwrite:
         print(f"sds calibrate rig: {args.out} exists (--overwrite replaces it)", file=sys.stderr)
         return 2
     try:
         rig = load_rig(args.rig)
-        known = read_surfaces(args.surfaces)
-        missing = [str(p) for k, p in enumerate(args.images) if k not in known]
-        if missing:
-            raise ValueError(f"{args.surfaces}: no known surface for {', '.join(missing[:3])}")
-        images = read_images(args.images)
+        surfaces = known_surfaces(args.surfaces)
+        images, names = calibration_frames(args.images or [args.video], rig, len(surfaces))
         settings = CalibrationSettings(cone_deg=args.cone_deg,
                                        camera_turn_deg=args.camera_turn_deg,
                                        fit_emitters=args.fit_emitters)
-        result, found = calibrate_images(rig, images, [known[k] for k in range(len(images))],
-                                         settings)
-        write_calibration(rig, result, found, images, [str(p) for p in args.images], args.out,
+        result, found = calibrate_images(rig, images, surfaces, settings)
+        write_calibration(rig, result, found, images, names, args.out,
                           f"`sds calibrate rig` from {args.rig}")
     except (OSError, ValueError, FrameSourceError) as error:  # RigError is a ValueError
         print(f"sds calibrate rig: {error}", file=sys.stderr)

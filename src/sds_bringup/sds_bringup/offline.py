@@ -19,7 +19,6 @@ from mcap.exceptions import McapError
 from mcap_ros2.reader import read_ros2_messages
 from sds_camera.frame_source import FrameSource, FrameSourceError, Region, open_source, select
 from sds_camera.image_msg import msg_to_image
-from sds_recon.calibration.laser_files import read_surfaces
 from sds_recon.reconstruction import (
     SurfaceFits,
     SurfacePoints,
@@ -47,7 +46,12 @@ from tqdm import tqdm
 
 from sds_bringup.graph import GraphFileError, node_parameters
 from sds_bringup.paths import CONFIG
-from sds_bringup.rig_calibration import calibrate_images, read_images, write_calibration
+from sds_bringup.rig_calibration import (
+    calibrate_images,
+    calibration_frames,
+    known_surfaces,
+    write_calibration,
+)
 
 GRAPH = CONFIG / "graphs" / "drop.yaml"
 """The graph whose tracker and reconstruction parameters the offline pipeline uses."""
@@ -112,21 +116,18 @@ def _recorded_frames(path: Path) -> Iterator[RedFrame]:
             index += 1
 
 
-def calibrate_from_images(rig: Rig, images: list[Path], surfaces: Path, out: Path
+def calibrate_from_images(rig: Rig, paths: list[Path], surfaces: Path, out: Path
                           ) -> tuple[Rig, Path]:
     """Self-calibrate the rig from images of known surfaces (image k is frame k of the
-    surfaces CSV), as `sds calibrate rig` does; write the rig, its report and overlays."""
-    known = read_surfaces(surfaces)
-    missing = [str(p) for k, p in enumerate(images) if k not in known]
-    if missing:
-        raise RecordingError(f"{surfaces}: no known surface for {', '.join(missing[:3])}")
-    pictures = read_images(images)
-    result, found = calibrate_images(rig, pictures, [known[k] for k in range(len(images))])
+    surfaces CSV) or one tilt-table video, as `sds calibrate rig` does; write the rig, its
+    report and overlays."""
+    known = known_surfaces(surfaces)
+    pictures, names = calibration_frames(paths, rig, len(known))
+    result, found = calibrate_images(rig, pictures, known)
     out.mkdir(parents=True, exist_ok=True)
     rig_path = out / "rig_calibrated.yaml"
-    calibrated = write_calibration(rig, result, found, pictures, [str(p) for p in images],
-                                   rig_path, f"`sds process --calibrate-lasers` from "
-                                             f"{len(images)} images")
+    calibrated = write_calibration(rig, result, found, pictures, names, rig_path,
+                                   f"`sds process --calibrate-lasers` from {len(names)} images")
     return calibrated, rig_path
 
 
@@ -298,8 +299,9 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
                          help="frame rate of an image folder [1/s]")
     process.add_argument("--gravity", type=float, help="gravity for the theory [m/s²]")
     process.add_argument("--calibrate-lasers", type=Path, nargs="+", metavar="IMAGE",
-                         help="images of known surfaces: calibrate the beams and line plane "
-                              "first (needs --surfaces) and process with the calibrated rig")
+                         help="images of known surfaces, or one video of the tilt table (its "
+                              "still stretches in order): self-calibrate the rig first (needs "
+                              "--surfaces) and process with the calibrated rig")
     process.add_argument("--surfaces", type=Path,
                          help="known surface per image: frame, tilt_x_deg, tilt_y_deg"
                               "[, offset_mm] (frame k = k-th image)")

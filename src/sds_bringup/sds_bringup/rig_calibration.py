@@ -15,7 +15,8 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from sds_camera.frame_source import Region, select
+from sds_camera.frame_source import Region, VideoFileSource, open_source, select
+from sds_recon.calibration.laser_files import read_surfaces
 from sds_recon.calibration.lasers import KnownSurface
 from sds_recon.calibration.rig_calibration import (
     CalibrationSettings,
@@ -28,6 +29,7 @@ from sds_recon.rig import Rig, save_rig
 from sds_recon.triangulation import beam_image_path
 from sds_tracker.discovery import SpotCandidates, find_spots
 from sds_tracker.line import LineSettings, track_line
+from sds_tracker.plateaus import changed_pixels, find_plateaus
 from sds_tracker.tracker import flat_line_px
 
 REGION_MARGIN_MM = 8.0
@@ -37,6 +39,11 @@ LINE_BAND_4K_PX = 80
 LINE_SAMPLES_PER_FRAME = 60
 """Line rows per image that enter the joint fit (evenly spaced; more add time, not accuracy)."""
 OVERLAY_WIDTH_PX = 1200
+VIDEO_SUFFIXES = (".mp4", ".mov", ".mkv", ".avi", ".m4v")
+STILL_S = 0.5
+"""Shortest still stretch of a calibration video that counts as a plateau [s]."""
+STILL_PX = 4
+"""Most changed pixels (half resolution) between two frames of a still stretch."""
 
 
 @dataclass(frozen=True)
@@ -57,6 +64,73 @@ def read_images(paths: list[Path]) -> list[np.ndarray]:
             raise ValueError(f"{path}: not a readable image")
         images.append(image)
     return images
+
+
+def known_surfaces(path: Path) -> list[KnownSurface]:
+    """The surfaces CSV's surfaces in frame order; its frames must run 0, 1, … without gaps."""
+    known = read_surfaces(path)
+    if sorted(known) != list(range(len(known))):
+        raise ValueError(f"{path}: frames must run 0, 1, 2, … (got {sorted(known)[:8]})")
+    if not known:
+        raise ValueError(f"{path}: no known surface")
+    return [known[k] for k in range(len(known))]
+
+
+def calibration_frames(paths: list[Path], rig: Rig, count: int
+                       ) -> tuple[list[np.ndarray], list[str]]:
+    """Images of the known surfaces (one per surface) from image files, or from the still
+    stretches of one video file (VIDEO_SUFFIXES)."""
+    if len(paths) == 1 and paths[0].suffix.lower() in VIDEO_SUFFIXES:
+        return read_video_plateaus(paths[0], rig, count)
+    if len(paths) != count:
+        raise ValueError(f"{len(paths)} images but {count} known surfaces")
+    return read_images(paths), [str(p) for p in paths]
+
+
+def read_video_plateaus(path: Path, rig: Rig, count: int, min_still_s: float = STILL_S
+                        ) -> tuple[list[np.ndarray], list[str]]:
+    """The middle frame (BGR) of each of the `count` still stretches of a tilt-table video,
+    and a name for each; a one-line error (ValueError) when it has another number of them.
+
+    Two passes: the first measures each frame's change inside the container's region (red
+    channel, half resolution), the second keeps only the plateaus' middle frames.
+    """
+    region = Region(*rig.container_region_px(rig.camera))
+    source = open_source(str(path))
+    try:
+        fps = source.nominal_fps if isinstance(source, VideoFileSource) else 0.0
+        if not fps > 0:
+            raise ValueError(f"{path}: a video file with a frame rate is needed")
+        changes, previous = [], None
+        for frame in source.frames():
+            region.check_inside(frame.image.shape[1], frame.image.shape[0])
+            red = cv2.resize(select(frame.image, region, "red"), None, fx=0.5, fy=0.5,
+                             interpolation=cv2.INTER_AREA)
+            changes.append(0 if previous is None else changed_pixels(previous, red))
+            previous = red
+    finally:
+        source.close()
+    plateaus = find_plateaus(np.array(changes), max(2, round(min_still_s * fps)),
+                             STILL_PX)
+    if len(plateaus) != count:
+        found = ", ".join(f"{p.first / fps:.1f}–{p.last / fps:.1f} s" for p in plateaus[:12])
+        raise ValueError(f"{path}: {len(plateaus)} still stretches of {min_still_s:g} s or more "
+                         f"({found or 'none'}), but {count} known surfaces")
+    wanted = {p.middle: p for p in plateaus}
+    images, names = [], []
+    source = open_source(str(path))
+    try:
+        for frame in source.frames():
+            if frame.index in wanted:
+                images.append(frame.image)
+                p = wanted[frame.index]
+                names.append(f"{path.name} frame {frame.index} (still {p.first / fps:.2f}–"
+                             f"{p.last / fps:.2f} s)")
+            if len(images) == len(wanted):
+                break
+    finally:
+        source.close()
+    return images, names
 
 
 def observe(rig: Rig, images: list[np.ndarray]) -> CalibrationImages:
