@@ -25,7 +25,7 @@ def main() -> None:
     args = parser.parse_args()
     rows = []
     print("seed  wrong/spots  calibrated  unidentified  camera err deg (sigma)  cam mm  "
-          "beam max deg  unseen tilt deg / RMSE mm: self | beam-only   s")
+          "beam max deg  unseen tilt deg / RMSE mm: self | beam-only  drop RMSE mm, missed  s")
     for seed in range(args.first_seed, args.first_seed + args.rigs):
         start = time.perf_counter()
         r = trial(seed, RIG)
@@ -35,8 +35,9 @@ def main() -> None:
               f"{np.abs(r['camera_error_deg']).max():>6.3f} ({r['camera_sigma_deg'].max():.3f})"
               f"  {np.abs(r['camera_error_mm']).max():>6.3f}  "
               f"{max(r['beam_error_deg'].values()):>12.3f}  "
-              f"{r['self'].tilt_error_deg:.3f} / {r['self'].height_rmse_mm:.3f} | "
-              f"{r['beam_only'].tilt_error_deg:.3f} / {r['beam_only'].height_rmse_mm:.3f}"
+              f"{r['self'].tilt_error_deg:.3f} / {r['self'].heights.rmse_mm:.3f} | "
+              f"{r['beam_only'].tilt_error_deg:.3f} / {r['beam_only'].heights.rmse_mm:.3f}"
+              f"  {r['drop'].heights.rmse_mm:.3f}, {r['drop'].missed}/{r['drop'].spots}"
               f"   {time.perf_counter() - start:.1f}", flush=True)
     beams = np.concatenate([list(r["beam_error_deg"].values()) for r in rows])
     print(f"\n{len(rows)} rigs: wrong identities {sum(r['wrong'] for r in rows)}, "
@@ -47,10 +48,19 @@ def main() -> None:
           f"max {beams.max():.3f}")
     for key in ("self", "beam_only"):
         tilt = [r[key].tilt_error_deg for r in rows]
-        rmse = [r[key].height_rmse_mm for r in rows]
+        rmse = [r[key].heights.rmse_mm for r in rows]
         print(f"unseen series, {key}: tilt error median {np.median(tilt):.3f} max "
               f"{np.max(tilt):.3f} deg; height RMSE median {np.median(rmse):.3f} max "
-              f"{np.max(rmse):.3f} mm")
+              f"{np.max(rmse):.3f} mm (points with sigma <= 0.1 mm: "
+              f"{sum(r[key].heights.precise for r in rows)} of "
+              f"{sum(r[key].heights.points for r in rows)}); error/sigma RMS max "
+              f"{max(r[key].heights.normalised_rms for r in rows):.2f}")
+    drops = [r["drop"] for r in rows]
+    print(f"1 g drop, 30 frames: height RMSE median "
+          f"{np.median([d.heights.rmse_mm for d in drops]):.3f} max "
+          f"{max(d.heights.rmse_mm for d in drops):.3f} mm, error/sigma RMS max "
+          f"{max(d.heights.normalised_rms for d in drops):.2f}; spots missed "
+          f"{sum(d.missed for d in drops)} of {sum(d.spots for d in drops)}")
 
 
 if __name__ == "__main__":

@@ -55,9 +55,15 @@ def test_self_calibration_of_a_random_true_rig(seed: int) -> None:
     for laser_id, beam_error in result["beam_error_deg"].items():
         assert beam_error < max(0.05, 4 * result["beam_sigma_deg"][laser_id]), laser_id
     # The unseen series about the other axis: the seed's Table 3 symptom is gone.
+    heights = result["self"].heights
     assert result["self"].tilt_error_deg <= 0.1
-    assert result["self"].height_rmse_mm <= 0.1
+    assert heights.rmse_mm <= 0.1 and heights.precise >= 0.8 * heights.points, heights
+    assert heights.normalised_rms < 3.0, heights    # the points' σ are about honest
     assert result["beam_only"].tilt_error_deg > 3 * result["self"].tilt_error_deg
+    # A 1 g sloshing drop (30 frames from the kick) tracked with the calibrated rig.
+    drop = result["drop"]
+    assert drop.missed == 0 and drop.spots >= 20 * len(result["calibrated"]), drop
+    assert drop.heights.rmse_mm <= 0.1 and drop.heights.normalised_rms < 3.0, drop
 
 
 def test_a_diode_without_a_consistent_beam_is_named_not_calibrated() -> None:

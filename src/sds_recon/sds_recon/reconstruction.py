@@ -12,7 +12,14 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from sds_recon.rig import Rig
-from sds_recon.surface_fit import ModalFit, PlaneFit, fit_modes, fit_plane, surface_outliers
+from sds_recon.surface_fit import (
+    HEIGHT_SIGMA_FLOOR_MM,
+    ModalFit,
+    PlaneFit,
+    fit_modes,
+    fit_plane,
+    surface_outliers,
+)
 from sds_recon.triangulation import (
     beam_height_sigma,
     plane_height_sigma,
@@ -86,13 +93,17 @@ def reconstruct_line(rig: Rig, pixels: ArrayLike, sigma_px: ArrayLike,
 
 def fit_surface(points: SurfacePoints, radius_mm: float) -> SurfaceFits:
     """Plane (three or more points) and modes (as many points as terms) of one frame, both
-    without the points that are not on the surface (one wrong blob cannot move them)."""
+    without the points that are not on the surface (one wrong blob cannot move them) and
+    weighted by each height's σ (floored at HEIGHT_SIGMA_FLOOR_MM)."""
     rejected = surface_outliers(points.points_mm, points.height_sigma_mm, radius_mm,
                                 points.miss_distance_mm)
     kept = points.points_mm[~rejected]
-    plane = fit_plane(kept) if len(kept) >= MIN_PLANE_POINTS else None
+    # Weights 1/σ² with σ floored: points of ordinary quality weigh alike (the seed's plain
+    # Eq. 12), a point measured less well (e.g. beside the laser line) weighs less.
+    weights = np.maximum(points.height_sigma_mm[~rejected], HEIGHT_SIGMA_FLOOR_MM) ** -2.0
+    plane = fit_plane(kept, weights) if len(kept) >= MIN_PLANE_POINTS else None
     try:
-        modal = fit_modes(kept, radius_mm)
+        modal = fit_modes(kept, radius_mm, weights=weights)
     except ValueError:
         modal = None   # too few points: no amplitudes rather than invented ones
     return SurfaceFits(plane, modal, rejected)

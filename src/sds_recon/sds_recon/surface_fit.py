@@ -60,13 +60,27 @@ def _finite(points: ArrayLike) -> np.ndarray:
     return points[np.isfinite(points).all(axis=1)]
 
 
-def fit_plane(points_mm: ArrayLike) -> PlaneFit:
-    """Least-squares plane through the finite points (N×3 mm); needs three or more."""
-    points = _finite(points_mm)
+def _finite_weighted(points_mm: ArrayLike, weights: ArrayLike | None
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """The finite points and their weights (1 where none are given) [mm, 1/mm²]."""
+    points = np.atleast_2d(np.asarray(points_mm, dtype=float))
+    weight = np.ones(len(points)) if weights is None else np.asarray(weights, dtype=float)
+    keep = np.isfinite(points).all(axis=1) & np.isfinite(weight)
+    return points[keep], weight[keep]
+
+
+def fit_plane(points_mm: ArrayLike, weights: ArrayLike | None = None) -> PlaneFit:
+    """Least-squares plane through the finite points (N×3 mm); needs three or more.
+
+    With `weights` (e.g. 1/σ² of each height) the plane is the weighted fit; R², RMSE and SSE
+    stay the plain statistics of its residuals.
+    """
+    points, weight = _finite_weighted(points_mm, weights)
     if len(points) < 3:
         raise ValueError(f"a plane needs 3 or more points, got {len(points)}")
     design = np.column_stack([np.ones(len(points)), points[:, 0], points[:, 1]])
-    coefficients, *_ = np.linalg.lstsq(design, points[:, 2], rcond=None)
+    root = np.sqrt(weight)
+    coefficients, *_ = np.linalg.lstsq(design * root[:, None], points[:, 2] * root, rcond=None)
     residual = points[:, 2] - design @ coefficients
     sse = float(residual @ residual)
     sst = float(np.sum((points[:, 2] - points[:, 2].mean()) ** 2))
@@ -76,13 +90,16 @@ def fit_plane(points_mm: ArrayLike) -> PlaneFit:
 
 
 def fit_modes(points_mm: ArrayLike, radius_mm: float,
-              modes: tuple[tuple[int, int], ...] = DEFAULT_MODES) -> ModalFit:
-    """Mean level plus J_m(ξ r/R)/J_m(ξ) · (cos mθ, sin mθ) per mode (cos alone for m = 0)."""
-    points = _finite(points_mm)
+              modes: tuple[tuple[int, int], ...] = DEFAULT_MODES,
+              weights: ArrayLike | None = None) -> ModalFit:
+    """Mean level plus J_m(ξ r/R)/J_m(ξ) · (cos mθ, sin mθ) per mode (cos alone for m = 0);
+    weighted by `weights` where given (RMSE stays the plain one)."""
+    points, weight = _finite_weighted(points_mm, weights)
     design, names = _modal_design(points, radius_mm, modes)
     if len(points) < design.shape[1]:
         raise ValueError(f"{design.shape[1]} modal terms need as many points, got {len(points)}")
-    amplitudes, *_ = np.linalg.lstsq(design, points[:, 2], rcond=None)
+    root = np.sqrt(weight)
+    amplitudes, *_ = np.linalg.lstsq(design * root[:, None], points[:, 2] * root, rcond=None)
     residual = points[:, 2] - design @ amplitudes
     return ModalFit(tuple(names), amplitudes, float(np.sqrt(np.mean(residual**2))), len(points))
 

@@ -11,6 +11,9 @@ from sds_tracker.kernels import spot_windows
 
 LOST, SATURATED, REFLECTION_SUSPECTED, OFF_PATH, HAMPEL_REPLACED = 1, 2, 4, 8, 16
 """Flag bits, the same as sds_msgs/LaserSpot's."""
+LINE_SIGMA_PX = 0.5
+"""Least uncertainty of a spot measured with the laser line's light subtracted (a saturated
+spot on the line keeps a bias of about 1.4 px across the line)."""
 
 
 @dataclass(frozen=True)
@@ -60,20 +63,15 @@ class SpotTracker:
 
     Per spot and frame only a window is read (no full-frame work): background = median of the
     window's border, connected blobs above `threshold`, the blob chosen by brightness times a
-    Gaussian prior around the previous position among those within the spot's path tolerance
-    (`path_tolerance_px`, or `tolerances_px` where wider) of the beam's path, and the
-    position = intensity centroid of the background-subtracted signal in a round aperture
-    (re-centred once). A spot not found is reported lost, with no position,
+    Gaussian prior around the previous position among those within `path_tolerance_px` of the
+    beam's path, and the position = intensity centroid of the background-subtracted signal in
+    a round aperture (re-centred once). A spot not found is reported lost, with no position,
     and searched for along its whole path in the next frame.
     """
 
-    def __init__(self, paths: dict[int, np.ndarray], settings: SpotSettings | None = None,
-                 tolerances_px: dict[int, float] | None = None) -> None:
+    def __init__(self, paths: dict[int, np.ndarray], settings: SpotSettings | None = None) -> None:
         self.settings = settings or SpotSettings()
         self.paths = {i: np.asarray(p, dtype=float) for i, p in paths.items()}
-        # Per spot: `path_tolerance_px`, or wider where its beam is known less well.
-        self.tolerance_px = {i: max(self.settings.path_tolerance_px,
-                                    (tolerances_px or {}).get(i, 0.0)) for i in self.paths}
         self.previous: dict[int, np.ndarray | None] = dict.fromkeys(self.paths)
         # All paths in one array for the batched pass; shorter ones repeat their last point
         # (a zero-length segment, which changes no distance).
@@ -86,19 +84,24 @@ class SpotTracker:
         # The previous position is a window's centre (to half a pixel): one prior for all.
         self._prior = np.exp(-(xx**2 + yy**2) / (2 * self.settings.prior_sigma_px**2))
 
-    def update(self, image: np.ndarray, offset: tuple[int, int] = (0, 0)) -> list[SpotEstimate]:
+    def update(self, image: np.ndarray, offset: tuple[int, int] = (0, 0),
+               line: tuple[np.ndarray, np.ndarray] | None = None) -> list[SpotEstimate]:
         """Estimates for one frame; `image` is the red channel of the region at `offset` (x, y).
 
         Spots tracked in the previous frame go through one batched pass over all their windows;
         any spot that pass cannot settle (not found, a competing blob, off its path, near the
-        image edge) and every spot not yet acquired take the full per-spot search.
+        image edge) and every spot not yet acquired take the full per-spot search. `line`, the
+        laser line's full-frame (rows, columns) in this frame, if given, rescues a spot the
+        line's light pulls off its path (`subtract_line_centroid`).
         """
         origin = np.array(offset, dtype=float)
         tracked = [i for i in self.paths if self.previous[i] is not None]
         settled = self._track_batch(image, origin, tracked) if tracked else {}
         estimates = []
         for laser_id, path in self.paths.items():
-            estimate = settled.get(laser_id) or self._track(image, origin, laser_id, path)
+            estimate = settled.get(laser_id) or self._track(
+                image, origin, laser_id, path, line if line is not None and len(line[0]) > 1
+                else None)
             self.previous[laser_id] = None if estimate.flags & LOST else \
                 np.array([estimate.x_px, estimate.y_px])
             estimates.append(estimate)
@@ -125,8 +128,7 @@ class SpotTracker:
             s.clip_fraction, s.read_noise)
         full = centre + corner + origin
         paths = self._stacked_paths[[self._row[i] for i in ids]]
-        tolerance = np.array([self.tolerance_px[i] for i in ids])
-        ok &= distances_to_paths(full, paths) <= tolerance
+        ok &= distances_to_paths(full, paths) <= s.path_tolerance_px
         settled = {}
         for k, laser_id in enumerate(ids):
             if not ok[k]:
@@ -136,6 +138,23 @@ class SpotTracker:
                                              float(sigma[k]), float(peak_raw[k]), flags)
         return settled
 
+    def _line_free_centre(self, image: np.ndarray, origin: np.ndarray, centre: np.ndarray,
+                          line: tuple[np.ndarray, np.ndarray]) -> np.ndarray | None:
+        """The spot's centroid in its window after the laser line's light is subtracted; None
+        where the line (full-frame rows and columns) does not cross the window."""
+        s = self.settings
+        window = spot_window(image.shape, origin, centre, s.window_px)
+        if window is None:
+            return None
+        x0, y0, x1, y1 = window
+        line_x = np.interp(np.arange(y0, y1) + origin[1], line[0], line[1],
+                           left=np.nan, right=np.nan) - origin[0] - x0
+        if not np.any(np.abs(line_x - s.window_px) <= 1.5 * s.window_px):
+            return None
+        local = subtract_line_centroid(image[y0:y1, x0:x1].astype(np.float32), line_x,
+                                       centre - origin - (x0, y0), s)
+        return None if local is None else local + origin + (x0, y0)
+
     def _search_box(self, laser_id: int, path: np.ndarray) -> np.ndarray:
         """(x0, y0, x1, y1) full-frame: around the previous position, or the whole path."""
         half = self.settings.window_px
@@ -144,8 +163,8 @@ class SpotTracker:
             return np.array([*(previous - half), *(previous + half)])
         return np.array([*(path.min(axis=0) - half), *(path.max(axis=0) + half)])
 
-    def _track(self, image: np.ndarray, origin: np.ndarray, laser_id: int,
-               path: np.ndarray) -> SpotEstimate:
+    def _track(self, image: np.ndarray, origin: np.ndarray, laser_id: int, path: np.ndarray,
+               line: tuple[np.ndarray, np.ndarray] | None = None) -> SpotEstimate:
         s = self.settings
         lost = SpotEstimate(laser_id, np.nan, np.nan, np.nan, 0.0, LOST)
         box = np.round(self._search_box(laser_id, path) - np.tile(origin, 2)).astype(int)
@@ -161,7 +180,7 @@ class SpotTracker:
         candidates = []
         for label in range(1, count):
             centre = centroids[label] + [x0, y0] + origin
-            if distance_to_path(centre, path) > self.tolerance_px[laser_id] + 2 * np.sqrt(
+            if distance_to_path(centre, path) > s.path_tolerance_px + 2 * np.sqrt(
                     stats[label, cv2.CC_STAT_AREA] / np.pi):
                 continue
             mass = float(signal[labels == label].sum())
@@ -189,12 +208,18 @@ class SpotTracker:
             if total <= 0:
                 return lost
             centre = np.array([np.sum(weights * xs), np.sum(weights * ys)]) / total
-        if distance_to_path(centre, path) > self.tolerance_px[laser_id]:
-            return SpotEstimate(laser_id, np.nan, np.nan, np.nan, 0.0, LOST | OFF_PATH)
+        peak = float(raw.max())
         variance = np.clip(raw, 0, None) + s.read_noise**2
         sigma = float(np.sqrt(np.sum(variance * ((xs - centre[0]) ** 2 +
                                                  (ys - centre[1]) ** 2)) / 2) / total)
-        peak = float(raw.max())
+        if distance_to_path(centre, path) > s.path_tolerance_px:
+            # A spot merged with the laser line is pulled off its path: measured again with
+            # the line's light subtracted, it is kept if it is then on its path.
+            refined = None if line is None else self._line_free_centre(image, origin, centre,
+                                                                       line)
+            if refined is None or distance_to_path(refined, path) > s.path_tolerance_px:
+                return SpotEstimate(laser_id, np.nan, np.nan, np.nan, 0.0, LOST | OFF_PATH)
+            centre, sigma = refined, max(sigma, LINE_SIGMA_PX)
         if peak >= s.saturation_level:
             flags |= SATURATED
         return SpotEstimate(laser_id, float(centre[0]), float(centre[1]), sigma, peak, flags)
@@ -214,3 +239,69 @@ class SpotTracker:
         xs, ys = xs + origin[0], ys + origin[1]
         inside = (xs - centre[0]) ** 2 + (ys - centre[1]) ** 2 <= radius**2
         return xs[inside], ys[inside], np.clip(raw[inside] - background, 0, None), raw[inside]
+
+
+def spot_window(shape: tuple[int, ...], offset: np.ndarray, centre: np.ndarray, half: int
+                ) -> tuple[int, int, int, int] | None:
+    """Region-pixel bounds (x0, y0, x1, y1; end exclusive) of the window of half size `half`
+    around a full-frame centre, or None where it would leave the image."""
+    cx, cy = np.round(centre - offset).astype(int)
+    x0, y0, x1, y1 = cx - half, cy - half, cx + half + 1, cy + half + 1
+    if x0 < 0 or y0 < 0 or x1 > shape[1] or y1 > shape[0]:
+        return None
+    return int(x0), int(y0), int(x1), int(y1)
+
+
+def subtract_line_centroid(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
+                           s: SpotSettings, iterations: int = 4) -> np.ndarray | None:
+    """A spot's centroid [window px] with the laser line's light taken away; None when the
+    line does not reach enough of the window's rows or no spot is left.
+
+    `line_x[r]` is the line's centre column on window row r (NaN where unknown); a straight
+    line through it on the rows beyond half a window from the spot is used. The line's
+    cross profile (signal against the column's offset from `line_x`, whole pixels) is the
+    median over the rows that lie beyond half a window from the spot, and is subtracted from
+    every row, the spot's included (but for saturated pixels): a spot on the line keeps its
+    own light and loses the line's, a spot beside it no longer leans towards it. Then the
+    centroid of what is left above `clip_fraction` of its peak, in a disc of half a window,
+    iterated from `spot`.
+    """
+    rows, columns = np.indices(window.shape)
+    border = np.concatenate([window[0], window[-1], window[:, 0], window[:, -1]])
+    signal = window - float(np.median(border))
+    reach = s.window_px // 2
+    # The line's own centre is pulled towards a spot on its rows: a straight line through
+    # its centres on the rows away from the spot stands for it on every row.
+    row_index = np.arange(len(line_x))
+    usable = np.isfinite(line_x) & (np.abs(row_index - spot[1]) > reach)
+    if usable.sum() < 4:
+        return None
+    slope, intercept = np.polyfit(row_index[usable], line_x[usable], 1)
+    offset = np.round(columns - (intercept + slope * rows))
+    on_line = np.abs(offset) <= reach
+    far_rows = np.abs(rows - spot[1]) > reach
+    profile_pixels = on_line & far_rows
+    if profile_pixels.sum() < 3 * (2 * reach + 1):
+        return None
+    bins = (offset[profile_pixels] + reach).astype(int)
+    profile = np.zeros(2 * reach + 1)
+    for b in range(2 * reach + 1):
+        values = signal[profile_pixels][bins == b]
+        profile[b] = float(np.median(values)) if len(values) else 0.0
+    line_light = np.zeros_like(signal)
+    line_light[on_line] = profile[(offset[on_line] + reach).astype(int)]
+    # A saturated pixel holds less than spot plus line: nothing of the line is taken from it.
+    line_light[window >= s.saturation_level] = 0.0
+    left = signal - line_light
+    centre = np.asarray(spot, dtype=float)
+    for _ in range(iterations):
+        inside = (columns - centre[0]) ** 2 + (rows - centre[1]) ** 2 <= reach**2
+        peak = float(left[inside].max()) if inside.any() else 0.0
+        if peak <= s.threshold:
+            return None
+        weights = np.where(inside, np.clip(left - s.clip_fraction * peak, 0, None), 0.0)
+        total = float(weights.sum())
+        if total <= 0:
+            return None
+        centre = np.array([np.sum(weights * columns), np.sum(weights * rows)]) / total
+    return centre

@@ -72,24 +72,6 @@ def parse_seeds(values: list[float]) -> dict[int, tuple[float, float]]:
             for i in range(0, len(values), 3)}
 
 
-PATH_TOLERANCE_SIGMAS = 3.0
-"""A calibrated beam's path tolerance covers this many σ of its `direction_sigma_deg`."""
-
-
-def path_tolerances_px(rig: Rig, heights_mm: tuple[float, float]) -> dict[int, float]:
-    """Per calibrated diode: PATH_TOLERANCE_SIGMAS × how far its spot moves [px] at the
-    path's far end (the lowest surface) when its direction turns by its σ."""
-    px_per_mm = rig.surface_px_per_mm()
-    tolerances = {}
-    for diode in rig.tracked_diodes:
-        if diode.direction_sigma_deg is None:
-            continue
-        length_mm = (diode.emitter_mm[2] - min(heights_mm)) / max(abs(diode.direction[2]), 1e-6)
-        tolerances[diode.laser_id] = (PATH_TOLERANCE_SIGMAS * length_mm *
-                                      np.radians(diode.direction_sigma_deg) * px_per_mm)
-    return tolerances
-
-
 def flat_line_px(rig: Rig) -> tuple[np.ndarray, np.ndarray]:
     """Rows and columns of the line on the flat surface: where to look for it first."""
     if rig.line_laser is None:
@@ -111,8 +93,7 @@ class FrameTracker:
         heights = np.linspace(low, high, 15)
         self.paths = {d.laser_id: beam_image_path(rig, d.laser_id, heights)
                       for d in rig.tracked_diodes}
-        self.spots = SpotTracker(self.paths, self.config.spots,
-                                 path_tolerances_px(rig, self.config.path_heights_mm))
+        self.spots = SpotTracker(self.paths, self.config.spots)
         for laser_id, position in (seeds or {}).items():
             if laser_id not in self.paths:
                 raise ValueError(f"seed for laser {laser_id}, which the rig does not have")
@@ -131,16 +112,17 @@ class FrameTracker:
         Returns the spots of every frame whose Hampel window is now complete (frame, spots),
         and this frame's line profile.
         """
-        estimates = self.spots.update(red, offset)
-        self._pending[frame] = {e.laser_id: e for e in estimates}
-        positions = np.array([[e.x_px, e.y_px] for e in estimates])
-        out = self.hampel.push(frame, positions)
-        ready = [] if out is None else [(out.frame, self._tracked(out))]
         line = track_line(red, offset, self._line_x, self._line_rows, self.config.line,
                           self.config.spots.read_noise)
         if len(line.x_px) > len(self._line_rows) // 4:
             # Follow the line: next frame looks around where it is now.
             self._line_x = np.interp(self._line_rows, line.y_px, line.x_px)
+        # The line's light is kept out of the spots it passes (seen this frame, or expected).
+        estimates = self.spots.update(red, offset, (self._line_rows, self._line_x))
+        self._pending[frame] = {e.laser_id: e for e in estimates}
+        positions = np.array([[e.x_px, e.y_px] for e in estimates])
+        out = self.hampel.push(frame, positions)
+        ready = [] if out is None else [(out.frame, self._tracked(out))]
         return ready, line
 
     def flush(self) -> list[tuple[int, list[TrackedSpot]]]:
