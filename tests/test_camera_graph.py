@@ -17,11 +17,13 @@ import numpy as np
 import pytest
 import yaml
 from conftest import NTSC, ntsc_time_ns, random_frames, write_lossless_clip
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
-from ros_helpers import LATCHED, Probe, SdsGraphRun, pid_alive
+from ros_helpers import LATCHED, Probe, SdsGraphRun, pid_alive, wait_until
+from sds_camera.camera_imu import CameraImu, sidecar_path, write_sidecar
 from sds_camera.image_msg import msg_to_image
 from sds_recon.camera import PinholeCamera, camera_from_dict, save_camera
-from sensor_msgs.msg import Image
+from sensor_msgs.msg import Image, Imu
 from std_msgs.msg import Header
 
 from sds_msgs.msg import CameraModel
@@ -29,6 +31,7 @@ from sds_msgs.msg import CameraModel
 pytestmark = pytest.mark.ros
 
 ROI = (40, 30, 200, 150)  # x, y, width, height
+IMU_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 FRAMES = random_frames(30, 240, 320, seed=11)
 
 
@@ -206,3 +209,42 @@ def test_demo_measures_a_simulated_drop_with_the_whole_graph(tmp_path, repo):
     assert heights and float(heights.group(1)) < 0.2, result.stdout
     spots = re.search(r"spots +(\d+) \(20 per frame\): (\d+) lost", result.stdout)
     assert spots and int(heights.group(2)) == int(spots.group(1)) - int(spots.group(2))
+
+
+def test_the_camera_imu_beside_a_video_is_published_on_the_frames_clock(clip, probe, tmp_path):
+    """A sidecar IMU file (the simulator's format): every sample from the first frame on is
+    published once, in order, stamped on the frames' clock, in the optical frame."""
+    video = tmp_path / "clip.mp4"
+    shutil.copy(clip, video)
+    rng = np.random.default_rng(3)
+    accel_t, gyro_t = np.arange(-0.1, 1.2, 0.005), np.arange(-0.1, 1.2, 0.0025)
+    imu = CameraImu(accel_t, rng.normal(0, 1, (len(accel_t), 3)), gyro_t,
+                    rng.normal(0, 0.1, (len(gyro_t), 3)), "test")
+    write_sidecar(imu, sidecar_path(video))
+    messages = probe.collect(Imu, "/camera/imu", IMU_QOS)
+    images = probe.collect(Image, "/camera/image")
+    graph = SdsGraphRun("camera.yaml", "--set", f"camera.source={video}", "--set",
+                        "camera.stamp=media", "--set", "camera.rate=4.0")
+    assert graph.wait(timeout=60) == 0, graph.output()
+    assert wait_until(lambda: len(messages) == int(np.sum(accel_t >= 0) + np.sum(gyro_t >= 0)),
+                      timeout=10), (len(messages), graph.output())
+    stamps = np.array([_stamp_ns(m) for m in messages]) * 1e-9
+    assert np.all(np.diff(stamps) >= 0) and stamps[0] >= 0
+    accel = [m for m in messages if m.angular_velocity_covariance[0] == -1]
+    gyro = [m for m in messages if m.linear_acceleration_covariance[0] == -1]
+    assert len(accel) == np.sum(accel_t >= 0) and len(gyro) == np.sum(gyro_t >= 0)
+    first = np.flatnonzero(accel_t >= 0)[0]
+    a = accel[0].linear_acceleration
+    np.testing.assert_allclose([a.x, a.y, a.z], imu.accel_m_s2[first], atol=1e-6)
+    assert _stamp_ns(accel[0]) * 1e-9 == pytest.approx(accel_t[first], abs=1e-6)
+    assert accel[0].header.frame_id == "camera_optical"
+    assert len(images) == len(FRAMES) and "camera IMU from" in graph.output()
+
+
+def test_a_video_without_telemetry_says_so_in_one_line(clip, probe):
+    messages = probe.collect(Imu, "/camera/imu", IMU_QOS)
+    probe.collect(Image, "/camera/image")
+    graph = SdsGraphRun("camera.yaml", "--set", f"camera.source={clip}", "--set",
+                        "camera.rate=8.0")
+    assert graph.wait(timeout=60) == 0, graph.output()
+    assert "has no camera IMU" in graph.output() and not messages

@@ -5,8 +5,10 @@ from __future__ import annotations
 import queue
 import threading
 import time
+from collections import deque
 from pathlib import Path
 
+import numpy as np
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -14,9 +16,10 @@ from rclpy.subscription import RCLError
 from rclpy.time import Time
 from sds_recon.camera import CameraModel as CameraModelBase
 from sds_recon.camera import load_camera
-from sensor_msgs.msg import Image
+from sensor_msgs.msg import Image, Imu
 from std_msgs.msg import Header
 
+from sds_camera.camera_imu import CameraImuError, read_camera_imu
 from sds_camera.frame_source import (
     CHANNELS,
     Frame,
@@ -26,6 +29,7 @@ from sds_camera.frame_source import (
     select,
 )
 from sds_camera.image_msg import image_to_msg
+from sds_camera.imu_msg import imu_message, imu_samples
 from sds_camera.led import LedDetector
 from sds_msgs.msg import CameraModel, SyncEvent
 
@@ -78,6 +82,9 @@ class FrameSourceNode(Node):
         led_roi = [int(v) for v in self.get_parameter("led_roi").value]
         self._led = LedDetector(tuple(led_roi)) if len(led_roi) == 4 and led_roi[2] > 0 else None
         self._led_switches: dict[int, bool] = {}
+        self._imu_pub = self.create_publisher(Imu, "imu", QoSProfile(
+            depth=1000, reliability=ReliabilityPolicy.RELIABLE))
+        self._imu_samples = self._camera_imu_samples(p["source"])
         self._ack_topic = self.create_subscription(
             Header, "frame_ack", self._on_ack, reliable).topic_name
         self._publish_camera_model(p)
@@ -87,6 +94,31 @@ class FrameSourceNode(Node):
         )
         self._decode_thread.start()
         self._publish_thread.start()
+
+    def _camera_imu_samples(self, source: str) -> deque[tuple[float, str, np.ndarray]]:
+        """The source's own IMU samples (GPMF track or sidecar CSV), each published once the
+        frame at or after its time is (first play only); one log line either way."""
+        if self._source.is_live:
+            return deque()
+        try:
+            imu = read_camera_imu(source)
+        except (CameraImuError, OSError) as error:
+            self.get_logger().warning(f"camera IMU of {source} not read: {error}")
+            return deque()
+        if imu is None:
+            self.get_logger().info(f"{source} has no camera IMU (no GPMF track, no sidecar)")
+            return deque()
+        self.get_logger().info(f"camera IMU from {imu.source}: {len(imu.accel_time_s)} "
+                               f"accelerometer and {len(imu.gyro_time_s)} gyroscope samples")
+        return deque(imu_samples(imu))
+
+    def _publish_imu_until(self, time_s: float, origin_ns: int) -> None:
+        """Publish the camera IMU's samples up to `time_s` on the video's clock."""
+        while self._imu_samples and self._imu_samples[0][0] <= time_s:
+            sample_s, sensor, value = self._imu_samples.popleft()
+            if origin_ns + sample_s * 1e9 >= 0:
+                _, msg = imu_message(sample_s, sensor, value, origin_ns, self._p["frame_id"])
+                self._imu_pub.publish(msg)
 
     def _declare_parameters(self) -> None:
         self.declare_parameter("source", "")
@@ -252,6 +284,7 @@ class FrameSourceNode(Node):
             except queue.Empty:
                 continue
             if isinstance(item, _EndOfStream):
+                self._publish_imu_until(np.inf, origin_ns)
                 self._finish(item.error, flow_control)
                 return
             if p["pacing"] == "realtime" and not self._source.is_live:
@@ -267,6 +300,7 @@ class FrameSourceNode(Node):
             if not self._publish(image_to_msg(item.image, stamp, p["frame_id"])):
                 return
             self.published += 1
+            self._publish_imu_until(item.time_ns * 1e-9, origin_ns)
             led_on = self._led_switches.pop(item.index, None)
             if led_on is not None:
                 self._sync_pub.publish(SyncEvent(

@@ -9,7 +9,7 @@ import numpy as np
 from sds_recon.geometry import RigidTransform
 
 from sds_sim.optics import line_laser_rays, ray_surface_points, wall_reflections
-from sds_sim.scenario import Scenario
+from sds_sim.scenario import Disturbances, Scenario
 
 PSF_SIGMA_PX = 0.5
 """Lens and sensor blur added to every spot and line width [px at full resolution]."""
@@ -34,6 +34,16 @@ class FrameTruth:
     line_mm: np.ndarray           # M×3 world points of the line at the frame time
     led_on: bool
     vibration_rad: np.ndarray     # camera roll-off about its x, y axes
+
+
+def vibration_rad(d: Disturbances, time_s: float) -> np.ndarray:
+    """The camera's launch vibration at a time: roll-off about its x and y axes [rad]."""
+    if d.vibration_start_s is None or time_s < d.vibration_start_s:
+        return np.zeros(2)
+    tau = time_s - d.vibration_start_s
+    envelope = np.radians(d.vibration_amplitude_deg) * np.exp(-tau / d.vibration_decay_s)
+    phase = 2 * np.pi * d.vibration_frequency_hz * tau
+    return envelope * np.array([np.sin(phase), 0.6 * np.sin(1.3 * phase)])
 
 
 class FrameRenderer:
@@ -61,13 +71,7 @@ class FrameRenderer:
 
     def pose_at(self, time_s: float) -> tuple[RigidTransform, np.ndarray]:
         """World → camera at a time, with the launch vibration; and the vibration angles [rad]."""
-        d = self.scenario.disturbances
-        angles = np.zeros(2)
-        if d.vibration_start_s is not None and time_s >= d.vibration_start_s:
-            tau = time_s - d.vibration_start_s
-            envelope = np.radians(d.vibration_amplitude_deg) * np.exp(-tau / d.vibration_decay_s)
-            phase = 2 * np.pi * d.vibration_frequency_hz * tau
-            angles = envelope * np.array([np.sin(phase), 0.6 * np.sin(1.3 * phase)])
+        angles = vibration_rad(self.scenario.disturbances, time_s)
         base = self.scenario.rig.world_to_camera
         if not angles.any():
             return base, angles

@@ -96,6 +96,19 @@ class ArduinoSpec:
 
 
 @dataclass(frozen=True)
+class CameraImuSpec:
+    """The camera's own IMU (a GoPro's GPMF track): rates, noise, and its clock's offset."""
+
+    enabled: bool = True
+    accel_rate_hz: float = 200.0
+    gyro_rate_hz: float = 400.0
+    accel_noise_m_s2: float = 0.05
+    gyro_noise_rad_s: float = 0.003
+    offset_s: float = 0.0         # a sample stamped t was taken at video time t − offset_s
+    start_s: float = -0.135       # first sample, on the video's clock (GoPro: before frame 0)
+
+
+@dataclass(frozen=True)
 class Scenario:
     """A reproducible simulated run."""
 
@@ -119,6 +132,7 @@ class Scenario:
     disturbances: Disturbances = field(default_factory=Disturbances)
     events: Events = field(default_factory=Events)
     arduino: ArduinoSpec = field(default_factory=ArduinoSpec)
+    camera_imu: CameraImuSpec = field(default_factory=CameraImuSpec)
 
     @property
     def frame_count(self) -> int:
@@ -200,7 +214,7 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
         raise ScenarioError(f"{path}: rig is missing (a rig file, config/rigs/*.yaml)")
     rig_file = (path.parent / str(content.pop("rig"))).resolve()
     sections = {"optics": Optics, "sensor": Sensor, "disturbances": Disturbances,
-                "events": Events, "arduino": ArduinoSpec}
+                "events": Events, "arduino": ArduinoSpec, "camera_imu": CameraImuSpec}
     parts = {key: _build(cls, content.pop(key, None), key) for key, cls in sections.items()}
     modes = content.pop("modes", []) or []
     if not isinstance(modes, list):

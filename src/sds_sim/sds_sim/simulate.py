@@ -3,6 +3,8 @@
 Output folder (format version 1; units: px, mm, s; pixels x = column, y = row, the centre of
 the top-left pixel at (0, 0); world frame of the rig file):
 - video.mp4 (H.264, or lossless), or frames/NNNNNN.png: what the camera records.
+- video.imu.csv (or frames.imu.csv): the camera's own accelerometer and gyroscope, as a
+  GoPro's GPMF track would hold them (sds_camera.camera_imu's sidecar format).
 - arduino/serial.txt: the serial line as the bridge reads it; arduino/SDS_LOG.TXT: the SD card
   (the same records; protocol in sds_arduino.protocol).
 - truth/run.json: the resolved scenario (modes with frequency, damping, amplitude), camera and
@@ -23,10 +25,12 @@ from pathlib import Path
 import cv2
 import numpy as np
 from sds_arduino.protocol import format_record
+from sds_camera.camera_imu import sidecar_path, write_sidecar
 from sds_camera.video_writer import VideoWriter
 from tqdm import tqdm
 
 from sds_sim.arduino import arduino_records
+from sds_sim.camera_imu import camera_imu
 from sds_sim.render import FrameRenderer, FrameTruth
 from sds_sim.scenario import Scenario
 
@@ -103,6 +107,9 @@ def simulate(scenario: Scenario, directory: Path, codec: str = "h264",
     _write_spots(scenario, truths, output.spots)
     _write_frames(scenario, truths, output.frames)
     _write_line(renderer, truths, output.line)
+    imu = camera_imu(scenario)
+    if imu is not None:
+        write_sidecar(imu, sidecar_path(output.video))
     output.run.write_text(json.dumps(_run_description(scenario, renderer, output), indent=2) + "\n")
     return output
 
@@ -166,7 +173,7 @@ def _run_description(scenario: Scenario, renderer: FrameRenderer,
         "kick_s": scenario.kick_s, "modes": modes,
         "events": asdict(scenario.events), "optics": asdict(scenario.optics),
         "sensor": asdict(scenario.sensor), "disturbances": asdict(scenario.disturbances),
-        "arduino": asdict(scenario.arduino),
+        "arduino": asdict(scenario.arduino), "camera_imu": asdict(scenario.camera_imu),
         "conventions": {"pixels": "x = column, y = row, centre of the top-left pixel at (0, 0), "
                                   "full frame at image_size",
                         "world": "rig file's world frame, mm", "time": "s from the first frame"},
