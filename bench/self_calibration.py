@@ -38,6 +38,7 @@ def main() -> None:
               f"{r['self'].tilt_error_deg:.3f} / {r['self'].heights.rmse_mm:.3f} | "
               f"{r['beam_only'].tilt_error_deg:.3f} / {r['beam_only'].heights.rmse_mm:.3f}"
               f"  {r['drop'].heights.rmse_mm:.3f}, {r['drop'].missed}/{r['drop'].spots}"
+              f" ({r['drop'].rejected} rejected)"
               f"   {time.perf_counter() - start:.1f}", flush=True)
     beams = np.concatenate([list(r["beam_error_deg"].values()) for r in rows])
     print(f"\n{len(rows)} rigs: wrong identities {sum(r['wrong'] for r in rows)}, "
@@ -60,7 +61,8 @@ def main() -> None:
           f"{np.median([d.heights.rmse_mm for d in drops]):.3f} max "
           f"{max(d.heights.rmse_mm for d in drops):.3f} mm, error/sigma RMS max "
           f"{max(d.heights.normalised_rms for d in drops):.2f}; spots missed "
-          f"{sum(d.missed for d in drops)} of {sum(d.spots for d in drops)}")
+          f"{sum(d.missed for d in drops)} of {sum(d.spots for d in drops)}, rejected by the "
+          f"fits {sum(d.rejected for d in drops)}")
 
 
 if __name__ == "__main__":

@@ -19,7 +19,8 @@ from sds_camera.camera_imu import (
     sidecar_path,
     write_sidecar,
 )
-from sds_sim.arduino import STANDARD_GRAVITY, arduino_records
+from sds_recon.sloshing.gravity import free_fall
+from sds_sim.arduino import CATAPULT_DURATION_S, STANDARD_GRAVITY, arduino_records
 from sds_sim.camera_imu import camera_imu
 from sds_sim.scenario import Scenario, load_scenario
 
@@ -121,3 +122,22 @@ def test_no_excitation_or_no_overlap_gives_no_link() -> None:
     assert align_by_acceleration(t, kicked, t + 0.3, kicked) is not None
     assert align_by_acceleration(t, kicked, t, quiet) is None        # the camera saw nothing
     assert align_by_acceleration(t, kicked, t[:6], kicked[:6]) is None
+
+
+def test_free_fall_is_found_in_a_drop_and_not_in_a_kick() -> None:
+    for name, falls in (("drop_4p7s", True), ("ground_kick", False),
+                        ("drop_9p3s_catapult", True)):
+        scenario = load_scenario(SCENARIOS / f"{name}.yaml")
+        imu = camera_imu(scenario)
+        assert imu is not None
+        fall = free_fall(imu.accel_time_s, imu.accel_m_s2)
+        assert (fall is not None) == falls, name
+        if fall is not None:
+            events = scenario.events
+            # free fall begins at the release, or when the catapult's launch pulse ends (the
+            # longest stretch may begin after the lateral kick that follows)
+            start = events.release_s if events.catapult_s is None else \
+                events.catapult_s + CATAPULT_DURATION_S
+            assert start is not None and fall.start_s > start - 0.02, (fall, start)
+            assert fall.end_s - fall.start_s > 0.5 * scenario.duration_s
+            assert fall.residual_m_s2 < 0.2

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import yaml
 from rclpy.serialization import serialize_message
+from sds_camera.camera_imu import read_camera_imu
 from sds_recon.results import COLUMNS, ResultsWriter, load_results
 from sds_recon.rig import LaserDiode, Rig, load_rig, save_rig
 from sds_record.mcap_files import McapRecorder
@@ -119,4 +120,11 @@ def test_process_calibrates_the_beams_from_images_first(repo: Path, tmp_path: Pa
     assert np.linalg.norm(calibrated.camera_position_mm - truth.camera_position_mm) < 0.1
     assert "calibrated rig written" in done.stdout
     assert (tmp_path / "out" / "rig_calibrated.report.html").is_file()
-    assert sorted(set(load_results(tmp_path / "out").spots["frame"])) == list(range(8))
+    results = load_results(tmp_path / "out")
+    assert sorted(set(results.spots["frame"])) == list(range(8))
+    # the camera's own IMU (the simulator's sidecar beside the frames) is a result table
+    imu = read_camera_imu(tmp_path / "sim" / "frames")
+    assert imu is not None and results.camera_imu is not None
+    assert len(results.camera_imu) == len(imu.accel_time_s) + len(imu.gyro_time_s)
+    accel = results.camera_imu[np.isfinite(results.camera_imu["ax_m_s2"])]
+    np.testing.assert_allclose(accel["az_m_s2"], imu.accel_m_s2[:, 2], atol=1e-6)

@@ -299,5 +299,5 @@ def test_surface_fits_keep_the_points_a_model_error_spreads_over() -> None:
         sigma = np.full(200, 0.03)
         fits = fit_surface(SurfacePoints(np.arange(200), points, sigma, sigma / 5), radius_mm)
         # only points in the steep band by the wall (14 σ off the modes) may go
-        assert fits.rejected_count <= 8
+        assert fits.rejected_count <= 20          # of 200
         assert np.all(radius[fits.rejected] > radius_mm - 6.0)

@@ -99,12 +99,13 @@ def unseen(rig: Rig, series: TiltSeries) -> UnseenSeries:
 
 @dataclass(frozen=True)
 class DropCheck:
-    """A rig on a sloshing drop: the spots' heights against the truth, and how many visible
-    spots the tracker missed of how many."""
+    """A rig on a sloshing drop: the heights of the spots the fits kept against the truth, how
+    many visible spots the tracker missed of how many, and how many the fits rejected."""
 
     heights: HeightErrors
     missed: int
     spots: int
+    rejected: int
 
 
 def sloshing_drop(rig: Rig, true: Rig, scale: float, seed: int, frames: int = 30) -> DropCheck:
@@ -124,7 +125,7 @@ def sloshing_drop(rig: Rig, true: Rig, scale: float, seed: int, frames: int = 30
         ready, _ = tracker.process(index, select(image, region, "red"), (region.x, region.y))
         outputs += ready
     outputs += tracker.flush()
-    errors, sigmas, missed, count = [], [], 0, 0
+    errors, sigmas, missed, count, rejected_count = [], [], 0, 0, 0
     ids = [d.laser_id for d in true.diodes]
     for index, spots in outputs:
         visible = {ids[i] for i in np.flatnonzero(truths[index].visible)}
@@ -134,10 +135,12 @@ def sloshing_drop(rig: Rig, true: Rig, scale: float, seed: int, frames: int = 30
         missed += len(seen) - len(found)
         points = reconstruct_spots(rig, [s.laser_id for s in found],
                                    [(s.x_px, s.y_px) for s in found], [s.sigma_px for s in found])
+        rejected = fit_surface(points, rig.container.radius_mm).rejected
         truth_z = truths[index].spot_mm[[ids.index(i) for i in points.laser_ids], 2]
-        errors.append(points.points_mm[:, 2] - truth_z)
-        sigmas.append(points.height_sigma_mm)
-    return DropCheck(height_errors(errors, sigmas), missed, count)
+        errors.append((points.points_mm[:, 2] - truth_z)[~rejected])
+        sigmas.append(points.height_sigma_mm[~rejected])
+        rejected_count += int(rejected.sum())
+    return DropCheck(height_errors(errors, sigmas), missed, count, rejected_count)
 
 
 def trial(seed: int, rig_file: Path, scale: float = 1.0, errors: RigErrors | None = None,

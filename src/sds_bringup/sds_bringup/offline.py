@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 from mcap.exceptions import McapError
 from mcap_ros2.reader import read_ros2_messages
+from sds_camera.camera_imu import CameraImu, read_camera_imu
 from sds_camera.frame_source import FrameSource, FrameSourceError, Region, open_source, select
 from sds_camera.image_msg import msg_to_image
 from sds_recon.reconstruction import (
@@ -30,6 +31,7 @@ from sds_recon.results import ResultsWriter
 from sds_recon.rig import Rig, RigError, load_rig
 from sds_recon.sloshing.analysis import AnalysisOptions, analyze
 from sds_recon.sloshing.estimators import DecayError
+from sds_recon.sloshing.gravity import free_fall
 from sds_recon.sloshing.recording import (
     RecordingError,
     cloud_points,
@@ -170,6 +172,14 @@ class RunTables:
         amplitudes = list(fits.modal.amplitudes_mm) if fits.modal is not None else []
         self.writer.add_fit((frame, time_s, *values, used, fits.rejected_count), names,
                             amplitudes)
+
+    def add_camera_imu(self, imu: CameraImu) -> None:
+        """The camera's own IMU samples, one row each (the other sensor's cells empty)."""
+        nan = (np.nan,) * 3
+        rows = [(t, *a, *nan) for t, a in zip(imu.accel_time_s, imu.accel_m_s2, strict=True)]
+        rows += [(t, *nan, *g) for t, g in zip(imu.gyro_time_s, imu.gyro_rad_s, strict=True)]
+        rows.sort(key=lambda row: row[0])
+        self.writer.add("camera_imu", rows)
 
     def recording(self, source: str):
         """The points as the analysis reads them."""
@@ -339,11 +349,21 @@ def run_process(args: argparse.Namespace) -> int:
         frames = video_frames(source, rig, args.fps) if args.video else mcap_frames(source)
         tables = RunTables(ResultsWriter(args.out), rig)
         count = process_frames(frames, rig, tables, progress=not args.no_progress)
+        imu = read_camera_imu(source) if args.video else None
     except (RigError, RecordingError, FrameSourceError, GraphFileError, McapError, OSError,
-            ValueError) as error:
+            ValueError) as error:   # CameraImuError is a ValueError
         return _fail("process", error)
-    note = _finish(tables, str(source), args.out, AnalysisOptions(gravity_m_s2=args.gravity))
-    print(f"sds process: {count} frames of {source} -> {args.out}" + (f" ({note})" if note
+    gravity, regime = args.gravity, ""
+    if imu is not None:
+        tables.add_camera_imu(imu)
+        fall = free_fall(imu.accel_time_s, imu.accel_m_s2)
+        if fall is not None and gravity is None:
+            gravity = 0.0
+            regime = (f"camera IMU: free fall {fall.start_s:.2f}–{fall.end_s:.2f} s, analysed "
+                      "as microgravity (--gravity overrides)")
+    note = _finish(tables, str(source), args.out, AnalysisOptions(gravity_m_s2=gravity))
+    notes = "; ".join(n for n in (regime, note) if n)
+    print(f"sds process: {count} frames of {source} -> {args.out}" + (f" ({notes})" if notes
                                                                        else ""))
     return 0
 

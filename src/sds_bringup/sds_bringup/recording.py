@@ -1,4 +1,4 @@
-"""Recording files: `sds mcap-repair`, `sds view` and `sds import-sd`."""
+"""Recording files: `sds mcap-repair`, `sds view`, `sds import-sd` and `sds import-gopro`."""
 
 from __future__ import annotations
 
@@ -6,12 +6,17 @@ import argparse
 import sys
 from pathlib import Path
 
+from rclpy.serialization import serialize_message
 from sds_arduino.import_sd import import_sd
+from sds_camera.camera_imu import CameraImu, read_gopro_imu
+from sds_camera.imu_msg import imu_messages
 from sds_recon.rig import RigError, load_rig
-from sds_record.mcap_files import repair
+from sds_record.mcap_files import McapRecorder, repair
 from sds_viz.from_mcap import mcap_to_rrd
 
 from sds_bringup.paths import CONFIG
+
+CAMERA_IMU_TOPIC = "/camera/imu"
 
 
 def add_parser(commands: argparse._SubParsersAction) -> None:
@@ -25,6 +30,7 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
     parser.set_defaults(run=run)
     add_view_parser(commands)
     add_import_sd_parser(commands)
+    add_import_gopro_parser(commands)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -97,3 +103,55 @@ def run_import_sd(args: argparse.Namespace) -> int:
     print(f"sds import-sd: {result.records} records to {output} ({result.rejected_lines} "
           f"lines rejected, {result.missing_records} records missing by sequence number)")
     return 0
+
+
+def add_import_gopro_parser(commands: argparse._SubParsersAction) -> None:
+    """Register `sds import-gopro`."""
+    parser = commands.add_parser(
+        "import-gopro", help="a GoPro video's own IMU (GPMF telemetry) as an MCAP recording",
+        description="Read the accelerometer and gyroscope of the video's GPMF track (GoPro's "
+                    "parser) and write them as /camera/imu sensor_msgs/Imu messages (one "
+                    "sensor per message, optical frame, SI units), stamped with the video's "
+                    "clock plus --start-s; samples that would be stamped before 0 are left "
+                    "out.")
+    parser.add_argument("video", type=Path)
+    parser.add_argument("--out", type=Path, help="MCAP to write (default: beside the video)")
+    parser.add_argument("--start-s", type=float, default=0.0,
+                        help="time of the video's first frame on the recording's clock [s]")
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing --out")
+    parser.set_defaults(run=run_import_gopro)
+
+
+def run_import_gopro(args: argparse.Namespace) -> int:
+    """Import; a one-line error and exit code 2 on bad input."""
+    output = args.out or args.video.with_suffix(".imu.mcap")
+    if output.exists() and not args.overwrite:
+        print(f"sds import-gopro: {output} exists (--overwrite replaces it)", file=sys.stderr)
+        return 2
+    try:
+        imu = read_gopro_imu(args.video)
+        if imu is None:
+            raise ValueError(f"{args.video}: no GPMF telemetry track (not a GoPro video?)")
+        written = write_imu_mcap(imu, output, round(args.start_s * 1e9))
+    except (OSError, ValueError) as error:
+        print(f"sds import-gopro: {error}", file=sys.stderr)
+        return 2
+    total = len(imu.accel_time_s) + len(imu.gyro_time_s)
+    print(f"sds import-gopro: {written} of {total} samples ({len(imu.accel_time_s)} "
+          f"accelerometer, {len(imu.gyro_time_s)} gyroscope) to {output} as /camera/imu")
+    return 0
+
+
+def write_imu_mcap(imu: CameraImu, output: Path, origin_ns: int,
+                   frame_id: str = "camera_optical") -> int:
+    """The camera IMU's samples as /camera/imu messages in a new MCAP; how many."""
+    recorder = McapRecorder(output)
+    count = 0
+    try:
+        recorder.add_topic(CAMERA_IMU_TOPIC, "sensor_msgs/msg/Imu")
+        for stamp_ns, msg in imu_messages(imu, origin_ns, frame_id):
+            recorder.write(CAMERA_IMU_TOPIC, serialize_message(msg), stamp_ns, stamp_ns)
+            count += 1
+    finally:
+        recorder.close()
+    return count

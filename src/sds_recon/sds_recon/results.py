@@ -1,7 +1,8 @@
 """A run's result files (`sds process`, `sds export`) and `load_results` for notebooks.
 
 One CSV per table, comma-separated, a header row of column names, one row per frame and laser
-(spots, points), per line sample (line), per frame (fits) or per reading (imu, tof);
+(spots, points), per line sample (line), per frame (fits) or per reading (imu, tof, and the
+camera's own IMU, camera_imu);
 `columns.json` describes every column; `analysis.json` holds the sloshing estimates. The names
 and units are the public interface (README, "Result files") and stay stable.
 """
@@ -78,6 +79,16 @@ COLUMNS: dict[str, dict[str, str]] = {
         "t_s": "time since the first frame [s]",
         "range_mm": "time-of-flight distance to the liquid [mm]",
     },
+    "camera_imu": {
+        "t_s": "time on the video's clock, 0 at the first frame [s]",
+        "ax_m_s2": "camera accelerometer, optical frame x (image right) [m/s²]; empty on a "
+                   "gyroscope row",
+        "ay_m_s2": "camera accelerometer, optical y (image down) [m/s²]",
+        "az_m_s2": "camera accelerometer, optical z (viewing direction) [m/s²]",
+        "gx_rad_s": "camera gyroscope about optical x [rad/s]; empty on an accelerometer row",
+        "gy_rad_s": "camera gyroscope about optical y [rad/s]",
+        "gz_rad_s": "camera gyroscope about optical z [rad/s]",
+    },
 }
 """Every table's columns and what they mean (written as columns.json)."""
 
@@ -146,6 +157,7 @@ class Results:
     fits: np.ndarray | None = None
     imu: np.ndarray | None = None
     tof: np.ndarray | None = None
+    camera_imu: np.ndarray | None = None
     analysis: dict | None = None
     columns: dict = field(default_factory=dict)
 
@@ -157,7 +169,8 @@ def _read_table(path: Path) -> np.ndarray | None:
     with path.open(newline="") as stream:
         rows = list(csv.reader(stream))
     header, body = rows[0], rows[1:]
-    integers = {"frame", "laser_id", "valid", "flags", "point_count"}
+    integers = {"frame", "laser_id", "valid", "flags", "point_count", "rejected",
+                "rejected_count"}
     dtype = [(name, np.int64 if name in integers else np.float64) for name in header]
     table = np.zeros(len(body), dtype=dtype)
     for index, name in enumerate(header):

@@ -15,8 +15,10 @@ OUTLIER_LIMIT_SIGMA = 4.0
 """A point this many of its own σ off the frame's surface (or its beam) is rejected."""
 HEIGHT_SIGMA_FLOOR_MM = 0.05
 """Floor under a point's height σ in that test: what the models leave (meniscus, modes)."""
+LEVERAGE_FLOOR = 0.05
+"""Least 1 − leverage for which a point's leave-one-out residual is judged."""
 MODAL_REDUNDANCY = 4
-"""Points beyond the modal terms' count before the modal fit is the outlier reference."""
+"""Points beyond the plane-and-modes terms' count before they are the outlier reference."""
 
 
 @dataclass(frozen=True)
@@ -140,10 +142,11 @@ def surface_outliers(points_mm: ArrayLike, height_sigma_mm: ArrayLike, radius_mm
     A spot whose camera ray misses its beam (Eq. 9) by more than `limit_sigma` of its height σ
     (floored at `floor_mm`) is not on that beam. Of the others, the one farthest off the
     surface is rejected, the surface refitted, and so on while one lies beyond `limit_sigma`
-    of its σ. The surface is the modal fit (it follows the sloshing, which the plane does not)
-    where the points over-determine it, else Eq. 12's plane. The σ-normalised residuals are
-    scaled by their robust spread (1.4826 × median |r|) where that exceeds 1, so a surface the
-    model only nearly describes loses no points, while a wrong blob, millimetres off, does.
+    of its σ. The surface is Eq. 12's plane plus the modes (a tilt table's steep plane and a
+    sloshing surface alike) where the points over-determine it, else the plane alone. The
+    σ-normalised leave-one-out residuals are scaled by their robust spread (1.4826 × median
+    |r|) where that exceeds 1, so a surface the model only nearly describes loses no points,
+    while a wrong blob, millimetres off, does.
     """
     points = np.atleast_2d(np.asarray(points_mm, dtype=float))
     sigma = np.maximum(np.asarray(height_sigma_mm, dtype=float), floor_mm)
@@ -151,17 +154,21 @@ def surface_outliers(points_mm: ArrayLike, height_sigma_mm: ArrayLike, radius_mm
     if miss_distance_mm is not None:
         miss = np.nan_to_num(np.asarray(miss_distance_mm, dtype=float), nan=0.0)
         rejected |= miss > limit_sigma * sigma
-    modal_terms = 1 + sum(2 if order else 1 for order, _ in DEFAULT_MODES)
+    plane = np.column_stack([np.ones(len(points)), points[:, :2]])
+    # Plane and modes together: a tilt table's steep plane or a sloshing surface alike.
+    surface = np.column_stack([plane, _modal_design(points, radius_mm, DEFAULT_MODES)[0][:, 1:]])
     while np.sum(~rejected) > 3:
         kept = points[~rejected]
-        if len(kept) >= modal_terms + MODAL_REDUNDANCY:
-            design = _modal_design(points, radius_mm, DEFAULT_MODES)[0]
-            coefficients, *_ = np.linalg.lstsq(design[~rejected], kept[:, 2], rcond=None)
-        else:
-            design = np.column_stack([np.ones(len(points)), points[:, :2]])
-            coefficients, *_ = np.linalg.lstsq(design[~rejected], kept[:, 2], rcond=None)
-        normalised = np.abs(points[:, 2] - np.nan_to_num(design) @ coefficients) / sigma
-        normalised[rejected] = 0.0
+        design = surface if len(kept) >= surface.shape[1] + MODAL_REDUNDANCY else plane
+        used = design[~rejected]
+        coefficients, *_ = np.linalg.lstsq(used, kept[:, 2], rcond=None)
+        # Leave-one-out residuals e / (1 − h): a point that pulls the fit onto itself (high
+        # leverage h) cannot hide its error; one that alone fixes a term (h → 1) is not judged.
+        leverage = np.zeros(len(points))
+        leverage[~rejected] = np.sum(used * (used @ np.linalg.pinv(used.T @ used)), axis=1)
+        residual = np.abs(points[:, 2] - np.nan_to_num(design) @ coefficients)
+        normalised = residual / np.maximum(1.0 - leverage, LEVERAGE_FLOOR) / sigma
+        normalised[rejected | (leverage > 1.0 - LEVERAGE_FLOOR)] = 0.0
         spread = max(1.0, 1.4826 * float(np.median(normalised[~rejected])))
         worst = int(np.argmax(normalised))
         if normalised[worst] <= limit_sigma * spread:
