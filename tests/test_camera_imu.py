@@ -3,6 +3,9 @@ camera IMU, and the clocks linked by the acceleration both accelerometers feel."
 
 from __future__ import annotations
 
+import re
+import subprocess
+import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -141,3 +144,29 @@ def test_free_fall_is_found_in_a_drop_and_not_in_a_kick() -> None:
             assert start is not None and fall.start_s > start - 0.02, (fall, start)
             assert fall.end_s - fall.start_s > 0.5 * scenario.duration_s
             assert fall.residual_m_s2 < 0.2
+
+
+@pytest.mark.parametrize("name", ["ground_kick", "drop_4p7s"])
+def test_sds_clock_link_on_a_simulated_run(name: str, tmp_path: Path) -> None:
+    """Video, camera IMU and Arduino log of the simulator, its clock offset known."""
+    sds = str(Path(sys.executable).with_name("sds"))
+    scenario = load_scenario(SCENARIOS / f"{name}.yaml")
+    subprocess.run([sds, "simulate", str(SCENARIOS / f"{name}.yaml"), "--out",
+                    str(tmp_path), "--seconds", "2", "--scale", "0.25"], check=True,
+                   capture_output=True)
+    x, y = (v * 0.25 for v in scenario.events.led_position_px)
+    command = [sds, "clock-link", "--video", str(tmp_path / "video.mp4"), "--arduino",
+               str(tmp_path / "arduino" / "SDS_LOG.TXT"), "--rig", str(scenario.rig_file)]
+    done = subprocess.run([*command, "--led-roi", str(round(x) - 8), str(round(y) - 8), "16",
+                           "16"], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    found = re.search(r"acceleration: camera − device = ([-+.\d]+) s", done.stdout)
+    led = re.search(r"LED: +camera − device = ([-+.\d]+) s ± ([.\d]+) ms", done.stdout)
+    agreement = re.search(r"disagreement: ([-+.\d]+) ms ± ([.\d]+) ms", done.stdout)
+    assert found and led and agreement, done.stdout
+    device_s = 0.5 * (1.3 + 2.3)           # the excitation lies in the first two seconds
+    truth = _true_offset_s(scenario, device_s)
+    assert abs(float(found.group(1)) - truth) < 0.002, (done.stdout, truth)
+    assert abs(float(agreement.group(1))) < 2 * float(agreement.group(2)), done.stdout
+    alone = subprocess.run(command, capture_output=True, text=True)   # no LED: acceleration
+    assert alone.returncode == 0 and "LED:          none" in alone.stdout, alone.stdout

@@ -11,7 +11,7 @@ from pathlib import Path
 os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
 os.environ.setdefault("OPENCV_LOG_LEVEL", "ERROR")
 
-from sds_bringup import analyze, offline, recording
+from sds_bringup import analyze, clock_link, offline, recording
 from sds_bringup.graph import GraphFileError, apply_overrides, composed, load_graph
 from sds_bringup.launcher import Launcher
 from sds_bringup.paths import CONFIG
@@ -418,6 +418,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_resolution(commands)
     analyze.add_parser(commands)
     recording.add_parser(commands)
+    clock_link.add_parser(commands)
     offline.add_parsers(commands)
     return parser
 

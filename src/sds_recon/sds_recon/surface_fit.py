@@ -106,6 +106,21 @@ def fit_modes(points_mm: ArrayLike, radius_mm: float,
     return ModalFit(tuple(names), amplitudes, float(np.sqrt(np.mean(residual**2))), len(points))
 
 
+def _leave_one_out(design: np.ndarray, heights: np.ndarray, rejected: np.ndarray) -> np.ndarray:
+    """|Leave-one-out residual| e / (1 − h) of every point (fit on the points not rejected):
+    a point that pulls the fit onto itself (leverage h) cannot hide its error. NaN where
+    1 − h < LEVERAGE_FLOOR (the point alone fixes a term) and for rejected points."""
+    used = design[~rejected]
+    coefficients, *_ = np.linalg.lstsq(used, heights[~rejected], rcond=None)
+    leverage = np.ones(len(heights))
+    leverage[~rejected] = np.sum(used * (used @ np.linalg.pinv(used.T @ used)), axis=1)
+    residual = np.abs(heights - np.nan_to_num(design) @ coefficients)
+    judged = 1.0 - leverage >= LEVERAGE_FLOOR
+    result = np.full(len(heights), np.nan)
+    result[judged] = residual[judged] / (1.0 - leverage[judged])
+    return result
+
+
 def _modal_design(points: np.ndarray, radius_mm: float, modes: tuple[tuple[int, int], ...]
                   ) -> tuple[np.ndarray, list[str]]:
     """The modal fit's design matrix (one column per term) at the points, and the terms' names."""
@@ -140,13 +155,15 @@ def surface_outliers(points_mm: ArrayLike, height_sigma_mm: ArrayLike, radius_mm
     """Mask of the points that are not on this frame's surface (True = rejected).
 
     A spot whose camera ray misses its beam (Eq. 9) by more than `limit_sigma` of its height σ
-    (floored at `floor_mm`) is not on that beam. Of the others, the one farthest off the
-    surface is rejected, the surface refitted, and so on while one lies beyond `limit_sigma`
-    of its σ. The surface is Eq. 12's plane plus the modes (a tilt table's steep plane and a
-    sloshing surface alike) where the points over-determine it, else the plane alone. The
-    σ-normalised leave-one-out residuals are scaled by their robust spread (1.4826 × median
-    |r|) where that exceeds 1, so a surface the model only nearly describes loses no points,
-    while a wrong blob, millimetres off, does.
+    (floored at `floor_mm`) is not on that beam. Of the others, the suspect is the point with
+    the largest σ-normalised leave-one-out residual (a point that pulls the fit onto itself
+    cannot hide); it is rejected if, with the surface fitted to the others alone, it lies
+    more than `limit_sigma` of its σ off, times the others' robust spread (1.4826 × median
+    normalised residual) where that exceeds 1; then the next suspect, until one is not. The
+    surface is Eq. 12's plane plus the modes (a tilt table's steep plane and a sloshing surface
+    alike) where the points over-determine it, the plane alone where they do not or where the
+    point would alone fix a modal term. A surface the models only nearly describe (meniscus,
+    higher modes) widens the spread and loses no points; a wrong blob, millimetres off, does.
     """
     points = np.atleast_2d(np.asarray(points_mm, dtype=float))
     sigma = np.maximum(np.asarray(height_sigma_mm, dtype=float), floor_mm)
@@ -157,21 +174,31 @@ def surface_outliers(points_mm: ArrayLike, height_sigma_mm: ArrayLike, radius_mm
     plane = np.column_stack([np.ones(len(points)), points[:, :2]])
     # Plane and modes together: a tilt table's steep plane or a sloshing surface alike.
     surface = np.column_stack([plane, _modal_design(points, radius_mm, DEFAULT_MODES)[0][:, 1:]])
-    while np.sum(~rejected) > 3:
-        kept = points[~rejected]
-        design = surface if len(kept) >= surface.shape[1] + MODAL_REDUNDANCY else plane
-        used = design[~rejected]
-        coefficients, *_ = np.linalg.lstsq(used, kept[:, 2], rcond=None)
-        # Leave-one-out residuals e / (1 − h): a point that pulls the fit onto itself (high
-        # leverage h) cannot hide its error; one that alone fixes a term (h → 1) is not judged.
-        leverage = np.zeros(len(points))
-        leverage[~rejected] = np.sum(used * (used @ np.linalg.pinv(used.T @ used)), axis=1)
-        residual = np.abs(points[:, 2] - np.nan_to_num(design) @ coefficients)
-        normalised = residual / np.maximum(1.0 - leverage, LEVERAGE_FLOOR) / sigma
-        normalised[rejected | (leverage > 1.0 - LEVERAGE_FLOOR)] = 0.0
-        spread = max(1.0, 1.4826 * float(np.median(normalised[~rejected])))
-        worst = int(np.argmax(normalised))
-        if normalised[worst] <= limit_sigma * spread:
+    def judged(excluded: np.ndarray) -> np.ndarray:
+        """σ-normalised leave-one-out residuals with the points in `excluded` left out."""
+        normalised = _leave_one_out(plane, points[:, 2], excluded) / sigma
+        if np.sum(~excluded) >= surface.shape[1] + MODAL_REDUNDANCY:
+            # The richer model where it can judge a point; the plane where the point alone
+            # would fix one of the modal terms (leverage near 1).
+            rich = _leave_one_out(surface, points[:, 2], excluded) / sigma
+            normalised = np.where(np.isfinite(rich), rich, normalised)
+        normalised[excluded | ~np.isfinite(normalised)] = 0.0
+        return normalised
+
+    while np.sum(~rejected) > 4:
+        worst = int(np.argmax(judged(rejected)))
+        # The suspect is judged against the others' spread with itself left out, so that
+        # it cannot widen the spread it is measured by.
+        without = rejected.copy()
+        without[worst] = True
+        others = judged(without)
+        spread = max(1.0, 1.4826 * float(np.median(others[~without])))
+        rich = np.sum(~without) >= surface.shape[1] + MODAL_REDUNDANCY and \
+            np.isfinite(_leave_one_out(surface, points[:, 2], rejected)[worst])
+        design = surface if rich else plane
+        coefficients, *_ = np.linalg.lstsq(design[~without], points[~without, 2], rcond=None)
+        suspect = abs(points[worst, 2] - design[worst] @ coefficients) / sigma[worst]
+        if suspect <= limit_sigma * spread:
             break
         rejected[worst] = True
     return rejected

@@ -1,0 +1,156 @@
+"""`sds clock-link`: the camera's clock against the Arduino's, by acceleration and by the LED.
+
+Two independent links between a video and an Arduino log (SD card or serial capture):
+- acceleration: the camera's own IMU (GPMF or sidecar, sds_camera.camera_imu), turned into
+  the rig's frame by the rig file's camera pose, against the Arduino's accelerometer around
+  the excitation (sds_arduino.clock.align_by_acceleration); needs no LED in view;
+- LED: the sync LED's switch-on seen in the video (sds_camera.led, region `--led-roi`) against
+  the Arduino's LED record. A switch shows in the first frame after it, so the frame time is
+  late by U(0, T) for a frame period T: T/2 is taken off and σ = T/√12.
+Where both exist, their difference is reported with its σ: a camera IMU whose clock is
+offset from the frames, or a wrong LED region, shows there.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from sds_arduino.clock import ClockLink, align_by_acceleration, camera_offset_s
+from sds_arduino.protocol import read_log, unwrap_time_s
+from sds_camera.camera_imu import read_camera_imu
+from sds_camera.frame_source import FrameSourceError, VideoFileSource
+from sds_camera.led import LedDetector
+from sds_recon.rig import Rig, RigError, load_rig
+
+STANDARD_GRAVITY = 9.80665
+"""The Arduino logs accelerations in mg (sds_arduino.protocol)."""
+
+
+@dataclass(frozen=True)
+class ArduinoLog:
+    """A log's accelerometer (device time [s], rig frame [m/s²]), its LED switch-on times [s]
+    and the device time of its first record [s]."""
+
+    accel_time_s: np.ndarray
+    accel_m_s2: np.ndarray
+    led_on_s: list[float]
+    first_record_s: float
+
+
+@dataclass(frozen=True)
+class ClockLinks:
+    """Camera time minus device time [s] by acceleration and by LED, each with its σ [s]."""
+
+    acceleration: ClockLink | None
+    led_offset_s: float | None
+    led_sigma_s: float | None
+
+    @property
+    def disagreement_s(self) -> tuple[float, float] | None:
+        """Acceleration minus LED offset [s] and the σ of that difference, where both exist."""
+        if self.acceleration is None or self.led_offset_s is None or self.led_sigma_s is None:
+            return None
+        return (self.acceleration.offset_s - self.led_offset_s,
+                float(np.hypot(self.acceleration.sigma_s, self.led_sigma_s)))
+
+
+def read_arduino_log(path: Path) -> ArduinoLog:
+    """The accelerometer and LED records of a protocol-v1 log; a one-line error without IMU."""
+    records, _ = read_log(path)
+    if not records:
+        raise ValueError(f"{path}: no valid protocol-v1 record")
+    device_s = unwrap_time_s([r.t_us for r in records])
+    imu = [k for k, r in enumerate(records) if r.kind == "IMU"]
+    if len(imu) < 10:
+        raise ValueError(f"{path}: {len(imu)} accelerometer records, too few to link clocks")
+    accel = np.array([records[k].values for k in imu], dtype=float) * STANDARD_GRAVITY / 1000
+    led_on = [float(device_s[k]) for k, r in enumerate(records)
+              if r.kind == "LED" and r.values[0]]
+    return ArduinoLog(device_s[imu], accel, led_on, float(device_s[0]))
+
+
+def video_led_on_s(video: Path, region: tuple[int, int, int, int]) -> tuple[list[float], float]:
+    """Times [s] of the frames where the LED switched on, and the frame period [s]."""
+    source = VideoFileSource(video)
+    detector = LedDetector(region)
+    times: list[float] = []
+    try:
+        for frame in source.frames():
+            switch = detector.update(frame.index, frame.image)
+            if switch is not None and switch.on:
+                times.append(frame.time_ns * 1e-9)
+    finally:
+        source.close()
+    return times, 1.0 / source.nominal_fps
+
+
+def link_clocks(video: Path, log: ArduinoLog, rig: Rig,
+                led_region: tuple[int, int, int, int] | None) -> ClockLinks:
+    """Both links of a video to an Arduino log (None where a link has no data)."""
+    acceleration = None
+    imu = read_camera_imu(video)
+    if imu is not None:
+        in_rig = imu.accel_m_s2 @ rig.world_to_camera.rotation     # optical → world: Rᵀ v
+        acceleration = align_by_acceleration(log.accel_time_s, log.accel_m_s2,
+                                             imu.accel_time_s, in_rig)
+    led_offset = led_sigma = None
+    if led_region is not None and log.led_on_s:
+        camera_on, period = video_led_on_s(video, led_region)
+        offset = camera_offset_s(log.led_on_s, [t - period / 2 for t in camera_on])
+        if np.isfinite(offset):
+            led_offset, led_sigma = offset, period / np.sqrt(12)
+    return ClockLinks(acceleration, led_offset, led_sigma)
+
+
+def add_parser(commands: argparse._SubParsersAction) -> None:
+    """Register `sds clock-link`."""
+    parser = commands.add_parser(
+        "clock-link", help="the camera's clock against the Arduino's (acceleration, LED)",
+        description="Link a video's clock to an Arduino log's: by the excitation both "
+                    "accelerometers feel (the camera's own IMU, turned into the rig's frame), "
+                    "and by the sync LED where --led-roi is given; print both with their σ, "
+                    "their disagreement, and the --start-s that puts the log on the video's "
+                    "clock in `sds import-sd`.")
+    parser.add_argument("--video", type=Path, required=True)
+    parser.add_argument("--arduino", type=Path, required=True,
+                        help="the SD-card log or a serial capture (protocol v1)")
+    parser.add_argument("--rig", type=Path, required=True,
+                        help="rig file: the camera's pose turns its IMU into the rig's frame")
+    parser.add_argument("--led-roi", type=int, nargs=4, metavar=("X", "Y", "W", "H"),
+                        help="the sync LED's region in the full frame [px]")
+    parser.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Link and print; a one-line error and exit code 2 on bad input."""
+    try:
+        log = read_arduino_log(args.arduino)
+        links = link_clocks(args.video, log, load_rig(args.rig),
+                            tuple(args.led_roi) if args.led_roi else None)
+    except (OSError, ValueError, RigError, FrameSourceError) as error:
+        print(f"sds clock-link: {error}", file=sys.stderr)
+        return 2
+    if links.acceleration is None and links.led_offset_s is None:
+        print("sds clock-link: no link: the video has no camera IMU (or no excitation in both "
+              "records) and no --led-roi with an LED switch", file=sys.stderr)
+        return 2
+    best = links.acceleration.offset_s if links.acceleration is not None else \
+        links.led_offset_s
+    a = links.acceleration
+    print("acceleration: " + (f"camera − device = {a.offset_s:+.5f} s ± {a.sigma_s * 1e3:.2f} ms"
+                              f" (device time {a.window_s[0]:.2f}–{a.window_s[1]:.2f} s)"
+                              if a is not None else "none (no camera IMU or no excitation)"))
+    print("LED:          " + (f"camera − device = {links.led_offset_s:+.5f} s ± "
+                              f"{links.led_sigma_s * 1e3:.2f} ms" if links.led_offset_s is not None
+                              and links.led_sigma_s is not None else "none"))
+    if links.disagreement_s is not None:
+        difference, sigma = links.disagreement_s
+        print(f"disagreement: {difference * 1e3:+.2f} ms ± {sigma * 1e3:.2f} ms "
+              f"({abs(difference) / sigma:.1f} σ)")
+    print(f"sds import-sd {args.arduino} --start-s {log.first_record_s + best:.6f}  "
+          "# puts the log on the video's clock")
+    return 0
