@@ -72,7 +72,7 @@ def stage_times(video: Path, rig) -> dict[str, float]:
 
     region = Region(*rig.container_region_px(rig.camera))
     tracker = FrameTracker(rig)
-    recorder = McapRecorder(video.with_name("stages.mcap"))
+    recorder = McapRecorder(video.with_name("stages.mcap"), overwrite=True)
     recorder.add_topic("/camera/image", "sensor_msgs/msg/Image")
     times: dict[str, list[float]] = {k: [] for k in ("decode", "transport", "tracking",
                                                       "triangulation", "recording")}

@@ -17,6 +17,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from ros_helpers import Probe, SdsGraphRun
 from rosbags.highlevel import AnyReader
 from rrd_helpers import rrd_entities
+from sds_camera.camera_imu import read_camera_imu
 from sds_recon.qos import stream_qos
 from sds_recon.results import load_results
 from sds_recon.rig import load_rig
@@ -267,8 +268,16 @@ def test_export_round_trip_equals_the_graphs_messages(drop_run: DropRun) -> None
         row = fits[(fit.frame_index,)]
         assert [row["p00_mm"], row["tilt_x_deg"], row["rmse_mm"]] == pytest.approx(
             [fit.p00_mm, np.degrees(fit.tilt_x_rad), fit.rmse_mm])
-    assert set(results.columns) == {"spots", "points", "line", "fits"}
+    assert set(results.columns) == {"spots", "points", "line", "fits", "camera_imu"}
     assert all(column in results.columns["points"] for column in results.points.dtype.names)
+    # the simulator's camera IMU went through the graph (/camera/imu) into the recording: every
+    # sample from the first frame on
+    imu = read_camera_imu(drop_run.output.video)
+    assert imu is not None and results.camera_imu is not None
+    accel = results.camera_imu[np.isfinite(results.camera_imu["ax_m_s2"])]
+    assert len(accel) == np.sum(imu.accel_time_s >= 0)
+    np.testing.assert_allclose(accel["az_m_s2"], imu.accel_m_s2[imu.accel_time_s >= 0, 2],
+                               atol=1e-6)
 
 
 def test_the_sync_led_is_found_in_the_video(drop_run: DropRun) -> None:

@@ -27,7 +27,8 @@ class Import:
 
 
 def import_sd(log: str | Path, output: str | Path, namespace: str = "/arduino",
-              start_s: float = 0.0, spec: SensorSpec | None = None) -> Import:
+              start_s: float = 0.0, spec: SensorSpec | None = None,
+              overwrite: bool = False) -> Import:
     """Every valid record as /arduino/imu, /arduino/tof, /arduino/events messages stamped with
     the device clock (seconds since the log's first record, plus `start_s`)."""
     records, rejected = read_log(log)
@@ -37,7 +38,7 @@ def import_sd(log: str | Path, output: str | Path, namespace: str = "/arduino",
     device_times = unwrap_time_s([r.t_us for r in records])
     device_times -= device_times[0]
     missing = sum((b.seq - a.seq - 1) % WRAP for a, b in pairwise(records))
-    recorder = McapRecorder(output)
+    recorder = McapRecorder(output, overwrite=overwrite)
     try:
         for record, device_s in zip(records, device_times, strict=True):
             stamp_ns = round((start_s + device_s) * 1e9)

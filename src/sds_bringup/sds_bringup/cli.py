@@ -68,6 +68,8 @@ def _add_demo(commands: argparse._SubParsersAction) -> None:
     run.add_argument("--out", type=Path, default=Path("run_output"))
     run.add_argument("--port", help="the Arduino's serial port (default: arduino.yaml's)")
     run.add_argument("--gravity", type=float, help="gravity for the theory [m/s²]")
+    run.add_argument("--overwrite", action="store_true",
+                     help="replace the recording and results of an earlier run in --out")
     run.set_defaults(run=_run_run)
 
 
@@ -80,7 +82,8 @@ def _run_demo(args: argparse.Namespace) -> int:
 def _run_run(args: argparse.Namespace) -> int:
     from sds_bringup.demo import run_live
 
-    return run_live(args.video or args.camera, args.rig, args.out, args.port, args.gravity)
+    return run_live(args.video or args.camera, args.rig, args.out, args.port, args.gravity,
+                    args.overwrite)
 
 
 def _add_calibrate(commands: argparse._SubParsersAction) -> None:
@@ -333,6 +336,8 @@ def _add_simulate(commands: argparse._SubParsersAction) -> None:
     parser.add_argument("--scale", type=float, help="image scale, e.g. 0.25 for 960x540")
     parser.add_argument("--seed", type=int, help="override the scenario's random seed")
     parser.add_argument("--codec", choices=["h264", "lossless", "png"], default="h264")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace an earlier simulation in --out")
     parser.set_defaults(run=_run_simulate)
 
 
@@ -349,6 +354,10 @@ def _run_simulate(args: argparse.Namespace) -> int:
         scenario = load_scenario(args.scenario, overrides)
     except ValueError as error:  # ScenarioError, RigError and CameraModelError included
         print(f"sds simulate: {error}", file=sys.stderr)
+        return 2
+    if (args.out / "truth" / "run.json").exists() and not args.overwrite:
+        print(f"sds simulate: {args.out} holds a simulation already (another --out, or "
+              "--overwrite)", file=sys.stderr)
         return 2
     start = time.perf_counter()
     output = simulate(scenario, args.out, codec=args.codec)

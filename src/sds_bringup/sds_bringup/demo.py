@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import os
+import sys
 import threading
 import time
 import tty
@@ -59,9 +60,9 @@ def graph_entries(overrides: list[str]):
 def run_graph(overrides: list[str], out: Path, expected_frames: int | None,
               serial_lines: list[bytes] | None = None, port: Path | None = None) -> RunOutputs:
     """Run the chain until `expected_frames` fits were made (or Ctrl-C for a live camera),
-    with a progress bar; node logs go to out/graph.log."""
+    with a progress bar; node logs go to out/graph.log. The recorder refuses an existing
+    recording unless the overrides say `recorder.overwrite=true`."""
     outputs = RunOutputs(out / "recording.mcap", out / "recording.rrd", out / "graph.log")
-    outputs.recording.unlink(missing_ok=True)
     domain_id = pick_domain_id()
     environment = graph_environment(domain_id)
     os.environ.update(environment)
@@ -176,9 +177,10 @@ def height_errors(truth_spots: Path, points: np.ndarray) -> np.ndarray:
 
 
 def analyse_run(recording: Path, rig: Rig, out: Path, options: AnalysisOptions,
-                truth_run: Path | None = None) -> dict:
-    """Result files, the analysis report; the results as a dictionary."""
-    tables = RunTables(ResultsWriter(out / "results"), rig)
+                truth_run: Path | None = None, overwrite: bool = True) -> dict:
+    """Result files, the analysis report; the results as a dictionary. The run's own folder:
+    an earlier run's results are replaced (the caller checked `overwrite`)."""
+    tables = RunTables(ResultsWriter(out / "results", overwrite), rig)
     export_recording(recording, rig, tables)
     tables.writer.close()
     analysis = analyze(read_mcap(recording), rig, options)
@@ -199,7 +201,8 @@ def run_demo(out: Path, seconds: float | None) -> int:
     half = LED_ROI_HALF_PX
     port = (out / "ttyARDUINO").resolve()
     serial_lines = simulation.serial.read_bytes().splitlines(keepends=True)
-    outputs = run_graph([f"camera.source={simulation.video.resolve()}",
+    outputs = run_graph(["recorder.overwrite=true",   # the demo's folder is its own
+                         f"camera.source={simulation.video.resolve()}",
                          f"camera.roi={list(rig.container_region_px(rig.camera))}",
                          f"camera.led_roi={[led_x - half, led_y - half, 2 * half, 2 * half]}",
                          f"tracker.rig={scenario.rig_file.resolve()}",
@@ -252,11 +255,15 @@ def print_summary(out: Path, scenario, simulation, outputs: RunOutputs, result: 
 
 
 def run_live(source: str, rig_file: Path, out: Path, port: str | None,
-             gravity: float | None) -> int:
+             gravity: float | None, overwrite: bool = False) -> int:
     """`sds run`: a video file or a camera through the whole chain, then the analysis."""
+    if (out / "recording.mcap").exists() and not overwrite:
+        print(f"sds run: {out / 'recording.mcap'} exists (another --out, or --overwrite)",
+              file=sys.stderr)
+        return 2
     out.mkdir(parents=True, exist_ok=True)
     rig = load_rig(rig_file)
-    overrides = [f"camera.source={source}",
+    overrides = [f"recorder.overwrite={str(overwrite).lower()}", f"camera.source={source}",
                  f"camera.roi={list(rig.container_region_px(rig.camera))}",
                  f"tracker.rig={rig_file.resolve()}", f"recon.rig={rig_file.resolve()}",
                  f"viewer.rig={rig_file.resolve()}"]

@@ -48,7 +48,10 @@ def run_nodes(
             executor.add_node(node)
             if is_required:
                 required.append(node)
-        while rclpy.ok() and not any(_finished(node) for node in required):
+        # Until a required node is done, or any node has failed (a node that cannot work,
+        # e.g. a recorder refusing to replace a file, ends its process with its code).
+        while rclpy.ok() and not any(_finished(node) for node in required) and \
+                not any(_failed(node) for node in nodes):
             executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
@@ -65,6 +68,10 @@ def run_nodes(
             node.destroy_node()
         rclpy.try_shutdown()
     return exit_code
+
+
+def _failed(node: Node) -> bool:
+    return _finished(node) and getattr(node, "exit_code", 0) != 0
 
 
 def _finished(node: Node) -> bool:

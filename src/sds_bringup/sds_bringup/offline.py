@@ -56,6 +56,7 @@ from sds_bringup.rig_calibration import (
 )
 
 GRAPH = CONFIG / "graphs" / "drop.yaml"
+CAMERA_IMU_TOPIC = "/camera/imu"
 """The graph whose tracker and reconstruction parameters the offline pipeline uses."""
 
 
@@ -181,6 +182,14 @@ class RunTables:
         rows.sort(key=lambda row: row[0])
         self.writer.add("camera_imu", rows)
 
+    def add_camera_imu_message(self, msg, time_s: float) -> None:
+        """A recorded /camera/imu message (one sensor each, the other's covariance[0] −1)."""
+        nan = (np.nan,) * 3
+        a, g = msg.linear_acceleration, msg.angular_velocity
+        accel = nan if msg.linear_acceleration_covariance[0] == -1 else (a.x, a.y, a.z)
+        gyro = nan if msg.angular_velocity_covariance[0] == -1 else (g.x, g.y, g.z)
+        self.writer.add("camera_imu", [(time_s, *accel, *gyro)])
+
     def recording(self, source: str):
         """The points as the analysis reads them."""
         if not self.point_rows:
@@ -261,6 +270,8 @@ def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:
                     cloud["miss_distance_mm"].astype(float)), cloud_rejected(cloud)))
         elif name == "sds_msgs/msg/SurfaceFit":
             _add_fit_message(tables, msg, time_s)
+        elif name == "sensor_msgs/msg/Imu" and message.channel.topic == CAMERA_IMU_TOPIC:
+            tables.add_camera_imu_message(msg, time_s)
         elif name == "sensor_msgs/msg/Imu":
             a = msg.linear_acceleration
             tables.writer.add("imu", [(time_s, a.x, a.y, a.z)])
@@ -303,8 +314,11 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
     inputs = process.add_mutually_exclusive_group(required=True)
     inputs.add_argument("--video", type=Path, help="video file, or image folder (with --fps)")
     inputs.add_argument("--mcap", type=Path, help="recording with camera frames")
-    process.add_argument("--rig", type=Path, required=True)
-    process.add_argument("--out", type=Path, required=True)
+    process.add_argument("--rig", type=Path, required=True, help="the rig file")
+    process.add_argument("--out", type=Path, required=True,
+                         help="folder for the result files (refused if it holds results)")
+    process.add_argument("--overwrite", action="store_true",
+                         help="replace the results of an earlier run in --out")
     process.add_argument("--fps", type=float, default=0.0,
                          help="frame rate of an image folder [1/s]")
     process.add_argument("--gravity", type=float, help="gravity for the theory [m/s²]")
@@ -322,8 +336,12 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
         description="Write the result files of a recording of the graph (see README, "
                     "'Result files').")
     export.add_argument("recording", type=Path)
-    export.add_argument("--rig", type=Path, default=CONFIG / "rigs" / "stelium.yaml")
-    export.add_argument("--out", type=Path, required=True)
+    export.add_argument("--rig", type=Path, default=CONFIG / "rigs" / "stelium.yaml",
+                        help="the rig file")
+    export.add_argument("--out", type=Path, required=True,
+                        help="folder for the result files (refused if it holds results)")
+    export.add_argument("--overwrite", action="store_true",
+                        help="replace the results of an earlier export in --out")
     export.add_argument("--gravity", type=float, help="gravity for the theory [m/s²]")
     export.set_defaults(run=run_export)
 
@@ -340,6 +358,7 @@ def run_process(args: argparse.Namespace) -> int:
         if not source.exists():
             raise RecordingError(f"{source}: no such file")
         rig = load_rig(args.rig)
+        writer = ResultsWriter(args.out, args.overwrite)
         if args.calibrate_lasers:
             if args.surfaces is None:
                 raise ValueError("--calibrate-lasers needs --surfaces")
@@ -347,7 +366,7 @@ def run_process(args: argparse.Namespace) -> int:
                                                   args.out)
             print(f"sds process: calibrated rig written to {rig_path}")
         frames = video_frames(source, rig, args.fps) if args.video else mcap_frames(source)
-        tables = RunTables(ResultsWriter(args.out), rig)
+        tables = RunTables(writer, rig)
         count = process_frames(frames, rig, tables, progress=not args.no_progress)
         imu = read_camera_imu(source) if args.video else None
     except (RigError, RecordingError, FrameSourceError, GraphFileError, McapError, OSError,
@@ -374,7 +393,7 @@ def run_export(args: argparse.Namespace) -> int:
         if not args.recording.is_file():
             raise RecordingError(f"{args.recording}: no such recording")
         rig = load_rig(args.rig)
-        tables = RunTables(ResultsWriter(args.out), rig)
+        tables = RunTables(ResultsWriter(args.out, args.overwrite), rig)
         frames = export_recording(args.recording, rig, tables)
     except (RigError, RecordingError, McapError, OSError, ValueError) as error:
         return _fail("export", error)

@@ -14,9 +14,8 @@ from sds_recon.rig import RigError, load_rig
 from sds_record.mcap_files import McapRecorder, repair
 from sds_viz.from_mcap import mcap_to_rrd
 
+from sds_bringup.offline import CAMERA_IMU_TOPIC
 from sds_bringup.paths import CONFIG
-
-CAMERA_IMU_TOPIC = "/camera/imu"
 
 
 def add_parser(commands: argparse._SubParsersAction) -> None:
@@ -25,8 +24,9 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
         "mcap-repair", help="rewrite an MCAP left without its summary (e.g. after a crash)",
         description="Copy every complete message of an MCAP file (one whose recorder was killed "
                     "keeps all flushed chunks) into a new file with a summary section.")
-    parser.add_argument("source", type=Path)
-    parser.add_argument("target", type=Path)
+    parser.add_argument("source", type=Path, help="the recording without a summary")
+    parser.add_argument("target", type=Path, help="the new, indexed recording to write")
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing target")
     parser.set_defaults(run=run)
     add_view_parser(commands)
     add_import_sd_parser(commands)
@@ -36,7 +36,7 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Repair; a one-line error and exit code 2 on bad input."""
     try:
-        report = repair(args.source, args.target)
+        report = repair(args.source, args.target, overwrite=args.overwrite)
     except (OSError, ValueError) as error:
         print(f"sds mcap-repair: {error}", file=sys.stderr)
         return 2
@@ -89,6 +89,7 @@ def add_import_sd_parser(commands: argparse._SubParsersAction) -> None:
     parser.add_argument("--out", type=Path, help="MCAP to write (default: beside the log)")
     parser.add_argument("--start-s", type=float, default=0.0,
                         help="time of the log's first record on the recording's clock [s]")
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing --out")
     parser.set_defaults(run=run_import_sd)
 
 
@@ -96,7 +97,7 @@ def run_import_sd(args: argparse.Namespace) -> int:
     """Import; a one-line error and exit code 2 on bad input."""
     output = args.out or args.log.with_suffix(".mcap")
     try:
-        result = import_sd(args.log, output, start_s=args.start_s)
+        result = import_sd(args.log, output, start_s=args.start_s, overwrite=args.overwrite)
     except (OSError, ValueError) as error:
         print(f"sds import-sd: {error}", file=sys.stderr)
         return 2
@@ -125,14 +126,11 @@ def add_import_gopro_parser(commands: argparse._SubParsersAction) -> None:
 def run_import_gopro(args: argparse.Namespace) -> int:
     """Import; a one-line error and exit code 2 on bad input."""
     output = args.out or args.video.with_suffix(".imu.mcap")
-    if output.exists() and not args.overwrite:
-        print(f"sds import-gopro: {output} exists (--overwrite replaces it)", file=sys.stderr)
-        return 2
     try:
         imu = read_gopro_imu(args.video)
         if imu is None:
             raise ValueError(f"{args.video}: no GPMF telemetry track (not a GoPro video?)")
-        written = write_imu_mcap(imu, output, round(args.start_s * 1e9))
+        written = write_imu_mcap(imu, output, round(args.start_s * 1e9), args.overwrite)
     except (OSError, ValueError) as error:
         print(f"sds import-gopro: {error}", file=sys.stderr)
         return 2
@@ -142,10 +140,10 @@ def run_import_gopro(args: argparse.Namespace) -> int:
     return 0
 
 
-def write_imu_mcap(imu: CameraImu, output: Path, origin_ns: int,
+def write_imu_mcap(imu: CameraImu, output: Path, origin_ns: int, overwrite: bool = False,
                    frame_id: str = "camera_optical") -> int:
     """The camera IMU's samples as /camera/imu messages in a new MCAP; how many."""
-    recorder = McapRecorder(output)
+    recorder = McapRecorder(output, overwrite=overwrite)
     count = 0
     try:
         recorder.add_topic(CAMERA_IMU_TOPIC, "sensor_msgs/msg/Imu")

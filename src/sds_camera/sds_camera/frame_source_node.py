@@ -34,6 +34,8 @@ from sds_camera.led import LedDetector
 from sds_msgs.msg import CameraModel, SyncEvent
 
 PACINGS = ("realtime", "flood")
+IMU_HISTORY = 2000
+"""Camera IMU messages kept for late subscribers (about 3 s of a GoPro's 600 per second)."""
 STAMPS = ("clock", "media")
 EXIT_SOURCE_ERROR = 2
 
@@ -82,8 +84,11 @@ class FrameSourceNode(Node):
         led_roi = [int(v) for v in self.get_parameter("led_roi").value]
         self._led = LedDetector(tuple(led_roi)) if len(led_roi) == 4 and led_roi[2] > 0 else None
         self._led_switches: dict[int, bool] = {}
+        # Kept for a late subscriber (a recorder that matches after the first frames): the
+        # samples of the first seconds come in a burst with the first frame.
         self._imu_pub = self.create_publisher(Imu, "imu", QoSProfile(
-            depth=1000, reliability=ReliabilityPolicy.RELIABLE))
+            depth=IMU_HISTORY, reliability=ReliabilityPolicy.RELIABLE,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL))
         self._imu_samples = self._camera_imu_samples(p["source"])
         self._ack_topic = self.create_subscription(
             Header, "frame_ack", self._on_ack, reliable).topic_name
@@ -113,10 +118,11 @@ class FrameSourceNode(Node):
         return deque(imu_samples(imu))
 
     def _publish_imu_until(self, time_s: float, origin_ns: int) -> None:
-        """Publish the camera IMU's samples up to `time_s` on the video's clock."""
+        """Publish the camera IMU's samples up to `time_s` on the video's clock (those before
+        the first frame are left out: the stream starts with the frames)."""
         while self._imu_samples and self._imu_samples[0][0] <= time_s:
             sample_s, sensor, value = self._imu_samples.popleft()
-            if origin_ns + sample_s * 1e9 >= 0:
+            if sample_s >= 0:
                 _, msg = imu_message(sample_s, sensor, value, origin_ns, self._p["frame_id"])
                 self._imu_pub.publish(msg)
 

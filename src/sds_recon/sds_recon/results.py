@@ -94,10 +94,16 @@ COLUMNS: dict[str, dict[str, str]] = {
 
 
 class ResultsWriter:
-    """Streams rows into the tables' CSV files (opened at their first row)."""
+    """Streams rows into the tables' CSV files (opened at their first row); a folder that
+    holds results already is refused unless `overwrite`."""
 
-    def __init__(self, directory: str | Path) -> None:
+    def __init__(self, directory: str | Path, overwrite: bool = False) -> None:
         self.directory = Path(directory)
+        earlier = [name for name in [*(f"{t}.csv" for t in COLUMNS), "columns.json"]
+                   if (self.directory / name).exists()]
+        if earlier and not overwrite:
+            raise FileExistsError(f"{self.directory} holds results already ({earlier[0]}, …): "
+                                  "another folder, or --overwrite")
         self.directory.mkdir(parents=True, exist_ok=True)
         self._files: dict[str, IO[str]] = {}
         self._writers: dict[str, Any] = {}

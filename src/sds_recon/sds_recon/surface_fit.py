@@ -15,6 +15,9 @@ OUTLIER_LIMIT_SIGMA = 4.0
 """A point this many of its own σ off the frame's surface (or its beam) is rejected."""
 HEIGHT_SIGMA_FLOOR_MM = 0.05
 """Floor under a point's height σ in that test: what the models leave (meniscus, modes)."""
+MODEL_ERROR_MM = 0.3
+"""What the plane and three modes leave of a strongly sloshing surface: leave-one-out residuals
+of correct points reach 0.9 mm (RMS 0.4 mm) in the simulated drop right after the kick."""
 LEVERAGE_FLOOR = 0.05
 """Least 1 − leverage for which a point's leave-one-out residual is judged."""
 MODAL_REDUNDANCY = 4
@@ -157,8 +160,9 @@ def surface_outliers(points_mm: ArrayLike, height_sigma_mm: ArrayLike, radius_mm
     A spot whose camera ray misses its beam (Eq. 9) by more than `limit_sigma` of its height σ
     (floored at `floor_mm`) is not on that beam. Of the others, the suspect is the point with
     the largest σ-normalised leave-one-out residual (a point that pulls the fit onto itself
-    cannot hide); it is rejected if, with the surface fitted to the others alone, it lies
-    more than `limit_sigma` of its σ off, times the others' robust spread (1.4826 × median
+    cannot hide; σ here adds MODEL_ERROR_MM in quadrature, what the models leave of a real
+    surface); it is rejected if, with the surface fitted to the others alone, it lies more
+    than `limit_sigma` of that σ off, times the others' robust spread (1.4826 × median
     normalised residual) where that exceeds 1; then the next suspect, until one is not. The
     surface is Eq. 12's plane plus the modes (a tilt table's steep plane and a sloshing surface
     alike) where the points over-determine it, the plane alone where they do not or where the
@@ -166,11 +170,13 @@ def surface_outliers(points_mm: ArrayLike, height_sigma_mm: ArrayLike, radius_mm
     higher modes) widens the spread and loses no points; a wrong blob, millimetres off, does.
     """
     points = np.atleast_2d(np.asarray(points_mm, dtype=float))
-    sigma = np.maximum(np.asarray(height_sigma_mm, dtype=float), floor_mm)
-    rejected = ~np.isfinite(points).all(axis=1) | ~np.isfinite(sigma)
+    measured = np.maximum(np.asarray(height_sigma_mm, dtype=float), floor_mm)
+    rejected = ~np.isfinite(points).all(axis=1) | ~np.isfinite(measured)
     if miss_distance_mm is not None:
         miss = np.nan_to_num(np.asarray(miss_distance_mm, dtype=float), nan=0.0)
-        rejected |= miss > limit_sigma * sigma
+        rejected |= miss > limit_sigma * measured
+    # Off the surface by what the models leave undescribed, too (sloshing beyond three modes).
+    sigma = np.hypot(measured, MODEL_ERROR_MM)
     plane = np.column_stack([np.ones(len(points)), points[:, :2]])
     # Plane and modes together: a tilt table's steep plane or a sloshing surface alike.
     surface = np.column_stack([plane, _modal_design(points, radius_mm, DEFAULT_MODES)[0][:, 1:]])

@@ -51,17 +51,26 @@ def header_stamp_ns(cdr: bytes) -> int:
     return sec * 1_000_000_000 + nanosec
 
 
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+"""The first bytes of every MCAP file."""
+
+
 class McapRecorder:
     """Writes serialized messages; a chunk is closed and flushed at least every `flush_period_s`
     so that a killed process loses at most that much (the OS keeps what was written)."""
 
     def __init__(self, path: str | Path, compression: str = "zstd",
-                 chunk_size: int = 4 * 1024 * 1024, flush_period_s: float = 0.5) -> None:
+                 chunk_size: int = 4 * 1024 * 1024, flush_period_s: float = 0.5,
+                 overwrite: bool = False) -> None:
         if compression not in COMPRESSIONS:
             raise ValueError(f"compression {compression!r} is not one of {sorted(COMPRESSIONS)}")
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._stream = self.path.open("wb")
+        try:   # never replaces a recording unless told to
+            self._stream = self.path.open("wb" if overwrite else "xb")
+        except FileExistsError:
+            raise ValueError(f"{self.path} exists (not replaced: choose another name, or "
+                             "overwrite)") from None
         self._writer = Writer(self._stream, chunk_size=chunk_size,
                               compression=COMPRESSIONS[compression])
         self._writer.start(profile=PROFILE, library="sds_record")
@@ -181,11 +190,17 @@ class RepairReport:
     had_summary: bool
 
 
-def repair(source: str | Path, target: str | Path, compression: str = "zstd") -> RepairReport:
+def repair(source: str | Path, target: str | Path, compression: str = "zstd",
+           overwrite: bool = False) -> RepairReport:
     """Copy every complete message of `source` into a new file with a summary section."""
     source, target = Path(source), Path(target)
     if source.resolve() == target.resolve():
         raise ValueError("repair writes a new file: give a target other than the source")
+    with source.open("rb") as stream:
+        if stream.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
+            raise ValueError(f"{source} is not an MCAP file (no MCAP magic at its start)")
+    if target.exists() and not overwrite:
+        raise ValueError(f"{target} exists (not replaced: choose another name, or --overwrite)")
     had_summary = _summary(source) is not None
     schemas: dict[int, int] = {}
     channels: dict[int, int] = {}

@@ -48,6 +48,7 @@ class RecorderNode(Node):
         self.declare_parameter("discovery_period_s", 0.5)
         self.declare_parameter("queue_depth", 100)
         self.declare_parameter("ack_for", [""])
+        self.declare_parameter("overwrite", False)
         output = self.get_parameter("output").value or \
             f"recordings/sds_{datetime.now():%Y%m%d_%H%M%S}.mcap"
         self._wanted = {t for t in self.get_parameter("topics").value if t}
@@ -56,7 +57,8 @@ class RecorderNode(Node):
         self._ack_for = {t for t in self.get_parameter("ack_for").value if t}
         try:
             self._recorder = McapRecorder(output, self.get_parameter("compression").value,
-                                          flush_period_s=self.get_parameter("flush_period_s").value)
+                                          flush_period_s=self.get_parameter("flush_period_s").value,
+                                          overwrite=bool(self.get_parameter("overwrite").value))
         except (ValueError, OSError) as error:
             self.get_logger().error(f"cannot record to {output}: {error}")
             self.exit_code = EXIT_CONFIG_ERROR
