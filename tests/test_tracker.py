@@ -10,7 +10,7 @@ from scipy import stats
 from sds_sim.render import FrameRenderer
 from sds_sim.scenario import load_scenario
 from sds_tracker.hampel import HampelBank
-from sds_tracker.spots import HAMPEL_REPLACED
+from sds_tracker.spots import HAMPEL_REPLACED, SpotSettings, subtract_line_centroid
 from sds_tracker.tracker import FrameTracker, is_lost
 
 
@@ -136,3 +136,19 @@ def test_manual_seeds_start_the_spots_and_bad_seeds_are_refused(repo: Path) -> N
     assert np.max(np.abs(found - truth.spot_px)) < 0.3
     with pytest.raises(ValueError, match="laser 99"):
         FrameTracker(rig, seeds={99: (10.0, 10.0)})
+
+
+def test_the_line_is_subtracted_from_a_spot_beside_it() -> None:
+    """A spot 4 px beside the laser line: its centroid without the line's light."""
+    settings = SpotSettings()
+    size = 2 * settings.window_px + 1
+    rows, columns = np.mgrid[0:size, 0:size].astype(float)
+    spot = np.array([26.3, 23.6])                                  # x, y [window px]
+    line_x = 30.4 + 0.05 * (rows[:, 0] - 24)                      # a slightly slanted line
+    line = 90.0 * np.exp(-0.5 * ((columns - line_x[:, None]) / 1.5) ** 2)
+    light = 20.0 + line + 150.0 * np.exp(-0.5 * ((columns - spot[0]) ** 2 +
+                                                 (rows - spot[1]) ** 2) / 2.0**2)
+    plain = np.array([np.sum(light * columns), np.sum(light * rows)]) / np.sum(light)
+    assert np.hypot(*(plain - spot)) > 0.5                         # the line pulls it
+    found = subtract_line_centroid(light, line_x, spot + np.array([1.5, -1.0]), settings)
+    assert found is not None and np.hypot(*(found - spot)) < 0.1

@@ -86,6 +86,14 @@ def _run_run(args: argparse.Namespace) -> int:
                     args.overwrite)
 
 
+def _add_board_arguments(parser: argparse.ArgumentParser) -> None:
+    """--board and --square: the checkerboard (sds_recon.calibration.board.Checkerboard)."""
+    parser.add_argument("--board", required=True, metavar="COLSxROWS",
+                        help="inner corners per row x per column, e.g. 9x6")
+    parser.add_argument("--square", type=float, required=True, metavar="MM",
+                        help="checkerboard square size [mm]")
+
+
 def _add_calibrate(commands: argparse._SubParsersAction) -> None:
     parser = commands.add_parser("calibrate",
                                  help="calibrate the camera, the whole rig, or the beams alone")
@@ -98,10 +106,7 @@ def _add_calibrate(commands: argparse._SubParsersAction) -> None:
     camera.add_argument("--model", choices=["pinhole", "scaramuzza"], required=True)
     camera.add_argument("--images", nargs="+", type=Path, required=True,
                         help="image files (all the same size)")
-    camera.add_argument("--board", required=True, metavar="COLSxROWS",
-                        help="inner corners per row x per column, e.g. 9x6")
-    camera.add_argument("--square", type=float, required=True, metavar="MM",
-                        help="checkerboard square size [mm]")
+    _add_board_arguments(camera)
     camera.add_argument("--out", type=Path, default=Path("camera.yaml"),
                         help="camera file to write; the report goes beside it")
     camera.set_defaults(run=_run_calibrate_camera)
@@ -153,10 +158,7 @@ def _add_calibrate(commands: argparse._SubParsersAction) -> None:
                     "(camera frame, n.X + d = 0, mm); write it as JSON with its residuals.")
     plane.add_argument("--images", nargs="+", type=Path, required=True,
                        help="colour images, one board pose each, the line crossing the board")
-    plane.add_argument("--board", required=True, metavar="COLSxROWS",
-                       help="inner corners per row x per column, e.g. 11x7")
-    plane.add_argument("--square", type=float, required=True, metavar="MM",
-                       help="checkerboard square size [mm]")
+    _add_board_arguments(plane)
     plane.add_argument("--model", choices=["pinhole", "scaramuzza"], default="pinhole")
     plane.add_argument("--out", type=Path, required=True, help="JSON file to write")
     plane.add_argument("--overwrite", action="store_true", help="replace an existing --out")

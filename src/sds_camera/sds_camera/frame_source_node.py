@@ -119,7 +119,7 @@ class FrameSourceNode(Node):
 
     def _publish_imu_until(self, time_s: float, origin_ns: int) -> None:
         """Publish the camera IMU's samples up to `time_s` on the video's clock (those before
-        the first frame are left out: the stream starts with the frames)."""
+        the first frame or after the last are left out: the stream is the frames' span)."""
         while self._imu_samples and self._imu_samples[0][0] <= time_s:
             sample_s, sensor, value = self._imu_samples.popleft()
             if sample_s >= 0:
@@ -290,7 +290,6 @@ class FrameSourceNode(Node):
             except queue.Empty:
                 continue
             if isinstance(item, _EndOfStream):
-                self._publish_imu_until(np.inf, origin_ns)
                 self._finish(item.error, flow_control)
                 return
             if p["pacing"] == "realtime" and not self._source.is_live:
@@ -331,6 +330,7 @@ class FrameSourceNode(Node):
         if self._stop.is_set():
             return
         self._image_pub.wait_for_all_acked(Duration(seconds=5))
+        self._imu_pub.wait_for_all_acked(Duration(seconds=5))
         if error is not None:
             self._fail(f"{error}; the {self.published} frames published before stay valid")
             return
