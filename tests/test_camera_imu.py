@@ -12,7 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 from sds_arduino.clock import align_by_acceleration
-from sds_arduino.protocol import unwrap_time_s
+from sds_arduino.import_sd import import_sd
+from sds_arduino.protocol import format_record, unwrap_time_s
+from sds_bringup.recording import write_imu_mcap
 from sds_camera.camera_imu import (
     HERO5_TO_OPTICAL,
     CameraImu,
@@ -22,7 +24,9 @@ from sds_camera.camera_imu import (
     sidecar_path,
     write_sidecar,
 )
-from sds_recon.sloshing.gravity import free_fall
+from sds_camera.frame_source import VideoFileSource
+from sds_recon.sloshing.gravity import free_fall, gravity_regime
+from sds_recon.sloshing.recording import read_mcap_accelerations
 from sds_sim.arduino import CATAPULT_DURATION_S, STANDARD_GRAVITY, arduino_records
 from sds_sim.camera_imu import camera_imu
 from sds_sim.scenario import Scenario, load_scenario
@@ -170,3 +174,32 @@ def test_sds_clock_link_on_a_simulated_run(name: str, tmp_path: Path) -> None:
     assert abs(float(agreement.group(1))) < 2 * float(agreement.group(2)), done.stdout
     alone = subprocess.run(command, capture_output=True, text=True)   # no LED: acceleration
     assert alone.returncode == 0 and "LED:          none" in alone.stdout, alone.stdout
+
+
+def test_a_recorded_free_fall_sets_microgravity(tmp_path: Path) -> None:
+    """The Arduino's log (import-sd) and the camera's IMU (import-gopro's writer) in MCAP:
+    either one's free fall makes the analysis microgravity; a ground kick does not."""
+    for name, falls in (("drop_4p7s", True), ("ground_kick", False)):
+        scenario = load_scenario(SCENARIOS / f"{name}.yaml", {"duration_s": 3.0})
+        log = tmp_path / f"{name}.txt"
+        log.write_text("".join(format_record(r) for r in arduino_records(scenario)))
+        arduino_only = tmp_path / f"{name}_arduino.mcap"
+        import_sd(log, arduino_only)
+        camera = camera_imu(scenario)
+        assert camera is not None
+        camera_only = tmp_path / f"{name}_camera.mcap"
+        write_imu_mcap(camera, camera_only, 10**9)
+        for path, topic in ((arduino_only, "/arduino/imu"), (camera_only, "/camera/imu")):
+            streams = read_mcap_accelerations(path)
+            assert list(streams) == [topic]
+            gravity, note = gravity_regime(streams)
+            assert (gravity == 0.0) == falls and (topic in note) == falls, (name, topic, note)
+
+
+@pytest.mark.shared_data
+def test_karma_frames_still_decode_at_their_presentation_times(shared_data: Path) -> None:
+    source = VideoFileSource(shared_data / "gopro_gpmf_samples" / "karma.mp4")
+    times = np.array([frame.time_ns for frame in source.frames()]) * 1e-9
+    source.close()
+    assert len(times) == 362
+    np.testing.assert_allclose(np.diff(times), 1001 / 30000, atol=2e-4)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -11,9 +12,11 @@ from sds_arduino.protocol import read_log, unwrap_time_s
 from sds_recon.rig import RigError, load_rig
 from sds_recon.sloshing.analysis import AnalysisOptions, analyze, analyze_table
 from sds_recon.sloshing.estimators import DecayError
+from sds_recon.sloshing.gravity import gravity_regime
 from sds_recon.sloshing.recording import (
     RecordingError,
     read_mcap,
+    read_mcap_accelerations,
     read_points_csv,
     read_series_csv,
 )
@@ -67,7 +70,7 @@ def _analysis(args: argparse.Namespace, options: AnalysisOptions):
         raise RecordingError(f"{path}: no such file")
     suffix = path.suffix.lower()
     if suffix == ".mcap":
-        return analyze(read_mcap(path), rig, options)
+        return analyze(read_mcap(path), rig, with_gravity_regime(path, options))
     if suffix in ARDUINO_LOG_SUFFIXES:
         records, rejected = read_log(path)
         tof = [r for r in records if r.kind == "TOF" and r.values[1] == 0]
@@ -82,6 +85,17 @@ def _analysis(args: argparse.Namespace, options: AnalysisOptions):
         return analyze(read_points_csv(path), rig, options)
     time_s, series = read_series_csv(path)
     return analyze_table(str(path), time_s, series, rig, options)
+
+
+def with_gravity_regime(recording: Path, options: AnalysisOptions) -> AnalysisOptions:
+    """The options, with microgravity where no gravity was given and a recorded accelerometer
+    (the Arduino's or the camera's) shows a free fall; says so on the console."""
+    if options.gravity_m_s2 is not None:
+        return options
+    gravity, note = gravity_regime(read_mcap_accelerations(recording))
+    if note:
+        print(f"sds: {note}")
+    return replace(options, gravity_m_s2=gravity)
 
 
 def _header(path: Path) -> str:

@@ -28,6 +28,7 @@ from sds_sim.scenario import load_scenario
 from sds_sim.simulate import simulate
 from tqdm import tqdm
 
+from sds_bringup.analyze import with_gravity_regime
 from sds_bringup.graph import apply_overrides, load_graph
 from sds_bringup.launcher import Launcher
 from sds_bringup.offline import RunTables, export_recording
@@ -183,7 +184,7 @@ def analyse_run(recording: Path, rig: Rig, out: Path, options: AnalysisOptions,
     tables = RunTables(ResultsWriter(out / "results", overwrite), rig)
     export_recording(recording, rig, tables)
     tables.writer.close()
-    analysis = analyze(read_mcap(recording), rig, options)
+    analysis = analyze(read_mcap(recording), rig, with_gravity_regime(recording, options))
     truth = truth_from_run(truth_run) if truth_run else None
     return write_report(analysis, out / "analysis", truth).results
 

@@ -31,12 +31,13 @@ from sds_recon.results import ResultsWriter
 from sds_recon.rig import Rig, RigError, load_rig
 from sds_recon.sloshing.analysis import AnalysisOptions, analyze
 from sds_recon.sloshing.estimators import DecayError
-from sds_recon.sloshing.gravity import free_fall
+from sds_recon.sloshing.gravity import gravity_regime
 from sds_recon.sloshing.recording import (
     RecordingError,
     cloud_points,
     cloud_rejected,
     cloud_xyz,
+    read_mcap_accelerations,
     recording_from_rows,
     stamp_s,
 )
@@ -369,17 +370,16 @@ def run_process(args: argparse.Namespace) -> int:
         tables = RunTables(writer, rig)
         count = process_frames(frames, rig, tables, progress=not args.no_progress)
         imu = read_camera_imu(source) if args.video else None
+        accelerometers = read_mcap_accelerations(source) if args.mcap else {}
     except (RigError, RecordingError, FrameSourceError, GraphFileError, McapError, OSError,
             ValueError) as error:   # CameraImuError is a ValueError
         return _fail("process", error)
-    gravity, regime = args.gravity, ""
     if imu is not None:
         tables.add_camera_imu(imu)
-        fall = free_fall(imu.accel_time_s, imu.accel_m_s2)
-        if fall is not None and gravity is None:
-            gravity = 0.0
-            regime = (f"camera IMU: free fall {fall.start_s:.2f}–{fall.end_s:.2f} s, analysed "
-                      "as microgravity (--gravity overrides)")
+        accelerometers["camera IMU"] = (imu.accel_time_s, imu.accel_m_s2)
+    gravity, regime = args.gravity, ""
+    if gravity is None:
+        gravity, regime = gravity_regime(accelerometers)
     note = _finish(tables, str(source), args.out, AnalysisOptions(gravity_m_s2=gravity))
     notes = "; ".join(n for n in (regime, note) if n)
     print(f"sds process: {count} frames of {source} -> {args.out}" + (f" ({notes})" if notes

@@ -42,3 +42,18 @@ def free_fall(times_s: np.ndarray, accel_m_s2: np.ndarray) -> FreeFall | None:
             best = FreeFall(float(times_s[first]), float(times_s[end - 1]),
                             float(np.mean(magnitude[first:end])))
     return best
+
+
+def gravity_regime(accelerometers: dict[str, tuple[np.ndarray, np.ndarray]]
+                   ) -> tuple[float | None, str]:
+    """0 (microgravity) and a note naming the stream and the fall if any accelerometer (name →
+    times [s], N×3 m/s²) shows a free fall; else None (the rig's gravity) and no note."""
+    for name, (times_s, accel) in sorted(accelerometers.items()):
+        if len(times_s) < 2:
+            continue
+        fall = free_fall(times_s, accel)
+        if fall is not None:
+            return 0.0, (f"{name}: free fall of {fall.end_s - fall.start_s:.2f} s "
+                         f"(|a| {fall.residual_m_s2:.2f} m/s²), analysed as microgravity "
+                         "(--gravity overrides)")
+    return None, ""

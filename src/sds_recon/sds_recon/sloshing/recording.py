@@ -155,3 +155,29 @@ def read_series_csv(path: str | Path) -> tuple[np.ndarray, dict[str, np.ndarray]
         raise RecordingError(f"{path}: {error}") from None
     names = [name.strip() for name in rows[0]]
     return table[:, 0], {name: table[:, k] for k, name in enumerate(names[1:], start=1)}
+
+
+def read_mcap_accelerations(path: str | Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Every accelerometer stream of a recording (sensor_msgs/Imu messages with a measured
+    linear acceleration), by topic: stamps [s] and specific force (N×3 m/s²)."""
+    from mcap.exceptions import McapError
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    path = Path(path)
+    streams: dict[str, tuple[list[float], list[tuple[float, float, float]]]] = defaultdict(
+        lambda: ([], []))
+    try:
+        with path.open("rb") as stream:
+            reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+            for schema, channel, _, msg in reader.iter_decoded_messages():
+                if schema.name != "sensor_msgs/msg/Imu" or \
+                        msg.linear_acceleration_covariance[0] == -1:
+                    continue
+                a = msg.linear_acceleration
+                times, values = streams[channel.topic]
+                times.append(stamp_s(msg))
+                values.append((a.x, a.y, a.z))
+    except (McapError, OSError, ValueError) as error:
+        raise RecordingError(f"{path}: {error}") from None
+    return {topic: (np.array(t), np.array(v)) for topic, (t, v) in streams.items()}
