@@ -85,3 +85,11 @@ def test_the_recorder_refuses_an_existing_output_at_start(tmp_path: Path) -> Non
     assert graph.wait(timeout=60) == 2, graph.output()
     assert "exists" in graph.output() and "Traceback" not in graph.output()
     assert output.read_bytes() == kept
+
+
+@pytest.mark.ros
+def test_a_misspelled_parameter_is_an_error_naming_the_close_match(tmp_path: Path) -> None:
+    graph = SdsGraphRun("record.yaml", "--set", f"recorder.outptu={tmp_path / 'x.mcap'}")
+    assert graph.wait(timeout=60) == 2, graph.output()
+    assert "no parameter 'outptu'; did you mean output" in graph.output(), graph.output()
+    assert "Traceback" not in graph.output() and not (tmp_path / "x.mcap").exists()

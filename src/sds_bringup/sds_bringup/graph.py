@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import difflib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -105,12 +106,32 @@ def apply_overrides(entries: list[NodeEntry], overrides: list[str]) -> list[Node
         if not equals or not dot or not parameter:
             raise GraphFileError(f"override {override!r} must look like node.parameter=value")
         if node not in by_name:
-            raise GraphFileError(f"override {override!r}: no node {node!r} in the graph")
+            close = difflib.get_close_matches(node, list(by_name), n=3)
+            hint = f" (did you mean {', '.join(close)}?)" if close else \
+                f" (it has {', '.join(by_name)})"
+            raise GraphFileError(f"override {override!r}: no node {node!r} in the graph{hint}")
         entry = by_name[node]
+        documented = documented_parameters(entry)
+        if documented and parameter not in documented:
+            close = difflib.get_close_matches(parameter, sorted(documented), n=3)
+            hint = f"; did you mean {', '.join(close)}?" if close else ""
+            raise GraphFileError(f"override {override!r}: node {node!r} has no parameter "
+                                 f"{parameter!r}{hint}")
         by_name[node] = replace(
             entry, parameters={**entry.parameters, parameter: yaml.safe_load(value)}
         )
     return [by_name[entry.name] for entry in entries]
+
+
+def documented_parameters(entry: NodeEntry) -> set[str]:
+    """The parameters a node's parameter files document (empty without a file): every
+    parameter a node declares is in its config/params file, with what it means."""
+    names: set[str] = set()
+    for file in entry.params_files:
+        document = yaml.safe_load(file.read_text()) or {}
+        for section in document.values():
+            names.update((section or {}).get("ros__parameters", {}))
+    return names
 
 
 def composed(entries: list[NodeEntry]) -> list[NodeEntry]:
