@@ -243,6 +243,7 @@ def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:
     frames = 0
     frame_of: dict[float, int] = {}   # header stamp [s] -> frame index (clouds carry none)
     clouds: list[tuple[float, float, SurfacePoints, np.ndarray]] = []
+    camera_imu: list[tuple[float, object]] = []
     for message in read_ros2_messages(str(path)):
         name, msg = (message.schema.name if message.schema else ""), message.ros_msg
         if not hasattr(msg, "header"):
@@ -272,7 +273,7 @@ def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:
         elif name == "sds_msgs/msg/SurfaceFit":
             _add_fit_message(tables, msg, time_s)
         elif name == "sensor_msgs/msg/Imu" and message.channel.topic == CAMERA_IMU_TOPIC:
-            tables.add_camera_imu_message(msg, time_s)
+            camera_imu.append((stamp, msg))   # may come before the first frame: kept for later
         elif name == "sensor_msgs/msg/Imu":
             a = msg.linear_acceleration
             tables.writer.add("imu", [(time_s, a.x, a.y, a.z)])
@@ -282,6 +283,9 @@ def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:
         raise RecordingError(f"{path}: no laser spots (sds_msgs/LaserSpotArray) recorded")
     for stamp, time_s, points, rejected in clouds:
         tables.add_points(frame_of.get(stamp, -1), time_s, points, rejected)
+    origin = first if first is not None else 0.0
+    for stamp, msg in sorted(camera_imu, key=lambda item: item[0]):
+        tables.add_camera_imu_message(msg, stamp - origin)
     return frames
 
 

@@ -17,6 +17,9 @@ from sds_record.schemas import SchemaError
 
 EXIT_CONFIG_ERROR = 2
 SKIPPED_TOPICS = ("/rosout", "/parameter_events")
+IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
+SMALL_MESSAGE_DEPTH = 5000
+"""Queue depth of the topics that are not images (small messages, high rates)."""
 
 
 def message_class(type_name: str) -> type:
@@ -81,7 +84,7 @@ class RecorderNode(Node):
                     or topic in self._excluded or (self._wanted and topic not in self._wanted):
                 continue
             type_name = types[0]
-            qos = self._qos_for(topic)
+            qos = self._qos_for(topic, type_name)
             if qos is None:
                 continue   # a subscriber's topic with no publisher yet: its QoS is unknown
             try:
@@ -96,8 +99,10 @@ class RecorderNode(Node):
                 msg_type, topic, self._writer_for(topic), qos, raw=True)
             self.get_logger().info(f"recording {topic} ({type_name})")
 
-    def _qos_for(self, topic: str) -> QoSProfile | None:
-        """Reliable, keep-last `queue_depth`; transient-local when every publisher is (a
+    def _qos_for(self, topic: str, type_name: str) -> QoSProfile | None:
+        """Reliable, keep-last `queue_depth` for images and SMALL_MESSAGE_DEPTH for the rest
+        (a burst of small messages, e.g. the camera IMU's 600 per second, must not overflow
+        the queue while a 4K frame is written); transient-local when every publisher is (a
         latched topic, a stream of `sds_recon.qos`); None while the topic has no publisher."""
         publishers = self.get_publishers_info_by_topic(topic)
         if not publishers:
@@ -106,8 +111,10 @@ class RecorderNode(Node):
             p.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in publishers)
         best_effort = any(p.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT
                           for p in publishers)
+        depth = self._depth if type_name in IMAGE_TYPES else max(self._depth,
+                                                                 SMALL_MESSAGE_DEPTH)
         return QoSProfile(
-            depth=self._depth, history=HistoryPolicy.KEEP_LAST,
+            depth=depth, history=HistoryPolicy.KEEP_LAST,
             reliability=ReliabilityPolicy.BEST_EFFORT if best_effort
             else ReliabilityPolicy.RELIABLE,
             durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
