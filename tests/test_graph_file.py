@@ -23,13 +23,16 @@ def test_shipped_graph_loads_with_existing_parameter_files_and_plugins(repo):
 
 def test_ros_args_reach_the_node_as_parameters_and_remaps(tmp_path: Path):
     params = tmp_path / "params.yaml"
-    params.write_text("/**:\n  ros__parameters:\n    rate: 2.5\n    channel: red\n")
+    params.write_text("/**:\n  ros__parameters:\n    rate: 2.5\n    channel: red\n"
+                      "    source: ''\n")
     graph = tmp_path / "graph.yaml"
     graph.write_text(
         "nodes:\n  - name: cam\n    plugin: rclpy.node:Node\n    params: params.yaml\n"
         "    parameters: {channel: green, roi: [1, 2, 3, 4]}\n    remap: {image: /x/image}\n"
     )
     (entry,) = apply_overrides(load_graph(graph), ["cam.source=/data/a b.mp4", "cam.rate=0.5"])
+    with pytest.raises(GraphFileError, match="no parameter 'rat'; did you mean rate"):
+        apply_overrides(load_graph(graph), ["cam.rat=0.5"])
     context = rclpy.Context()
     rclpy.init(context=context)
     try:
