@@ -144,9 +144,12 @@ def observe(rig: Rig, images: list[np.ndarray]) -> CalibrationImages:
     for index, image in enumerate(images):
         region.check_inside(image.shape[1], image.shape[0])
         red = select(image, region, "red")
-        spots.append(find_spots(red, (region.x, region.y)))
-        if len(rows):
-            profile = track_line(red, (region.x, region.y), expected, rows, settings)
+        profile = track_line(red, (region.x, region.y), expected, rows, settings) \
+            if len(rows) else None
+        line_px = (profile.y_px, profile.x_px) if profile is not None and \
+            len(profile.y_px) > len(rows) // 4 else None
+        spots.append(find_spots(red, (region.x, region.y), line=line_px))
+        if profile is not None:
             keep = np.linspace(0, len(profile.x_px) - 1,
                                min(LINE_SAMPLES_PER_FRAME, len(profile.x_px))).astype(int)
             line_frame += [index] * len(keep)

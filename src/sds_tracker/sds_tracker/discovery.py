@@ -14,7 +14,7 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
-from sds_tracker.spots import LOST, SpotSettings, SpotTracker
+from sds_tracker.spots import LOST, SpotSettings, SpotTracker, line_free_centre
 
 BACKGROUND_SCALE = 4
 """The background is estimated on the region shrunk by this factor (cheap, spots vanish)."""
@@ -39,9 +39,15 @@ class SpotCandidates:
 
 def find_spots(red: np.ndarray, offset: tuple[int, int] = (0, 0),
                settings: SpotSettings | None = None, min_area_px: int = 3,
-               max_area_px: int = 5000) -> SpotCandidates:
+               max_area_px: int = 5000,
+               line: tuple[np.ndarray, np.ndarray] | None = None) -> SpotCandidates:
     """All compact blobs `settings.threshold` above the local background in `red` (the red
-    channel of the region at `offset`, x, y), each measured as the tracker measures a spot."""
+    channel of the region at `offset`, x, y), each measured as the tracker measures a spot.
+
+    With `line`, the laser line's full-frame rows and columns in this image, a spot the line
+    passes is measured with the line's light subtracted, as the tracker does
+    (`sds_tracker.spots.line_free_centre`); without it, with the line's pixels left out
+    symmetrically."""
     s = settings or SpotSettings()
     image = np.ascontiguousarray(red)
     small = cv2.resize(image, None, fx=1 / BACKGROUND_SCALE, fy=1 / BACKGROUND_SCALE,
@@ -64,8 +70,12 @@ def find_spots(red: np.ndarray, offset: tuple[int, int] = (0, 0),
     pixels = np.array([[estimates[k].x_px, estimates[k].y_px] for k in found]).reshape(-1, 2)
     sigma = np.array([estimates[k].sigma_px for k in found])
     for row, k in enumerate(found):
-        refined = _beside_line(image, np.asarray(offset, float), pixels[row], line_mask, s,
-                               estimates[k].peak)
+        refined = None
+        if line is not None and len(line[0]) > 1:
+            refined = line_free_centre(image, np.asarray(offset, float), pixels[row], line, s)
+        if refined is None:
+            refined = _beside_line(image, np.asarray(offset, float), pixels[row], line_mask, s,
+                                   estimates[k].peak)
         if refined is not None:
             pixels[row] = refined
             sigma[row] = max(sigma[row], BESIDE_LINE_SIGMA_PX)

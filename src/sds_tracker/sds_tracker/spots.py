@@ -138,23 +138,6 @@ class SpotTracker:
                                              float(sigma[k]), float(peak_raw[k]), flags)
         return settled
 
-    def _line_free_centre(self, image: np.ndarray, origin: np.ndarray, centre: np.ndarray,
-                          line: tuple[np.ndarray, np.ndarray]) -> np.ndarray | None:
-        """The spot's centroid in its window after the laser line's light is subtracted; None
-        where the line (full-frame rows and columns) does not cross the window."""
-        s = self.settings
-        window = spot_window(image.shape, origin, centre, s.window_px)
-        if window is None:
-            return None
-        x0, y0, x1, y1 = window
-        line_x = np.interp(np.arange(y0, y1) + origin[1], line[0], line[1],
-                           left=np.nan, right=np.nan) - origin[0] - x0
-        if not np.any(np.abs(line_x - s.window_px) <= 1.5 * s.window_px):
-            return None
-        local = subtract_line_centroid(image[y0:y1, x0:x1].astype(np.float32), line_x,
-                                       centre - origin - (x0, y0), s)
-        return None if local is None else local + origin + (x0, y0)
-
     def _search_box(self, laser_id: int, path: np.ndarray) -> np.ndarray:
         """(x0, y0, x1, y1) full-frame: around the previous position, or the whole path."""
         half = self.settings.window_px
@@ -215,8 +198,7 @@ class SpotTracker:
         if distance_to_path(centre, path) > s.path_tolerance_px:
             # A spot merged with the laser line is pulled off its path: measured again with
             # the line's light subtracted, it is kept if it is then on its path.
-            refined = None if line is None else self._line_free_centre(image, origin, centre,
-                                                                       line)
+            refined = None if line is None else line_free_centre(image, origin, centre, line, s)
             if refined is None or distance_to_path(refined, path) > s.path_tolerance_px:
                 return SpotEstimate(laser_id, np.nan, np.nan, np.nan, 0.0, LOST | OFF_PATH)
             centre, sigma = refined, max(sigma, LINE_SIGMA_PX)
@@ -239,6 +221,24 @@ class SpotTracker:
         xs, ys = xs + origin[0], ys + origin[1]
         inside = (xs - centre[0]) ** 2 + (ys - centre[1]) ** 2 <= radius**2
         return xs[inside], ys[inside], np.clip(raw[inside] - background, 0, None), raw[inside]
+
+
+def line_free_centre(image: np.ndarray, origin: np.ndarray, centre: np.ndarray,
+                     line: tuple[np.ndarray, np.ndarray], s: SpotSettings) -> np.ndarray | None:
+    """The centroid (full-frame px) of the spot in the window around `centre` after the laser
+    line's light is subtracted (`subtract_line_centroid`); None where the line (full-frame
+    rows and columns) does not cross the window or the window leaves the image."""
+    window = spot_window(image.shape, origin, centre, s.window_px)
+    if window is None:
+        return None
+    x0, y0, x1, y1 = window
+    line_x = np.interp(np.arange(y0, y1) + origin[1], line[0], line[1],
+                       left=np.nan, right=np.nan) - origin[0] - x0
+    if not np.any(np.abs(line_x - s.window_px) <= 1.5 * s.window_px):
+        return None
+    local = subtract_line_centroid(image[y0:y1, x0:x1].astype(np.float32), line_x,
+                                   centre - origin - (x0, y0), s)
+    return None if local is None else local + origin + (x0, y0)
 
 
 def spot_window(shape: tuple[int, ...], offset: np.ndarray, centre: np.ndarray, half: int
