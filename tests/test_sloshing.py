@@ -413,3 +413,24 @@ def test_meniscus_profile_from_the_line_laser_before_the_kick(repo: Path) -> Non
     assert np.abs(height[inside] - truth[inside]).max() < 0.01
     rise = height[finite][-1] - height[finite][0]   # the last bin's mean, under the wall's 2 mm
     assert truth[finite][-1] - truth[finite][0] < rise < 2.0
+
+
+def test_mcap_times_are_seconds_from_the_first_frame_and_a_window_must_be_one(
+        repo: Path, tmp_path: Path) -> None:
+    """A recording stamped with the wall clock reads as seconds from its first frame, as the
+    CSVs do; a window that ends before it starts is a one-line error."""
+    scenario = load_scenario(repo / "config" / "scenarios" / "drop_4p7s.yaml")
+    recording = observe(scenario)
+    epoch = 1.8e9
+    shifted = SurfaceRecording(recording.time_s + epoch, recording.laser_ids,
+                               recording.points_mm)
+    write_points_mcap(shifted, tmp_path / "drop.mcap")
+    back = read_mcap(tmp_path / "drop.mcap")
+    np.testing.assert_allclose(back.time_s, recording.time_s - recording.time_s[0], atol=1e-6)
+    done = run_sds("analyze", str(tmp_path / "drop.mcap"), "--start-s", "1.5", "--end-s", "1.0",
+                   "--out", str(tmp_path / "analysis"))
+    assert done.returncode == 2 and "ends before it starts" in done.stderr, done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1
+    good = run_sds("analyze", str(tmp_path / "drop.mcap"), "--start-s", "1.5", "--gravity", "0",
+                   "--out", str(tmp_path / "analysis"))
+    assert good.returncode == 0 and "free decay 1.500–" in good.stdout, good.stdout

@@ -178,6 +178,13 @@ def analyze_series(name: str, time_s: np.ndarray, values: np.ndarray, unit: str,
     return ModeResult(name, time_s, values, unit, fit, component, tuple(estimates), tuple(notes))
 
 
+def check_window(start_s: float, end_s: float) -> None:
+    """A one-line error (ValueError) for a window that ends before it starts."""
+    if not end_s > start_s:
+        raise ValueError(f"the analysis window {start_s:.3f}–{end_s:.3f} s ends before it "
+                         "starts (times are seconds from the first frame)")
+
+
 def decay_start(time_s: np.ndarray, values: np.ndarray, options: AnalysisOptions) -> float:
     """Start of the free decay [s] by the rule `AnalysisOptions` describes."""
     if options.start_s is not None:
@@ -280,6 +287,7 @@ def analyze(recording: SurfaceRecording, rig: Rig, options: AnalysisOptions | No
     except DecayError:
         start = float(recording.time_s[0])   # no decay to find: each mode says why below
     end = options.end_s if options.end_s is not None else float(recording.time_s[-1])
+    check_window(start, end)
     modes = []
     for coordinate in coordinates:
         result = analyze_series(coordinate.name, coordinate.time_s, coordinate.values_mm, "mm",
@@ -316,6 +324,8 @@ def analyze_table(source: str, time_s: np.ndarray, series: dict[str, np.ndarray]
     results, windows = [], []
     for column, values in series.items():
         start = decay_start(time_s, values, options)
+        if options.end_s is not None:
+            check_window(start, options.end_s)
         windows.append(start)
         targets = expected.items() if expected else [(column, None)]
         for mode, frequency in targets:

@@ -109,7 +109,9 @@ def stamp_s(msg) -> float:
 
 
 def read_mcap(path: str | Path) -> SurfaceRecording:
-    """Every surface cloud (PointCloud2 with laser_id) and ToF range (sensor_msgs/Range [m])."""
+    """Every surface cloud (PointCloud2 with laser_id) and ToF range (sensor_msgs/Range [m]),
+    with times in seconds from the first frame (the first spot cloud's stamp), the one time
+    convention of every input (`sds export`'s and the CSVs' `t_s`)."""
     from mcap.exceptions import McapError
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
@@ -137,9 +139,11 @@ def read_mcap(path: str | Path) -> SurfaceRecording:
     if not rows:
         raise RecordingError(f"{path}: no PointCloud2 with a laser_id field (a recording of the "
                              "reconstruction node's points topic is needed)")
-    return recording_from_rows(np.concatenate(rows["time"]), np.concatenate(rows["id"]),
-                               np.concatenate(rows["xyz"]), str(path),
-                               (np.array(tof_time), np.array(tof_range)))
+    times, ids = np.concatenate(rows["time"]), np.concatenate(rows["id"])
+    spots = ids != LINE_LASER_ID
+    origin = float(times[spots].min()) if spots.any() else float(times.min())
+    return recording_from_rows(times - origin, ids, np.concatenate(rows["xyz"]), str(path),
+                               (np.array(tof_time) - origin, np.array(tof_range)))
 
 
 def read_series_csv(path: str | Path) -> tuple[np.ndarray, dict[str, np.ndarray]]:
