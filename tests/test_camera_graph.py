@@ -196,6 +196,7 @@ def test_demo_measures_a_simulated_drop_with_the_whole_graph(tmp_path, repo):
                             check=False)
     assert result.returncode == 0, result.stdout + result.stderr
     assert "frames processed   60 of 60" in result.stdout
+    assert not (tmp_path / "ttyARDUINO").is_symlink()     # the stand-in cable is unplugged
     assert "bad lines 0" in result.stdout and "reconnects 0" in result.stdout, result.stdout
     assert "from the sync LED" in result.stdout
     for path in ("recording.mcap", "recording.rrd", "analysis/report.html", "results/points.csv",

@@ -36,9 +36,12 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
                     "column per series, e.g. one spot's pixel position) or an Arduino log "
                     "(serial capture or SD card: the ToF quick estimate). Writes analysis.json, "
                     "report.html and figures.")
-    parser.add_argument("recording", type=Path)
-    parser.add_argument("--rig", type=Path, default=CONFIG / "rigs" / "stelium.yaml")
-    parser.add_argument("--out", type=Path, default=Path("analysis"))
+    parser.add_argument("recording", type=Path,
+                        help="MCAP, points CSV, time-series CSV or Arduino log")
+    parser.add_argument("--rig", type=Path, default=CONFIG / "rigs" / "stelium.yaml",
+                        help="the rig file (container, liquid, gravity for the theory)")
+    parser.add_argument("--out", type=Path, default=Path("analysis"),
+                        help="folder for analysis.json, report.html and figures")
     parser.add_argument("--start-s", type=float, help="free decay starts here [s]")
     parser.add_argument("--end-s", type=float, help="analysis window ends here [s]")
     parser.add_argument("--forcing-s", type=float,

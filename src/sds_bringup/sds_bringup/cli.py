@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import importlib.metadata
 import os
 import sys
 from pathlib import Path
@@ -23,7 +24,7 @@ def _add_graph(commands: argparse._SubParsersAction) -> None:
         "graph", help="start the nodes of a graph file as processes",
         description="Start a graph (config/graphs/*.yaml); Ctrl-C or SIGTERM stops every node.",
     )
-    parser.add_argument("graph_file", type=Path)
+    parser.add_argument("graph_file", type=Path, help="a graph file, e.g. config/graphs/drop.yaml")
     parser.add_argument("--set", dest="overrides", action="append", default=[],
                         metavar="NODE.PARAM=VALUE", help="override a node parameter (YAML value)")
     parser.add_argument("--compose", action="store_true",
@@ -54,7 +55,8 @@ def _add_demo(commands: argparse._SubParsersAction) -> None:
                     "bridge on a pseudo-terminal, recorder, Rerun), analyse the recording and "
                     "print the results next to the simulator's truth.",
     )
-    parser.add_argument("--out", type=Path, default=Path("demo_output"))
+    parser.add_argument("--out", type=Path, default=Path("demo_output"),
+                        help="the demo's own folder (rewritten on each run)")
     parser.add_argument("--seconds", type=float, help="simulated duration [s] (default 4.7)")
     parser.set_defaults(run=_run_demo)
     run = commands.add_parser(
@@ -64,8 +66,9 @@ def _add_demo(commands: argparse._SubParsersAction) -> None:
     source = run.add_mutually_exclusive_group(required=True)
     source.add_argument("--video", help="video file")
     source.add_argument("--camera", help="camera device, e.g. /dev/video0")
-    run.add_argument("--rig", type=Path, required=True)
-    run.add_argument("--out", type=Path, default=Path("run_output"))
+    run.add_argument("--rig", type=Path, required=True, help="the rig file")
+    run.add_argument("--out", type=Path, default=Path("run_output"),
+                     help="folder for the recording, Rerun file, results and report")
     run.add_argument("--port", help="the Arduino's serial port (default: arduino.yaml's)")
     run.add_argument("--gravity", type=float, help="gravity for the theory [m/s²]")
     run.add_argument("--overwrite", action="store_true",
@@ -103,7 +106,8 @@ def _add_calibrate(commands: argparse._SubParsersAction) -> None:
         description="Find the checkerboard's inner corners in every image (sub-pixel), fit the "
                     "model, and write the camera file and a report (JSON, text, residual plot).",
     )
-    camera.add_argument("--model", choices=["pinhole", "scaramuzza"], required=True)
+    camera.add_argument("--model", choices=["pinhole", "scaramuzza"], required=True,
+                        help="pinhole + Brown-Conrady, or Scaramuzza's omnidirectional model")
     camera.add_argument("--images", nargs="+", type=Path, required=True,
                         help="image files (all the same size)")
     _add_board_arguments(camera)
@@ -115,7 +119,7 @@ def _add_calibrate(commands: argparse._SubParsersAction) -> None:
         description="Each spot seen on a known flat surface (level or tilted) is a point of its "
                     "beam; every beam (and the line laser's plane) is fitted to its points by "
                     "least squares, and an updated rig file is written with a report.")
-    lasers.add_argument("--rig", type=Path, required=True)
+    lasers.add_argument("--rig", type=Path, required=True, help="the rig file as designed")
     lasers.add_argument("--spots", type=Path, required=True,
                         help="CSV: frame, laser_id, x_px, y_px[, visible] (full-frame pixels)")
     lasers.add_argument("--surfaces", type=Path, required=True,
@@ -420,6 +424,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog="sds",
         description="Sloshing Detection Subsystem: laser-based free-surface measurement.",
     )
+    parser.add_argument("--version", action="version",
+                        version=f"sds {importlib.metadata.version('sds_bringup')}")
     commands = parser.add_subparsers(title="commands", required=True, metavar="COMMAND")
     _add_graph(commands)
     _add_demo(commands)

@@ -88,6 +88,8 @@ def run_graph(overrides: list[str], out: Path, expected_frames: int | None,
     if cable is not None and not feeding.is_set():
         for fd in cable:
             os.close(fd)
+    if port is not None:
+        port.unlink(missing_ok=True)   # the stand-in cable's link dangles once it is gone
     return outputs
 
 
