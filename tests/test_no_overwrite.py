@@ -93,3 +93,16 @@ def test_a_misspelled_parameter_is_an_error_naming_the_close_match(tmp_path: Pat
     assert graph.wait(timeout=60) == 2, graph.output()
     assert "no parameter 'outptu'; did you mean output" in graph.output(), graph.output()
     assert "Traceback" not in graph.output() and not (tmp_path / "x.mcap").exists()
+
+
+def test_calibration_and_camera_files_are_kept(tmp_path: Path) -> None:
+    existing = tmp_path / "existing.yaml"
+    existing.write_text("kept: true\n")
+    rig = str(REPO / "config" / "rigs" / "stelium.yaml")
+    for args in (["calibrate", "camera", "--model", "pinhole", "--images", rig, "--board", "9x6",
+                  "--square", "20"],
+                 ["calibrate", "lasers", "--rig", rig, "--spots", rig, "--surfaces", rig],
+                 ["camera", "import", "ocamcalib", rig],
+                 ["camera", "camera-info", rig]):
+        refused(sds(*args, "--out", str(existing)), "exists")
+        assert existing.read_text() == "kept: true\n"

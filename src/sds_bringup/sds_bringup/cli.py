@@ -89,6 +89,18 @@ def _run_run(args: argparse.Namespace) -> int:
                     args.overwrite)
 
 
+def _add_overwrite(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing --out")
+
+
+def _refused(command: str, path: Path, overwrite: bool, what: str = "exists") -> bool:
+    """True, with one line on stderr, when `path` exists and `--overwrite` was not given."""
+    if path.exists() and not overwrite:
+        print(f"sds {command}: {path} {what} (another --out, or --overwrite)", file=sys.stderr)
+        return True
+    return False
+
+
 def _add_board_arguments(parser: argparse.ArgumentParser) -> None:
     """--board and --square: the checkerboard (sds_recon.calibration.board.Checkerboard)."""
     parser.add_argument("--board", required=True, metavar="COLSxROWS",
@@ -113,6 +125,7 @@ def _add_calibrate(commands: argparse._SubParsersAction) -> None:
     _add_board_arguments(camera)
     camera.add_argument("--out", type=Path, default=Path("camera.yaml"),
                         help="camera file to write; the report goes beside it")
+    _add_overwrite(camera)
     camera.set_defaults(run=_run_calibrate_camera)
     lasers = targets.add_parser(
         "lasers", help="laser beams and the line laser's plane from images of known surfaces",
@@ -128,6 +141,7 @@ def _add_calibrate(commands: argparse._SubParsersAction) -> None:
     lasers.add_argument("--fit-emitters", action="store_true",
                         help="also move each emitter onto its fitted beam")
     lasers.add_argument("--out", type=Path, required=True, help="rig file to write")
+    _add_overwrite(lasers)
     lasers.set_defaults(run=_run_calibrate_lasers)
     rig = targets.add_parser(
         "rig", help="self-calibrate camera pose, beams and line plane from images of known "
@@ -153,7 +167,7 @@ def _add_calibrate(commands: argparse._SubParsersAction) -> None:
                      help="farthest the camera may be turned from the rig file [deg]")
     rig.add_argument("--fit-emitters", action="store_true",
                      help="also fit each emitter's position across its beam")
-    rig.add_argument("--overwrite", action="store_true", help="replace an existing --out")
+    _add_overwrite(rig)
     rig.set_defaults(run=_run_calibrate_rig)
     plane = targets.add_parser(
         "line-plane", help="camera and line laser plane from a checkerboard crossed by the line",
@@ -165,7 +179,7 @@ def _add_calibrate(commands: argparse._SubParsersAction) -> None:
     _add_board_arguments(plane)
     plane.add_argument("--model", choices=["pinhole", "scaramuzza"], default="pinhole")
     plane.add_argument("--out", type=Path, required=True, help="JSON file to write")
-    plane.add_argument("--overwrite", action="store_true", help="replace an existing --out")
+    _add_overwrite(plane)
     plane.set_defaults(run=_run_calibrate_line_plane)
 
 
@@ -177,9 +191,7 @@ def _run_calibrate_line_plane(args: argparse.Namespace) -> int:
 
     from sds_bringup.line_plane_calibration import calibrate_line_plane, line_plane_report
 
-    if args.out.exists() and not args.overwrite:
-        print(f"sds calibrate line-plane: {args.out} exists (--overwrite replaces it)",
-              file=sys.stderr)
+    if _refused("calibrate line-plane", args.out, args.overwrite):
         return 2
     try:
         result = calibrate_line_plane(sorted(args.images),
@@ -211,8 +223,7 @@ def _run_calibrate_rig(args: argparse.Namespace) -> int:
         write_calibration,
     )
 
-    if args.out.exists() and not args.overwrite:
-        print(f"sds calibrate rig: {args.out} exists (--overwrite replaces it)", file=sys.stderr)
+    if _refused("calibrate rig", args.out, args.overwrite):
         return 2
     try:
         rig = load_rig(args.rig)
@@ -238,6 +249,8 @@ def _run_calibrate_lasers(args: argparse.Namespace) -> int:
     from sds_recon.calibration.laser_files import calibrate_lasers, report_text
     from sds_recon.rig import load_rig, save_rig
 
+    if _refused("calibrate lasers", args.out, args.overwrite):
+        return 2
     try:
         rig = load_rig(args.rig)
         calibrated, report = calibrate_lasers(rig, args.spots, args.surfaces, args.line,
@@ -261,6 +274,8 @@ def _run_calibrate_camera(args: argparse.Namespace) -> int:
     from sds_recon.calibration.report import report_content, report_text, write_report
     from sds_recon.camera import save_camera
 
+    if _refused("calibrate camera", args.out, args.overwrite):
+        return 2
     try:
         board = Checkerboard.parse(args.board, args.square)
         run = calibrate_camera(sorted(args.images), board, args.model)
@@ -291,18 +306,22 @@ def _add_camera(commands: argparse._SubParsersAction) -> None:
     importing.add_argument("format", choices=sorted(IMPORTERS))
     importing.add_argument("source", type=Path)
     importing.add_argument("--out", type=Path, required=True, help="SDS camera file to write")
+    _add_overwrite(importing)
     importing.set_defaults(run=_run_camera_import)
     exporting = actions.add_parser(
         "camera-info", help="write a ROS camera_info YAML from a pinhole SDS camera file")
     exporting.add_argument("camera", type=Path)
     exporting.add_argument("--out", type=Path, required=True)
     exporting.add_argument("--name", default="sds_camera", help="camera_name in the file")
+    _add_overwrite(exporting)
     exporting.set_defaults(run=_run_camera_info)
 
 
 def _run_camera_import(args: argparse.Namespace) -> int:
     from sds_recon.camera import CameraModelError, importers, save_camera
 
+    if _refused("camera import", args.out, args.overwrite):
+        return 2
     try:
         camera = getattr(importers, IMPORTERS[args.format])(args.source)
     except CameraModelError as error:
@@ -317,6 +336,8 @@ def _run_camera_info(args: argparse.Namespace) -> int:
     from sds_recon.camera import CameraModelError, PinholeCamera, load_camera
     from sds_recon.camera.importers import write_camera_info
 
+    if _refused("camera camera-info", args.out, args.overwrite):
+        return 2
     try:
         camera = load_camera(args.camera)
     except CameraModelError as error:
@@ -361,9 +382,8 @@ def _run_simulate(args: argparse.Namespace) -> int:
     except ValueError as error:  # ScenarioError, RigError and CameraModelError included
         print(f"sds simulate: {error}", file=sys.stderr)
         return 2
-    if (args.out / "truth" / "run.json").exists() and not args.overwrite:
-        print(f"sds simulate: {args.out} holds a simulation already (another --out, or "
-              "--overwrite)", file=sys.stderr)
+    if _refused("simulate", args.out / "truth" / "run.json", args.overwrite,
+                "exists: the folder holds a simulation already"):
         return 2
     start = time.perf_counter()
     output = simulate(scenario, args.out, codec=args.codec)
