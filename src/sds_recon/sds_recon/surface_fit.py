@@ -181,9 +181,10 @@ def surface_outliers(points_mm: ArrayLike, height_sigma_mm: ArrayLike, radius_mm
     # Plane and modes together: a tilt table's steep plane or a sloshing surface alike.
     surface = np.column_stack([plane, _modal_design(points, radius_mm, DEFAULT_MODES)[0][:, 1:]])
     def judged(excluded: np.ndarray) -> np.ndarray:
-        """σ-normalised leave-one-out residuals with the points in `excluded` left out."""
+        """σ-normalised leave-one-out residuals with the points in `excluded` left out: each
+        point against the surface fitted to the others (e / (1 − h) is exactly that)."""
         normalised = _leave_one_out(plane, points[:, 2], excluded) / sigma
-        if np.sum(~excluded) >= surface.shape[1] + MODAL_REDUNDANCY:
+        if np.sum(~excluded) - 1 >= surface.shape[1] + MODAL_REDUNDANCY:
             # The richer model where it can judge a point; the plane where the point alone
             # would fix one of the modal terms (leverage near 1).
             rich = _leave_one_out(surface, points[:, 2], excluded) / sigma
@@ -192,19 +193,15 @@ def surface_outliers(points_mm: ArrayLike, height_sigma_mm: ArrayLike, radius_mm
         return normalised
 
     while np.sum(~rejected) > 4:
-        worst = int(np.argmax(judged(rejected)))
+        normalised = judged(rejected)
+        worst = int(np.argmax(normalised))
         # The suspect is judged against the others' spread with itself left out, so that
         # it cannot widen the spread it is measured by.
         without = rejected.copy()
         without[worst] = True
         others = judged(without)
         spread = max(1.0, 1.4826 * float(np.median(others[~without])))
-        rich = np.sum(~without) >= surface.shape[1] + MODAL_REDUNDANCY and \
-            np.isfinite(_leave_one_out(surface, points[:, 2], rejected)[worst])
-        design = surface if rich else plane
-        coefficients, *_ = np.linalg.lstsq(design[~without], points[~without, 2], rcond=None)
-        suspect = abs(points[worst, 2] - design[worst] @ coefficients) / sigma[worst]
-        if suspect <= limit_sigma * spread:
+        if normalised[worst] <= limit_sigma * spread:
             break
         rejected[worst] = True
     return rejected
