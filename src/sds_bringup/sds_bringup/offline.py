@@ -20,6 +20,7 @@ from mcap_ros2.reader import read_ros2_messages
 from sds_camera.camera_imu import CameraImu, read_camera_imu
 from sds_camera.frame_source import FrameSource, FrameSourceError, Region, open_source, select
 from sds_camera.image_msg import msg_to_image
+from sds_camera.imu_msg import imu_samples
 from sds_recon.reconstruction import (
     SurfaceFits,
     SurfacePoints,
@@ -135,6 +136,12 @@ def calibrate_from_images(rig: Rig, paths: list[Path], surfaces: Path, out: Path
     return calibrated, rig_path
 
 
+def _camera_imu_row(time_s: float, accel, gyro) -> tuple:
+    """A camera_imu.csv row: time, accelerometer and gyroscope cells (empty where None)."""
+    empty = (np.nan,) * 3
+    return (time_s, *(empty if accel is None else accel), *(empty if gyro is None else gyro))
+
+
 class RunTables:
     """The rows of one run, written as they come, kept for the analysis."""
 
@@ -176,20 +183,19 @@ class RunTables:
                             amplitudes)
 
     def add_camera_imu(self, imu: CameraImu) -> None:
-        """The camera's own IMU samples, one row each (the other sensor's cells empty)."""
-        nan = (np.nan,) * 3
-        rows = [(t, *a, *nan) for t, a in zip(imu.accel_time_s, imu.accel_m_s2, strict=True)]
-        rows += [(t, *nan, *g) for t, g in zip(imu.gyro_time_s, imu.gyro_rad_s, strict=True)]
-        rows.sort(key=lambda row: row[0])
-        self.writer.add("camera_imu", rows)
+        """The camera's own IMU samples in time order, one row each (the other sensor's cells
+        empty)."""
+        self.writer.add("camera_imu", [
+            _camera_imu_row(t, value if sensor == "accel" else None,
+                            value if sensor == "gyro" else None)
+            for t, sensor, value in imu_samples(imu)])
 
     def add_camera_imu_message(self, msg, time_s: float) -> None:
         """A recorded /camera/imu message (one sensor each, the other's covariance[0] −1)."""
-        nan = (np.nan,) * 3
         a, g = msg.linear_acceleration, msg.angular_velocity
-        accel = nan if msg.linear_acceleration_covariance[0] == -1 else (a.x, a.y, a.z)
-        gyro = nan if msg.angular_velocity_covariance[0] == -1 else (g.x, g.y, g.z)
-        self.writer.add("camera_imu", [(time_s, *accel, *gyro)])
+        self.writer.add("camera_imu", [_camera_imu_row(
+            time_s, None if msg.linear_acceleration_covariance[0] == -1 else (a.x, a.y, a.z),
+            None if msg.angular_velocity_covariance[0] == -1 else (g.x, g.y, g.z))])
 
     def recording(self, source: str):
         """The points as the analysis reads them."""

@@ -49,3 +49,13 @@ class RigidTransform:
         """The transform that applies `first`, then this one."""
         return RigidTransform(self.rotation @ first.rotation,
                               self.rotation @ first.translation_mm + self.translation_mm)
+
+
+def ray_plane_points(origin: np.ndarray, rays: np.ndarray, normal: np.ndarray,
+                     offset: float) -> np.ndarray:
+    """Where rays (N×3) from `origin` meet the plane normal · X = offset (N×3, the rays'
+    units); NaN for rays that meet it behind the origin or never."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        distance = (offset - origin @ normal) / (rays @ normal)
+    distance[~(distance > 0)] = np.nan
+    return origin + distance[:, None] * rays

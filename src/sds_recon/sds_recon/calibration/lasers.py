@@ -8,7 +8,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from sds_recon.camera.model import CameraModel
-from sds_recon.geometry import RigidTransform
+from sds_recon.geometry import RigidTransform, ray_plane_points
 from sds_recon.rig import Rig
 
 HUBER_MM = 0.2
@@ -26,11 +26,7 @@ class KnownSurface:
     def intersect(self, origin: np.ndarray, rays: np.ndarray) -> np.ndarray:
         """Where rays from `origin` meet this surface (N×3 mm); NaN for rays that miss it."""
         normal = np.array([np.tan(self.tilt_x_rad), np.tan(self.tilt_y_rad), 1.0])
-        facing = rays @ normal
-        with np.errstate(divide="ignore", invalid="ignore"):
-            distance = (self.offset_mm - origin @ normal) / facing
-        distance[~(distance > 0)] = np.nan
-        return origin + distance[:, None] * rays
+        return ray_plane_points(origin, rays, normal, self.offset_mm)
 
 
 @dataclass(frozen=True)
@@ -137,10 +133,7 @@ def board_points(camera: CameraModel, board_to_camera: RigidTransform, pixels: A
     """Camera rays through the pixels, ended on a board's plane Z = 0 (N×3 mm, camera frame)."""
     rays = camera.pixel_to_ray(np.atleast_2d(np.asarray(pixels, dtype=float)))
     normal = board_to_camera.rotation[:, 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        distance = (normal @ board_to_camera.translation_mm) / (rays @ normal)
-    distance[~(distance > 0)] = np.nan
-    return distance[:, None] * rays
+    return ray_plane_points(np.zeros(3), rays, normal, normal @ board_to_camera.translation_mm)
 
 
 def calibrate_line_plane_on_boards(camera: CameraModel, poses: list[RigidTransform],
