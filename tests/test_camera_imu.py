@@ -14,7 +14,7 @@ import pytest
 from sds_arduino.clock import align_by_acceleration
 from sds_arduino.import_sd import import_sd
 from sds_arduino.protocol import format_record, unwrap_time_s
-from sds_bringup.recording import write_imu_mcap
+from sds_bringup.camera_imu_mcap import write_imu_mcap
 from sds_camera.camera_imu import (
     HERO5_TO_OPTICAL,
     CameraImu,
@@ -26,7 +26,7 @@ from sds_camera.camera_imu import (
 )
 from sds_camera.frame_source import VideoFileSource
 from sds_recon.sloshing.gravity import free_fall, gravity_regime
-from sds_recon.sloshing.recording import read_mcap_accelerations
+from sds_record.recorded_series import read_accelerations
 from sds_sim.arduino import CATAPULT_DURATION_S, STANDARD_GRAVITY, arduino_records
 from sds_sim.camera_imu import camera_imu
 from sds_sim.scenario import Scenario, load_scenario
@@ -190,7 +190,7 @@ def test_a_recorded_free_fall_sets_microgravity(tmp_path: Path) -> None:
         camera_only = tmp_path / f"{name}_camera.mcap"
         write_imu_mcap(camera, camera_only, 10**9)
         for path, topic in ((arduino_only, "/arduino/imu"), (camera_only, "/camera/imu")):
-            streams = read_mcap_accelerations(path)
+            streams = read_accelerations(path)
             assert list(streams) == [topic]
             gravity, note = gravity_regime(streams)
             assert (gravity == 0.0) == falls and (topic in note) == falls, (name, topic, note)

@@ -29,10 +29,11 @@ from sds_recon.sloshing.estimators import (
     half_power,
     log_decrement,
 )
-from sds_recon.sloshing.recording import SurfaceRecording, read_mcap, recording_from_rows
+from sds_recon.sloshing.recording import SurfaceRecording, recording_from_rows
 from sds_recon.sloshing.running import RunningAnalysis
 from sds_recon.sloshing.theory import theoretical_modes
 from sds_recon.triangulation import triangulate_beams
+from sds_record.recorded_series import read_surface_recording
 from sds_sim.arduino import arduino_records
 from sds_sim.optics import line_laser_rays, ray_surface_points
 from sds_sim.scenario import Scenario, load_scenario
@@ -301,7 +302,7 @@ def test_mcap_reads_back_the_points_it_was_given(repo: Path, tmp_path: Path) -> 
                              {"duration_s": 1.0})
     recording = observe(scenario)
     write_points_mcap(recording, tmp_path / "run.mcap")
-    back = read_mcap(tmp_path / "run.mcap")
+    back = read_surface_recording(tmp_path / "run.mcap")
     np.testing.assert_array_equal(back.laser_ids, recording.laser_ids)
     np.testing.assert_allclose(back.time_s, recording.time_s, atol=1e-9)
     np.testing.assert_allclose(back.points_mm, recording.points_mm.astype(np.float32),
@@ -425,7 +426,7 @@ def test_mcap_times_are_seconds_from_the_first_frame_and_a_window_must_be_one(
     shifted = SurfaceRecording(recording.time_s + epoch, recording.laser_ids,
                                recording.points_mm)
     write_points_mcap(shifted, tmp_path / "drop.mcap")
-    back = read_mcap(tmp_path / "drop.mcap")
+    back = read_surface_recording(tmp_path / "drop.mcap")
     np.testing.assert_allclose(back.time_s, recording.time_s - recording.time_s[0], atol=1e-6)
     done = run_sds("analyze", str(tmp_path / "drop.mcap"), "--start-s", "1.5", "--end-s", "1.0",
                    "--out", str(tmp_path / "analysis"))

@@ -50,6 +50,7 @@ class DropRun:
     fits: list
     sync: list
     log: str
+    exit_code: int
 
 
 @pytest.fixture(scope="module")
@@ -96,18 +97,19 @@ def drop_run(repo, tmp_path_factory) -> DropRun:
         while time.monotonic() < deadline and (len(spots) < 30 or len(fits) < 30
                                                or len(line_clouds) < 30 or len(sync) < 2):
             time.sleep(0.2)
-        time.sleep(0.5)   # the recorder receives what the probe did
+        exit_code = graph.wait(timeout=60)   # a file-fed drop graph ends by itself
     finally:
         graph.stop()
         probe.close()
     return DropRun(output, rig_file, recording, tmp_path, spots, lines, clouds, line_clouds, fits,
-                   sync, graph.output())
+                   sync, graph.output(), exit_code)
 
 
 def test_simulated_drop_is_tracked_and_reconstructed(drop_run: DropRun) -> None:
     output, spots, lines, clouds, fits = (drop_run.output, drop_run.spots, drop_run.lines,
                                           drop_run.clouds, drop_run.fits)
     assert sorted(m.frame_index for m in spots) == list(range(30)), drop_run.log
+    assert drop_run.exit_code == 0 and "end of " in drop_run.log, drop_run.log
     assert len(lines) == 30 and len(clouds) == 30 and len(fits) == 30, drop_run.log
     assert len(drop_run.line_clouds) == 30
     with output.spots.open() as file:
@@ -248,6 +250,32 @@ def test_sds_process_gives_the_graphs_spots_points_and_fits(drop_run: DropRun) -
                        atol=1e-9)
     assert offline.analysis["modes"][0]["mode"] == "lateral_1"
     assert (processed / "report.html").is_file()
+
+
+def test_an_unfinished_recording_is_read_to_its_last_chunk_and_said_so(
+        drop_run: DropRun) -> None:
+    """A recording cut off mid-file (a killed recorder: no summary, a torn last chunk): every
+    reader takes what is complete and says so in one line, with the repair command."""
+    unfinished = drop_run.folder / "unfinished.mcap"
+    data = drop_run.recording.read_bytes()
+    unfinished.write_bytes(data[: len(data) * 3 // 4])
+    complete = sum(1 for m in read_messages(drop_run.recording) if m.topic == "/tracker/spots")
+    cut = sum(1 for m in read_messages(unfinished) if m.topic == "/tracker/spots")
+    assert 0 < cut < complete
+    runs = {"export": sds("export", str(unfinished), "--out", str(drop_run.folder / "cut_export")),
+            "process": sds("process", "--mcap", str(unfinished), "--rig", str(drop_run.rig_file),
+                           "--out", str(drop_run.folder / "cut_process"), "--no-progress"),
+            "view": sds("view", str(unfinished), "--out", str(drop_run.folder / "cut.rrd")),
+            "analyze": sds("analyze", str(unfinished), "--out", str(drop_run.folder / "cut_a"))}
+    for command, done in runs.items():
+        output = done.stdout + done.stderr
+        assert "Traceback" not in output, (command, output)
+        assert f"sds: {unfinished} is unfinished (its recorder did not close it): read " \
+            in done.stderr and "sds mcap-repair" in done.stderr, (command, output)
+        assert done.returncode == 0 or (command == "analyze" and done.returncode == 2 \
+            and done.stderr.strip().splitlines()[-1].startswith("sds analyze: ")), (command, output)
+    exported = load_results(drop_run.folder / "cut_export")
+    assert len(set(exported.spots["frame"])) == cut
 
 
 def test_export_round_trip_equals_the_graphs_messages(drop_run: DropRun) -> None:

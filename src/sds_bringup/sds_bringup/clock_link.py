@@ -1,4 +1,4 @@
-"""`sds clock-link`: the camera's clock against the Arduino's, by acceleration and by the LED.
+"""The camera's clock against the Arduino's, by acceleration and by the LED (`sds clock-link`).
 
 Two independent links between a video and an Arduino log (SD card or serial capture):
 - acceleration: the camera's own IMU (GPMF or sidecar, sds_camera.camera_imu), turned into
@@ -13,8 +13,6 @@ offset from the frames, or a wrong LED region, shows there.
 
 from __future__ import annotations
 
-import argparse
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,9 +20,9 @@ import numpy as np
 from sds_arduino.clock import ClockLink, align_by_acceleration, camera_offset_s
 from sds_arduino.protocol import read_log, unwrap_time_s
 from sds_camera.camera_imu import read_camera_imu
-from sds_camera.frame_source import FrameSourceError, VideoFileSource
+from sds_camera.frame_source import VideoFileSource
 from sds_camera.led import LedDetector
-from sds_recon.rig import Rig, RigError, load_rig
+from sds_recon.rig import Rig
 
 STANDARD_GRAVITY = 9.80665
 """The Arduino logs accelerations in mg (sds_arduino.protocol)."""
@@ -104,53 +102,3 @@ def link_clocks(video: Path, log: ArduinoLog, rig: Rig,
         if np.isfinite(offset):
             led_offset, led_sigma = offset, period / np.sqrt(12)
     return ClockLinks(acceleration, led_offset, led_sigma)
-
-
-def add_parser(commands: argparse._SubParsersAction) -> None:
-    """Register `sds clock-link`."""
-    parser = commands.add_parser(
-        "clock-link", help="the camera's clock against the Arduino's (acceleration, LED)",
-        description="Link a video's clock to an Arduino log's: by the excitation both "
-                    "accelerometers feel (the camera's own IMU, turned into the rig's frame), "
-                    "and by the sync LED where --led-roi is given; print both with their σ, "
-                    "their disagreement, and the --start-s that puts the log on the video's "
-                    "clock in `sds import-sd`.")
-    parser.add_argument("--video", type=Path, required=True)
-    parser.add_argument("--arduino", type=Path, required=True,
-                        help="the SD-card log or a serial capture (protocol v1)")
-    parser.add_argument("--rig", type=Path, required=True,
-                        help="rig file: the camera's pose turns its IMU into the rig's frame")
-    parser.add_argument("--led-roi", type=int, nargs=4, metavar=("X", "Y", "W", "H"),
-                        help="the sync LED's region in the full frame [px]")
-    parser.set_defaults(run=run)
-
-
-def run(args: argparse.Namespace) -> int:
-    """Link and print; a one-line error and exit code 2 on bad input."""
-    try:
-        log = read_arduino_log(args.arduino)
-        links = link_clocks(args.video, log, load_rig(args.rig),
-                            tuple(args.led_roi) if args.led_roi else None)
-    except (OSError, ValueError, RigError, FrameSourceError) as error:
-        print(f"sds clock-link: {error}", file=sys.stderr)
-        return 2
-    if links.acceleration is None and links.led_offset_s is None:
-        print("sds clock-link: no link: the video has no camera IMU (or no excitation in both "
-              "records) and no --led-roi with an LED switch", file=sys.stderr)
-        return 2
-    best = links.acceleration.offset_s if links.acceleration is not None else \
-        links.led_offset_s
-    a = links.acceleration
-    print("acceleration: " + (f"camera − device = {a.offset_s:+.5f} s ± {a.sigma_s * 1e3:.2f} ms"
-                              f" (device time {a.window_s[0]:.2f}–{a.window_s[1]:.2f} s)"
-                              if a is not None else "none (no camera IMU or no excitation)"))
-    print("LED:          " + (f"camera − device = {links.led_offset_s:+.5f} s ± "
-                              f"{links.led_sigma_s * 1e3:.2f} ms" if links.led_offset_s is not None
-                              and links.led_sigma_s is not None else "none"))
-    if links.disagreement_s is not None:
-        difference, sigma = links.disagreement_s
-        print(f"disagreement: {difference * 1e3:+.2f} ms ± {sigma * 1e3:.2f} ms "
-              f"({abs(difference) / sigma:.1f} σ)")
-    print(f"sds import-sd {args.arduino} --start-s {log.first_record_s + best:.6f}  "
-          "# puts the log on the video's clock")
-    return 0

@@ -14,7 +14,7 @@ import sys
 import threading
 import time
 import tty
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -22,8 +22,8 @@ from sds_arduino.replay import paced
 from sds_recon.results import ResultsWriter, load_results
 from sds_recon.rig import Rig, load_rig
 from sds_recon.sloshing.analysis import AnalysisOptions, analyze
-from sds_recon.sloshing.recording import read_mcap
 from sds_recon.sloshing.report import summary_lines, truth_from_run, write_report
+from sds_record.recorded_series import read_surface_recording
 from sds_sim.scenario import load_scenario
 from sds_sim.simulate import simulate
 from tqdm import tqdm
@@ -45,11 +45,14 @@ BRIDGE_OPEN_S = 0.5
 
 @dataclass(frozen=True)
 class RunOutputs:
-    """Where a run put its files."""
+    """Where a run put its files, and how its graph ended."""
 
     recording: Path
     rerun: Path
     log: Path
+    exit_code: int = 0
+    failure: str | None = None
+    """The needed node that failed and why (None if none did)."""
 
 
 def graph_entries(overrides: list[str]):
@@ -77,20 +80,21 @@ def run_graph(overrides: list[str], out: Path, expected_frames: int | None,
                              "sloshing.wait_for_consumers=2"])
     cable = plug_in(port) if serial_lines is not None and port is not None else None
     with outputs.log.open("w") as log:
-        launcher = Launcher(entries, environment, output=log)
+        launcher = Launcher(entries, environment, output=log, console=sys.stderr)
         unplug, feeding = threading.Event(), threading.Event()
         watcher = threading.Thread(target=_watch, args=(launcher, expected_frames, serial_lines,
                                                         cable, unplug, feeding), daemon=True)
         print(f"running the graph on ROS_DOMAIN_ID={domain_id}: "
               + ", ".join(e.name for e in entries) + f" (log: {outputs.log})")
-        launcher.run(on_started=watcher.start)
+        exit_code = launcher.run(on_started=watcher.start)
         unplug.set()   # the stand-in Arduino leaves after the bridge
+        watcher.join(timeout=5.0)
     if cable is not None and not feeding.is_set():
         for fd in cable:
             os.close(fd)
     if port is not None:
         port.unlink(missing_ok=True)   # the stand-in cable's link dangles once it is gone
-    return outputs
+    return replace(outputs, exit_code=exit_code, failure=launcher.failure)
 
 
 def _watch(launcher: Launcher, expected_frames: int | None, serial_lines: list[bytes] | None,
@@ -186,7 +190,8 @@ def analyse_run(recording: Path, rig: Rig, out: Path, options: AnalysisOptions,
     tables = RunTables(ResultsWriter(out / "results", overwrite), rig)
     export_recording(recording, rig, tables)
     tables.writer.close()
-    analysis = analyze(read_mcap(recording), rig, with_gravity_regime(recording, options))
+    analysis = analyze(read_surface_recording(recording), rig,
+                       with_gravity_regime(recording, options))
     truth = truth_from_run(truth_run) if truth_run else None
     return write_report(analysis, out / "analysis", truth).results
 
@@ -204,7 +209,8 @@ def run_demo(out: Path, seconds: float | None) -> int:
     half = LED_ROI_HALF_PX
     port = (out / "ttyARDUINO").resolve()
     serial_lines = simulation.serial.read_bytes().splitlines(keepends=True)
-    outputs = run_graph(["recorder.overwrite=true",   # the demo's folder is its own
+    # The watcher ends the demo's graph once every frame and the Arduino's last line are in.
+    outputs = run_graph(["recorder.overwrite=true", "camera.linger_s=60.0",
                          f"camera.source={simulation.video.resolve()}",
                          f"camera.roi={list(rig.container_region_px(rig.camera))}",
                          f"camera.led_roi={[led_x - half, led_y - half, 2 * half, 2 * half]}",
@@ -213,9 +219,10 @@ def run_demo(out: Path, seconds: float | None) -> int:
                          f"viewer.rig={scenario.rig_file.resolve()}",
                          f"arduino.port={port}"],
                         out, scenario.frame_count, serial_lines, port)
-    if not outputs.recording.is_file():
-        print(f"demo failed: no recording (see {outputs.log})")
-        return 1
+    if outputs.failure or not outputs.recording.is_file():
+        print(f"demo failed: {outputs.failure or 'no recording'} (see {outputs.log})",
+              file=sys.stderr)
+        return outputs.exit_code or 1
     result = analyse_run(outputs.recording, rig, out,
                          AnalysisOptions(gravity_m_s2=scenario.gravity), simulation.run)
     return print_summary(out, scenario, simulation, outputs, result)
@@ -259,11 +266,8 @@ def print_summary(out: Path, scenario, simulation, outputs: RunOutputs, result: 
 
 def run_live(source: str, rig_file: Path, out: Path, port: str | None,
              gravity: float | None, overwrite: bool = False) -> int:
-    """`sds run`: a video file or a camera through the whole chain, then the analysis."""
-    if (out / "recording.mcap").exists() and not overwrite:
-        print(f"sds run: {out / 'recording.mcap'} exists (another --out, or --overwrite)",
-              file=sys.stderr)
-        return 2
+    """`sds run`: a video file or a camera through the whole chain, then the analysis (the
+    caller checked `overwrite` against an earlier run in `out`)."""
     out.mkdir(parents=True, exist_ok=True)
     rig = load_rig(rig_file)
     overrides = [f"recorder.overwrite={str(overwrite).lower()}", f"camera.source={source}",
@@ -279,9 +283,10 @@ def run_live(source: str, rig_file: Path, out: Path, port: str | None,
 
         frames = VideoFileSource(Path(source)).announced_frames
     outputs = run_graph(overrides, out, frames)
-    if not outputs.recording.is_file():
-        print(f"run failed: no recording (see {outputs.log})")
-        return 1
+    if outputs.failure or not outputs.recording.is_file():
+        print(f"sds run: {outputs.failure or 'no recording'} (see {outputs.log})",
+              file=sys.stderr)
+        return outputs.exit_code or 1
     result = analyse_run(outputs.recording, rig, out, AnalysisOptions(gravity_m_s2=gravity))
     print(f"\nSDS run: {source}\n  recording {outputs.recording}\n  Rerun {outputs.rerun}\n"
           f"  report {out / 'analysis' / 'report.html'}\n  results {out / 'results'}/")

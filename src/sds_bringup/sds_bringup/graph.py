@@ -25,6 +25,7 @@ class NodeEntry:
     remap: dict[str, str] = field(default_factory=dict)
     process: str = ""
     required: bool = False
+    needed: bool = True
     nice: int = 0
 
     def ros_args(self) -> list[str]:
@@ -41,7 +42,8 @@ class NodeEntry:
         return args
 
 
-_NODE_KEYS = {"name", "plugin", "params", "parameters", "remap", "process", "required", "nice"}
+_NODE_KEYS = {"name", "plugin", "params", "parameters", "remap", "process", "required", "needed",
+              "nice"}
 
 
 def load_graph(path: str | Path) -> list[NodeEntry]:
@@ -82,6 +84,9 @@ def _node_entry(path: Path, index: int, item: Any) -> NodeEntry:
     for key in ("parameters", "remap"):
         if not isinstance(item.get(key, {}), dict):
             raise GraphFileError(f"{where}: '{key}' must be a mapping")
+    for key in ("required", "needed"):
+        if not isinstance(item.get(key, False), bool):
+            raise GraphFileError(f"{where}: '{key}' must be true or false")
     nice = item.get("nice", 0)
     if not isinstance(nice, int) or isinstance(nice, bool) or not 0 <= nice <= 19:
         raise GraphFileError(f"{where}: 'nice' must be an integer from 0 to 19, got {nice!r}")
@@ -92,7 +97,8 @@ def _node_entry(path: Path, index: int, item: Any) -> NodeEntry:
         parameters=dict(item.get("parameters", {})),
         remap={str(k): str(v) for k, v in item.get("remap", {}).items()},
         process=str(item.get("process", item["name"])),
-        required=bool(item.get("required", False)),
+        required=item.get("required", False),
+        needed=item.get("needed", True),
         nice=nice,
     )
 

@@ -1,4 +1,10 @@
-"""Start graph processes, prefix their logs, and shut every one down on exit or signal."""
+"""Start graph processes, prefix their logs, and shut every one down on exit or signal.
+
+The graph runs until Ctrl-C/SIGTERM, until a `required` node's process ends, until every
+process has ended, or until a `needed` node's process fails (non-zero exit or killed): then the
+launcher names it, its exit status and its last log lines, and stops the rest cleanly (SIGTERM),
+so that the recorder closes its file. A node that is not needed (the viewer) may fail alone.
+"""
 
 from __future__ import annotations
 
@@ -11,14 +17,17 @@ import subprocess
 import sys
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import IO
 
 from sds_bringup.graph import NodeEntry
 
 _PR_SET_PDEATHSIG = 1
 GRACE_PERIOD_S = 10.0
+LAST_LINES = 6
+"""Log lines of a failed process repeated in its failure report."""
 
 
 def _prepare_child(nice: int) -> None:
@@ -36,11 +45,24 @@ class GraphProcess:
     name: str
     entries: list[NodeEntry]
     popen: subprocess.Popen[bytes] | None = None
+    last_lines: deque[str] = field(default_factory=lambda: deque(maxlen=LAST_LINES))
 
     @property
     def required(self) -> bool:
         """Whether the graph ends when this process exits."""
         return any(entry.required for entry in self.entries)
+
+    @property
+    def needed(self) -> bool:
+        """Whether the graph stops when this process fails."""
+        return any(entry.needed for entry in self.entries)
+
+    def cause(self) -> str:
+        """The failure's cause: the last error line's message, else the last line."""
+        errors = [line for line in self.last_lines if "[ERROR]" in line or "[FATAL]" in line
+                  or line.startswith(("node host:", "Traceback"))]
+        line = (errors or list(self.last_lines) or ["no output"])[-1]
+        return line.split("]: ", 1)[-1]
 
     @property
     def nice(self) -> int:
@@ -53,7 +75,7 @@ class GraphProcess:
             {"plugin": e.plugin, "name": e.name, "ros_args": e.ros_args(), "required": e.required}
             for e in self.entries
         ]
-        return [sys.executable, "-O", "-m", "sds_bringup.node_host", json.dumps(specs)]
+        return [sys.executable, "-O", "-m", "sds_bringup.node_process", json.dumps(specs)]
 
 
 def group_processes(entries: list[NodeEntry]) -> list[GraphProcess]:
@@ -65,7 +87,8 @@ def group_processes(entries: list[NodeEntry]) -> list[GraphProcess]:
 
 
 class Launcher:
-    """Run a graph's processes until a required one exits, all exit, or SIGINT/SIGTERM."""
+    """Run a graph's processes until a required one exits, a needed one fails, all exit, or
+    SIGINT/SIGTERM. Logs go to `output`; failure reports also to `console` if given."""
 
     def __init__(
         self,
@@ -73,11 +96,15 @@ class Launcher:
         env: dict[str, str],
         output: IO[str] | None = None,
         grace_period_s: float = GRACE_PERIOD_S,
+        console: IO[str] | None = None,
     ) -> None:
         self.processes = group_processes(entries)
         self.env = env
         self.output = output or sys.stdout
+        self.console = console
         self.grace_period_s = grace_period_s
+        self.failure: str | None = None
+        """One line on the first needed process that failed (None while none has)."""
         self._stop = threading.Event()
         self._print_lock = threading.Lock()
         self._log_threads: list[threading.Thread] = []
@@ -99,12 +126,15 @@ class Launcher:
             if on_started:
                 on_started()
             self._wait()
+            self._stop.set()
         finally:
             self._shutdown()
             for sig, handler in previous.items():
                 signal.signal(sig, handler)
+        # A process still starting Python when it got the SIGTERM dies of it: a clean stop.
         codes = [process.popen.returncode for process in self.processes if process.popen]
-        return next((code for code in codes if code not in (0, None)), 0)
+        code = next((code for code in codes if code not in (0, None, -signal.SIGTERM)), 0)
+        return 128 - code if code < 0 else code   # killed by a signal: the shell's 128 + N
 
     def _start(self) -> None:
         for process in self.processes:
@@ -125,18 +155,45 @@ class Launcher:
             self._log_threads.append(thread)
 
     def _wait(self) -> None:
+        reported: set[str] = set()
         while not self._stop.is_set():
             running = [p for p in self.processes if p.popen and p.popen.poll() is None]
+            for process in self.processes:
+                code = process.popen.returncode if process.popen else None
+                if code not in (0, None) and process.name not in reported:
+                    reported.add(process.name)
+                    self._report_failure(process, code)
+                    if process.needed:
+                        return
             ended_required = [p for p in self.processes if p.required and p not in running]
             if not running or ended_required:
                 return
             time.sleep(0.05)
 
+    def _report_failure(self, process: GraphProcess, code: int) -> None:
+        """Name a failed process, its exit status and its last log lines."""
+        thread = self._log_threads[self.processes.index(process)]
+        thread.join(timeout=1.0)   # its last lines are still on their way through the pipe
+        status = f"was killed by {signal.Signals(-code).name}" if code < 0 else \
+            f"exited with code {code}"
+        nodes = ", ".join(entry.name for entry in process.entries)
+        consequence = "stopping the graph" if process.needed else "the graph goes on without it"
+        headline = f"{process.name} ({nodes}) {status}: {process.cause()}"
+        if process.needed and self.failure is None:
+            self.failure = headline
+        report = [f"sds graph: {headline}; {consequence}. Its last lines:",
+                  *(f"  [{process.name}] {line}" for line in process.last_lines)]
+        for stream in {self.output, self.console} - {None}:
+            with self._print_lock:
+                print("\n".join(report), file=stream, flush=True)
+
     def _shutdown(self) -> None:
-        """SIGINT to every live process, then SIGKILL after the grace period."""
+        """SIGTERM to every live process, then SIGKILL after the grace period. (SIGTERM, not
+        SIGINT: a process still starting Python dies of it quietly, where SIGINT would raise
+        KeyboardInterrupt with a traceback; the node host handles both alike.)"""
         live = [p for p in self.processes if p.popen and p.popen.poll() is None]
         for process in live:
-            process.popen.send_signal(signal.SIGINT)
+            process.popen.send_signal(signal.SIGTERM)
         deadline = time.monotonic() + self.grace_period_s
         for process in live:
             try:
@@ -149,12 +206,16 @@ class Launcher:
             thread.join(timeout=2.0)
         for process in self.processes:
             if process.popen:
-                self._say(process.name, f"exited with code {process.popen.returncode}")
+                code = process.popen.returncode
+                self._say(process.name, "stopped while starting" if code == -signal.SIGTERM
+                          else f"exited with code {code}")
 
     def _forward_log(self, process: GraphProcess) -> None:
         assert process.popen is not None and process.popen.stdout is not None
         for raw in process.popen.stdout:
-            self._say(process.name, raw.decode(errors="replace").rstrip())
+            line = raw.decode(errors="replace").rstrip()
+            process.last_lines.append(line)
+            self._say(process.name, line)
 
     def _say(self, name: str, line: str) -> None:
         with self._print_lock:

@@ -2,14 +2,15 @@
 
 A hosted node class takes (node_name, cli_args=...) like rclpy's Node. It may offer
 `finished` (threading.Event), `exit_code` (int) and `close()`; the host uses them if present.
-Run as `python -m sds_bringup.node_host SPEC_JSON`, where SPEC_JSON is a list of
-{"plugin": "module:Class", "name": ..., "ros_args": [...], "required": bool}.
+The launcher runs it as `python -m sds_bringup.node_process SPEC_JSON`, where SPEC_JSON is
+a list of {"plugin": "module:Class", "name": ..., "ros_args": [...], "required": bool}.
 """
 
 from __future__ import annotations
 
 import importlib
 import json
+import signal
 import sys
 import threading
 from collections.abc import Callable, Sequence
@@ -17,6 +18,7 @@ from collections.abc import Callable, Sequence
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
 
 NodeFactory = Callable[..., Node]
 EXIT_STARTUP_ERROR = 3
@@ -36,7 +38,12 @@ def run_nodes(
     args: list[str] | None = None,
 ) -> int:
     """Spin (factory, name, required[, ros_args]) nodes; return the worst node exit code."""
-    rclpy.init(args=args)
+    # SIGINT/SIGTERM end the loop below, not the context: the nodes' last words in close()
+    # (files written, final counts) still reach /rosout.
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
     executor = SingleThreadedExecutor()
     nodes: list[Node] = []
     required: list[Node] = []
@@ -50,7 +57,8 @@ def run_nodes(
                 required.append(node)
         # Until a required node is done, or any node has failed (a node that cannot work,
         # e.g. a recorder refusing to replace a file, ends its process with its code).
-        while rclpy.ok() and not any(_finished(node) for node in required) and \
+        while rclpy.ok() and not stop.is_set() and \
+                not any(_finished(node) for node in required) and \
                 not any(_failed(node) for node in nodes):
             executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
@@ -82,15 +90,8 @@ def _finished(node: Node) -> bool:
 def main() -> None:
     """Entry point of the graph processes started by the launcher."""
     specs = json.loads(sys.argv[1])
-    try:
-        entries = [
-            (load_plugin(spec["plugin"]), spec["name"], spec["required"], spec["ros_args"])
-            for spec in specs
-        ]
-    except KeyboardInterrupt:   # the graph stopped while the nodes' modules were loading
-        raise SystemExit(0) from None
+    entries = [
+        (load_plugin(spec["plugin"]), spec["name"], spec["required"], spec["ros_args"])
+        for spec in specs
+    ]
     raise SystemExit(run_nodes(entries, args=[sys.argv[0]]))
-
-
-if __name__ == "__main__":
-    main()

@@ -1,4 +1,4 @@
-"""`sds process` and `sds export`: a run's results as plain files, without a ROS graph.
+"""A run's results as plain files without a ROS graph (`sds process`, `sds export`).
 
 `process` runs the graph's own code in one process (frame selection, FrameTracker,
 reconstruct_spots/line, fit_surface, the analysis) with the parameters of
@@ -8,16 +8,12 @@ the same files from a recording of the graph.
 
 from __future__ import annotations
 
-import argparse
-import sys
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from mcap.exceptions import McapError
-from mcap_ros2.reader import read_ros2_messages
-from sds_camera.camera_imu import CameraImu, read_camera_imu
+from sds_camera.camera_imu import CameraImu
 from sds_camera.frame_source import FrameSource, FrameSourceError, Region, open_source, select
 from sds_camera.image_msg import msg_to_image
 from sds_camera.imu_msg import imu_samples
@@ -29,26 +25,24 @@ from sds_recon.reconstruction import (
     reconstruct_spots,
 )
 from sds_recon.results import ResultsWriter
-from sds_recon.rig import Rig, RigError, load_rig
+from sds_recon.rig import Rig
 from sds_recon.sloshing.analysis import AnalysisOptions, analyze
 from sds_recon.sloshing.estimators import DecayError
-from sds_recon.sloshing.gravity import gravity_regime
 from sds_recon.sloshing.recording import (
     RecordingError,
     cloud_points,
     cloud_rejected,
     cloud_xyz,
-    read_mcap_accelerations,
     recording_from_rows,
     stamp_s,
 )
 from sds_recon.sloshing.report import write_report
-from sds_record.mcap_files import recorded_topics
+from sds_record.mcap_files import decoded_messages, recorded_topics
 from sds_tracker.spots import LOST
 from sds_tracker.tracker import FrameTracker, TrackedSpot, parse_seeds, tracker_config
 from tqdm import tqdm
 
-from sds_bringup.graph import GraphFileError, node_parameters
+from sds_bringup.graph import node_parameters
 from sds_bringup.paths import CONFIG
 from sds_bringup.rig_calibration import (
     calibrate_images,
@@ -105,17 +99,17 @@ def mcap_frames(path: Path) -> Iterator[RedFrame]:
 
 def _recorded_frames(path: Path) -> Iterator[RedFrame]:
     offset, first, index = None, None, 0
-    for message in read_ros2_messages(str(path)):
-        name = message.schema.name if message.schema else ""
+    for recorded, msg in decoded_messages(path):
+        name = recorded.type_name
         if name == "sds_msgs/msg/CameraModel":
-            offset = (int(message.ros_msg.roi.x_offset), int(message.ros_msg.roi.y_offset))
+            offset = (int(msg.roi.x_offset), int(msg.roi.y_offset))
         elif name == "sensor_msgs/msg/Image":
             if offset is None:
                 raise RecordingError(f"{path}: a camera frame before any camera model "
                                      "(the region offset is unknown)")
-            stamp = stamp_s(message.ros_msg)
+            stamp = stamp_s(msg)
             first = stamp if first is None else first
-            image = msg_to_image(message.ros_msg)
+            image = msg_to_image(msg)
             yield RedFrame(index, stamp - first, image[..., 2] if image.ndim == 3 else image,
                            offset)
             index += 1
@@ -250,8 +244,8 @@ def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:
     frame_of: dict[float, int] = {}   # header stamp [s] -> frame index (clouds carry none)
     clouds: list[tuple[float, float, SurfacePoints, np.ndarray]] = []
     camera_imu: list[tuple[float, object]] = []
-    for message in read_ros2_messages(str(path)):
-        name, msg = (message.schema.name if message.schema else ""), message.ros_msg
+    for recorded, msg in decoded_messages(path):
+        name = recorded.type_name
         if not hasattr(msg, "header"):
             continue
         stamp = stamp_s(msg)
@@ -278,7 +272,7 @@ def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:
                     cloud["miss_distance_mm"].astype(float)), cloud_rejected(cloud)))
         elif name == "sds_msgs/msg/SurfaceFit":
             _add_fit_message(tables, msg, time_s)
-        elif name == "sensor_msgs/msg/Imu" and message.channel.topic == CAMERA_IMU_TOPIC:
+        elif name == "sensor_msgs/msg/Imu" and recorded.topic == CAMERA_IMU_TOPIC:
             camera_imu.append((stamp, msg))   # may come before the first frame: kept for later
         elif name == "sensor_msgs/msg/Imu":
             a = msg.linear_acceleration
@@ -304,7 +298,7 @@ def _add_fit_message(tables: RunTables, msg, time_s: float) -> None:
                           tuple(msg.mode_names), list(msg.modal_amplitudes_mm))
 
 
-def _finish(tables: RunTables, source: str, out: Path, options: AnalysisOptions) -> str:
+def finish_analysis(tables: RunTables, source: str, out: Path, options: AnalysisOptions) -> str:
     """The analysis of the run's points (report, analysis.json), the tables closed."""
     note = ""
     try:
@@ -314,101 +308,3 @@ def _finish(tables: RunTables, source: str, out: Path, options: AnalysisOptions)
         note = f"no analysis: {error}"
     tables.writer.close()
     return note
-
-
-def add_parsers(commands: argparse._SubParsersAction) -> None:
-    """Register `sds process` and `sds export`."""
-    process = commands.add_parser(
-        "process", help="track, reconstruct and analyse a video or recording, no ROS graph",
-        description="Run the graph's tracker, reconstruction and analysis in one process (the "
-                    "parameters of config/graphs/drop.yaml) and write the result files.")
-    inputs = process.add_mutually_exclusive_group(required=True)
-    inputs.add_argument("--video", type=Path, help="video file, or image folder (with --fps)")
-    inputs.add_argument("--mcap", type=Path, help="recording with camera frames")
-    process.add_argument("--rig", type=Path, required=True, help="the rig file")
-    process.add_argument("--out", type=Path, required=True,
-                         help="folder for the result files (refused if it holds results)")
-    process.add_argument("--overwrite", action="store_true",
-                         help="replace the results of an earlier run in --out")
-    process.add_argument("--fps", type=float, default=0.0,
-                         help="frame rate of an image folder [1/s]")
-    process.add_argument("--gravity", type=float, help="gravity for the theory [m/s²]")
-    process.add_argument("--calibrate-lasers", type=Path, nargs="+", metavar="IMAGE",
-                         help="images of known surfaces, or one video of the tilt table (its "
-                              "still stretches in order): self-calibrate the rig first (needs "
-                              "--surfaces) and process with the calibrated rig")
-    process.add_argument("--surfaces", type=Path,
-                         help="known surface per image: frame, tilt_x_deg, tilt_y_deg"
-                              "[, offset_mm] (frame k = k-th image)")
-    process.add_argument("--no-progress", action="store_true")
-    process.set_defaults(run=run_process)
-    export = commands.add_parser(
-        "export", help="a recording's spots, points, line, fits, IMU, ToF and analysis as files",
-        description="Write the result files of a recording of the graph (see README, "
-                    "'Result files').")
-    export.add_argument("recording", type=Path)
-    export.add_argument("--rig", type=Path, default=CONFIG / "rigs" / "stelium.yaml",
-                        help="the rig file")
-    export.add_argument("--out", type=Path, required=True,
-                        help="folder for the result files (refused if it holds results)")
-    export.add_argument("--overwrite", action="store_true",
-                        help="replace the results of an earlier export in --out")
-    export.add_argument("--gravity", type=float, help="gravity for the theory [m/s²]")
-    export.set_defaults(run=run_export)
-
-
-def _fail(command: str, error: Exception) -> int:
-    print(f"sds {command}: {error}", file=sys.stderr)
-    return 2
-
-
-def run_process(args: argparse.Namespace) -> int:
-    """Process; one-line errors with exit code 2."""
-    source = args.video or args.mcap
-    try:
-        if not source.exists():
-            raise RecordingError(f"{source}: no such file")
-        rig = load_rig(args.rig)
-        writer = ResultsWriter(args.out, args.overwrite)
-        if args.calibrate_lasers:
-            if args.surfaces is None:
-                raise ValueError("--calibrate-lasers needs --surfaces")
-            rig, rig_path = calibrate_from_images(rig, args.calibrate_lasers, args.surfaces,
-                                                  args.out)
-            print(f"sds process: calibrated rig written to {rig_path}")
-        frames = video_frames(source, rig, args.fps) if args.video else mcap_frames(source)
-        tables = RunTables(writer, rig)
-        count = process_frames(frames, rig, tables, progress=not args.no_progress)
-        imu = read_camera_imu(source) if args.video else None
-        accelerometers = read_mcap_accelerations(source) if args.mcap else {}
-    except (RigError, RecordingError, FrameSourceError, GraphFileError, McapError, OSError,
-            ValueError) as error:   # CameraImuError is a ValueError
-        return _fail("process", error)
-    if imu is not None:
-        tables.add_camera_imu(imu)
-        accelerometers["camera IMU"] = (imu.accel_time_s, imu.accel_m_s2)
-    gravity, regime = args.gravity, ""
-    if gravity is None:
-        gravity, regime = gravity_regime(accelerometers)
-    note = _finish(tables, str(source), args.out, AnalysisOptions(gravity_m_s2=gravity))
-    notes = "; ".join(n for n in (regime, note) if n)
-    print(f"sds process: {count} frames of {source} -> {args.out}" + (f" ({notes})" if notes
-                                                                       else ""))
-    return 0
-
-
-def run_export(args: argparse.Namespace) -> int:
-    """Export; one-line errors with exit code 2."""
-    try:
-        if not args.recording.is_file():
-            raise RecordingError(f"{args.recording}: no such recording")
-        rig = load_rig(args.rig)
-        tables = RunTables(ResultsWriter(args.out, args.overwrite), rig)
-        frames = export_recording(args.recording, rig, tables)
-    except (RigError, RecordingError, McapError, OSError, ValueError) as error:
-        return _fail("export", error)
-    note = _finish(tables, str(args.recording), args.out,
-                   AnalysisOptions(gravity_m_s2=args.gravity))
-    print(f"sds export: {frames} frames of {args.recording} -> {args.out}" + (
-        f" ({note})" if note else ""))
-    return 0

@@ -141,17 +141,19 @@ class FrameSourceNode(Node):
         self.declare_parameter("max_in_flight", 2)
         self.declare_parameter("led_roi", [0, 0, 0, 0])
         self.declare_parameter("repeat", 1)
+        self.declare_parameter("linger_s", 3.0)
 
     def _read_parameters(self) -> dict:
         names = ["source", "fps", "roi", "channel", "pacing", "rate", "stamp", "frame_id",
                  "camera_model", "wait_for_subscribers", "ack_consumers", "max_in_flight",
-                 "repeat"]
+                 "repeat", "linger_s"]
         p = {name: self.get_parameter(name).value for name in names}
         for name, allowed in (("channel", CHANNELS), ("pacing", PACINGS), ("stamp", STAMPS)):
             if p[name] not in allowed:
                 raise ValueError(f"parameter {name}={p[name]!r} is not one of {allowed}")
-        if p["rate"] <= 0 or p["max_in_flight"] < 1:
-            raise ValueError("parameters rate and max_in_flight must be positive")
+        if p["rate"] <= 0 or p["max_in_flight"] < 1 or p["linger_s"] < 0:
+            raise ValueError("parameters rate and max_in_flight must be positive, linger_s "
+                             "not negative")
         if not p["source"]:
             raise ValueError("parameter source is empty: name a video file, folder or camera")
         self._p = p
@@ -335,6 +337,9 @@ class FrameSourceNode(Node):
             self._fail(f"{error}; the {self.published} frames published before stay valid")
             return
         self.get_logger().info(f"end of {self._p['source']}: published {self.published} frames")
+        # The consumers' last outputs: the tracker publishes the frames its Hampel window held
+        # back once the stream has been idle for 1 s, the chain behind it follows.
+        self._stop.wait(self._p["linger_s"])
         self.finished.set()
 
     def close(self) -> None:

@@ -1,17 +1,24 @@
-"""MCAP files of serialized ROS 2 messages: a crash-safe writer, a tolerant reader, repair.
+"""MCAP files of serialized ROS 2 messages: a crash-safe writer, the one reader, repair.
 
 Files follow rosbag2's MCAP layout (profile "ros2", schemas in `ros2msg` encoding, CDR
-messages), so the `mcap` readers, `rosbags` and Foxglove open them.
+messages), so the `mcap` readers, `rosbags` and Foxglove open them. Every tool reads
+recordings through `read_messages` (CDR bytes) or `decoded_messages` (message objects decoded
+from the embedded schemas, no generated classes needed). A recording whose recorder did not
+close it (a crash, SIGKILL) has no summary: it is read in file order up to its last complete
+chunk, and a warning (logger `sds_record.mcap_files`) says how many messages that gave and
+that `sds mcap-repair` gives the file an index.
 """
 
 from __future__ import annotations
 
+import logging
 import struct
 import threading
 import time
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader, make_reader
@@ -19,6 +26,7 @@ from mcap.records import Channel, Message, Schema
 from mcap.stream_reader import StreamReader
 from mcap.summary import Summary
 from mcap.writer import CompressionType, Writer
+from mcap_ros2.decoder import DecoderFactory
 
 from sds_record.schemas import MESSAGE_ENCODING, SCHEMA_ENCODING, message_definition
 
@@ -27,6 +35,7 @@ DURABILITY_KEY = "durability"
 """Channel metadata key: the recorded publishers' durability, transient_local or volatile."""
 COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
                 "none": CompressionType.NONE}
+_log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -153,18 +162,50 @@ def _indexed_messages(path: Path, topics: Iterable[str] | None
         yield from make_reader(stream).iter_messages(topics=topics, log_time_order=True)
 
 
+def _records(path: Path, topics: Iterable[str] | None
+             ) -> Iterator[tuple[Schema | None, Channel, Message]]:
+    """The wanted topics' messages: log-time order from the index, else (an unfinished file)
+    file order up to the last complete chunk, with a warning once a read that found some is
+    done."""
+    wanted = set(topics) if topics is not None else None
+    if _summary(path) is not None:
+        yield from _indexed_messages(path, wanted)
+        return
+    count = 0
+    for schema, channel, message in _linear_messages(path):
+        if wanted is None or channel.topic in wanted:
+            count += 1
+            yield schema, channel, message
+    if count:   # nothing read: the caller's own error (no such topic...) says it all
+        _log.warning(f"{path} is unfinished (its recorder did not close it): read {count} "
+                     f"messages up to its last complete chunk; `sds mcap-repair {path} "
+                     "REPAIRED.mcap` gives it an index")
+
+
 def read_messages(path: str | Path, topics: Iterable[str] | None = None
                   ) -> Iterator[RecordedMessage]:
-    """Messages in log-time order; a file without its summary (a crash) is read linearly."""
-    path = Path(path)
-    wanted = set(topics) if topics is not None else None
-    source = _indexed_messages(path, wanted) if _summary(path) else _linear_messages(path)
-    for schema, channel, message in source:
-        if wanted is not None and channel.topic not in wanted:
-            continue
+    """Messages as CDR bytes, in log-time order (an unfinished file: in file order)."""
+    for schema, channel, message in _records(Path(path), topics):
         yield RecordedMessage(channel.topic, schema.name if schema else "", message.data,
                               message.log_time, message.publish_time,
                               channel.metadata.get(DURABILITY_KEY) == "transient_local")
+
+
+def decoded_messages(path: str | Path, topics: Iterable[str] | None = None
+                     ) -> Iterator[tuple[RecordedMessage, Any]]:
+    """Messages with their objects, decoded by the schemas the file embeds (fields as in
+    rclpy's classes); messages of a schema-less channel are skipped."""
+    factory = DecoderFactory()
+    decoders: dict[int, Any] = {}
+    for schema, channel, message in _records(Path(path), topics):
+        if schema is None:
+            continue
+        if schema.id not in decoders:
+            decoders[schema.id] = factory.decoder_for(channel.message_encoding, schema)
+        recorded = RecordedMessage(channel.topic, schema.name, message.data, message.log_time,
+                                   message.publish_time,
+                                   channel.metadata.get(DURABILITY_KEY) == "transient_local")
+        yield recorded, decoders[schema.id](message.data)
 
 
 def recorded_topics(path: str | Path) -> dict[str, tuple[str, bool]]:

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import rerun as rr
 from mcap.exceptions import McapError
-from mcap_ros2.reader import read_ros2_messages
 from sds_recon.rig import Rig
+from sds_record.mcap_files import decoded_messages
 
 from sds_viz.messages import log_message
 from sds_viz.scene import RerunScene
@@ -30,13 +30,13 @@ def mcap_to_rrd(recording: str | Path, output: str | Path, rig: Rig | None = Non
     scene = RerunScene(stream, rig, image_scale)
     shown = skipped = images = 0
     try:
-        for message in read_ros2_messages(str(recording)):
-            type_name = message.schema.name if message.schema else ""
+        for recorded, msg in decoded_messages(recording):
+            type_name = recorded.type_name
             if type_name == "sensor_msgs/msg/Image":
                 images += 1
                 if (images - 1) % max(1, image_every):
                     continue
-            if log_message(scene, type_name, message.ros_msg):
+            if log_message(scene, type_name, msg):
                 shown += 1
             else:
                 skipped += 1

@@ -1,14 +1,13 @@
 """What the analysis reads: surface points per frame and laser, line points, ToF ranges.
 
-Sources: an MCAP recording (the reconstruction node's PointCloud2 topics, sensor_msgs/Range for
-the ToF, decoded from the schemas the file carries), or a points CSV with the columns
-`frame, t_s, laser_id, X_mm, Y_mm, Z_mm` (more columns are ignored; laser_id 65535 is the line).
+Sources: a points CSV with the columns `frame, t_s, laser_id, X_mm, Y_mm, Z_mm` (more columns
+are ignored; laser_id 65535 is the line), a time-series CSV, or the point clouds of an MCAP
+recording (read by `sds_record.recorded_series`, grouped here).
 """
 
 from __future__ import annotations
 
 import csv
-from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -108,44 +107,6 @@ def stamp_s(msg) -> float:
     return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
 
 
-def read_mcap(path: str | Path) -> SurfaceRecording:
-    """Every surface cloud (PointCloud2 with laser_id) and ToF range (sensor_msgs/Range [m]),
-    with times in seconds from the first frame (the first spot cloud's stamp), the one time
-    convention of every input (`sds export`'s and the CSVs' `t_s`)."""
-    from mcap.exceptions import McapError
-    from mcap.reader import make_reader
-    from mcap_ros2.decoder import DecoderFactory
-
-    path = Path(path)
-    rows: dict[str, list[np.ndarray]] = defaultdict(list)
-    tof_time, tof_range = [], []
-    try:
-        with path.open("rb") as stream:
-            reader = make_reader(stream, decoder_factories=[DecoderFactory()])
-            for schema, _, _, msg in reader.iter_decoded_messages():
-                if schema.name == "sensor_msgs/msg/PointCloud2":
-                    cloud = cloud_points(msg)
-                    if cloud is not None:
-                        cloud = cloud[~cloud_rejected(cloud)]
-                    if cloud is not None and len(cloud):
-                        rows["time"].append(np.full(len(cloud), stamp_s(msg)))
-                        rows["id"].append(cloud["laser_id"].astype(int))
-                        rows["xyz"].append(cloud_xyz(cloud))
-                elif schema.name == "sensor_msgs/msg/Range" and np.isfinite(msg.range):
-                    tof_time.append(stamp_s(msg))
-                    tof_range.append(msg.range * 1e3)
-    except (McapError, OSError, ValueError) as error:
-        raise RecordingError(f"{path}: {error}") from None
-    if not rows:
-        raise RecordingError(f"{path}: no PointCloud2 with a laser_id field (a recording of the "
-                             "reconstruction node's points topic is needed)")
-    times, ids = np.concatenate(rows["time"]), np.concatenate(rows["id"])
-    spots = ids != LINE_LASER_ID
-    origin = float(times[spots].min()) if spots.any() else float(times.min())
-    return recording_from_rows(times - origin, ids, np.concatenate(rows["xyz"]), str(path),
-                               (np.array(tof_time) - origin, np.array(tof_range)))
-
-
 def read_series_csv(path: str | Path) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """A time-series table: first column time [s], one column per series (e.g. one spot's px)."""
     path = Path(path)
@@ -159,29 +120,3 @@ def read_series_csv(path: str | Path) -> tuple[np.ndarray, dict[str, np.ndarray]
         raise RecordingError(f"{path}: {error}") from None
     names = [name.strip() for name in rows[0]]
     return table[:, 0], {name: table[:, k] for k, name in enumerate(names[1:], start=1)}
-
-
-def read_mcap_accelerations(path: str | Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """Every accelerometer stream of a recording (sensor_msgs/Imu messages with a measured
-    linear acceleration), by topic: stamps [s] and specific force (N×3 m/s²)."""
-    from mcap.exceptions import McapError
-    from mcap.reader import make_reader
-    from mcap_ros2.decoder import DecoderFactory
-
-    path = Path(path)
-    streams: dict[str, tuple[list[float], list[tuple[float, float, float]]]] = defaultdict(
-        lambda: ([], []))
-    try:
-        with path.open("rb") as stream:
-            reader = make_reader(stream, decoder_factories=[DecoderFactory()])
-            for schema, channel, _, msg in reader.iter_decoded_messages():
-                if schema.name != "sensor_msgs/msg/Imu" or \
-                        msg.linear_acceleration_covariance[0] == -1:
-                    continue
-                a = msg.linear_acceleration
-                times, values = streams[channel.topic]
-                times.append(stamp_s(msg))
-                values.append((a.x, a.y, a.z))
-    except (McapError, OSError, ValueError) as error:
-        raise RecordingError(f"{path}: {error}") from None
-    return {topic: (np.array(t), np.array(v)) for topic, (t, v) in streams.items()}

@@ -1,0 +1,45 @@
+"""`sds export`: a recording of the graph as result files and an analysis report."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from sds_bringup.commands import CommandError, add_overwrite
+from sds_bringup.paths import CONFIG
+
+
+def add_parser(commands: argparse._SubParsersAction) -> None:
+    """Register `sds export`."""
+    parser = commands.add_parser(
+        "export", help="a recording's spots, points, line, fits, IMU, ToF and analysis as files",
+        description="Write the result files of a recording of the graph (see README, "
+                    "'Result files').")
+    parser.add_argument("recording", type=Path)
+    parser.add_argument("--rig", type=Path, default=CONFIG / "rigs" / "stelium.yaml",
+                        help="the rig file")
+    parser.add_argument("--out", type=Path, required=True,
+                        help="folder for the result files (refused if it holds results)")
+    add_overwrite(parser, "replace the results of an earlier export in --out")
+    parser.add_argument("--gravity", type=float, help="gravity for the theory [m/s²]")
+    parser.set_defaults(run=run, command="export")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Result files and the analysis report of one recording."""
+    from sds_recon.results import ResultsWriter
+    from sds_recon.rig import load_rig
+    from sds_recon.sloshing.analysis import AnalysisOptions
+
+    from sds_bringup.offline import RunTables, export_recording, finish_analysis
+
+    if not args.recording.is_file():
+        raise CommandError(f"{args.recording}: no such recording")
+    rig = load_rig(args.rig)
+    tables = RunTables(ResultsWriter(args.out, args.overwrite), rig)
+    frames = export_recording(args.recording, rig, tables)
+    note = finish_analysis(tables, str(args.recording), args.out,
+                           AnalysisOptions(gravity_m_s2=args.gravity))
+    print(f"sds export: {frames} frames of {args.recording} -> {args.out}" + (
+        f" ({note})" if note else ""))
+    return 0

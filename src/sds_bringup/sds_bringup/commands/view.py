@@ -1,0 +1,40 @@
+"""`sds view`: a recording (MCAP) as a Rerun .rrd file."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from sds_bringup.commands import CommandError
+from sds_bringup.paths import CONFIG
+
+
+def add_parser(commands: argparse._SubParsersAction) -> None:
+    """Register `sds view`."""
+    parser = commands.add_parser(
+        "view", help="a recording (MCAP) as a Rerun .rrd file",
+        description="Log a recording's camera frames, spots, beam paths, line, surface points, "
+                    "fitted plane, container and time series to a Rerun .rrd file (open it "
+                    "with `rerun FILE.rrd`).")
+    parser.add_argument("recording", type=Path)
+    parser.add_argument("--out", type=Path, help="the .rrd file (default: beside the MCAP)")
+    parser.add_argument("--rig", type=Path, default=CONFIG / "rigs" / "stelium.yaml",
+                        help="rig file for the container, beams and beam paths")
+    parser.add_argument("--image-scale", type=float, default=0.25)
+    parser.add_argument("--image-every", type=int, default=1, help="log every Nth frame")
+    parser.set_defaults(run=run, command="view")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Convert and say how many messages the scene shows."""
+    from sds_recon.rig import load_rig
+    from sds_viz.from_mcap import mcap_to_rrd
+
+    output = args.out or args.recording.with_suffix(".rrd")
+    if not args.recording.is_file():
+        raise CommandError(f"{args.recording}: no such recording")
+    conversion = mcap_to_rrd(args.recording, output, load_rig(args.rig), args.image_scale,
+                             args.image_every)
+    print(f"sds view: {conversion.shown} messages shown ({conversion.skipped} of types the "
+          f"scene does not show) in {output}")
+    return 0

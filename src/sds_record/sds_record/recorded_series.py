@@ -1,0 +1,78 @@
+"""What the analysis reads from a recording: the surface points and every accelerometer.
+
+Both come through the one reader (`mcap_files.decoded_messages`), so an unfinished recording
+is read up to its last complete chunk with a warning. Times are in seconds from the first
+frame (the first spot cloud's stamp), the one time convention of every input (`sds export`'s
+and the CSVs' `t_s`).
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+from mcap.exceptions import McapError
+from sds_recon.reconstruction import LINE_LASER_ID
+from sds_recon.sloshing.recording import (
+    RecordingError,
+    SurfaceRecording,
+    cloud_points,
+    cloud_rejected,
+    cloud_xyz,
+    recording_from_rows,
+    stamp_s,
+)
+
+from sds_record.mcap_files import decoded_messages
+
+
+def read_surface_recording(path: str | Path) -> SurfaceRecording:
+    """Every surface cloud (PointCloud2 with laser_id; rejected points left out) and ToF
+    range (sensor_msgs/Range [m] → mm)."""
+    path = Path(path)
+    rows: dict[str, list[np.ndarray]] = defaultdict(list)
+    tof_time, tof_range = [], []
+    try:
+        for recorded, msg in decoded_messages(path):
+            if recorded.type_name == "sensor_msgs/msg/PointCloud2":
+                cloud = cloud_points(msg)
+                if cloud is not None:
+                    cloud = cloud[~cloud_rejected(cloud)]
+                if cloud is not None and len(cloud):
+                    rows["time"].append(np.full(len(cloud), stamp_s(msg)))
+                    rows["id"].append(cloud["laser_id"].astype(int))
+                    rows["xyz"].append(cloud_xyz(cloud))
+            elif recorded.type_name == "sensor_msgs/msg/Range" and np.isfinite(msg.range):
+                tof_time.append(stamp_s(msg))
+                tof_range.append(msg.range * 1e3)
+    except (McapError, OSError, ValueError) as error:
+        raise RecordingError(f"{path}: {error}") from None
+    if not rows:
+        raise RecordingError(f"{path}: no PointCloud2 with a laser_id field (a recording of the "
+                             "reconstruction node's points topic is needed)")
+    times, ids = np.concatenate(rows["time"]), np.concatenate(rows["id"])
+    spots = ids != LINE_LASER_ID
+    origin = float(times[spots].min()) if spots.any() else float(times.min())
+    return recording_from_rows(times - origin, ids, np.concatenate(rows["xyz"]), str(path),
+                               (np.array(tof_time) - origin, np.array(tof_range)))
+
+
+def read_accelerations(path: str | Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Every accelerometer stream (sensor_msgs/Imu messages with a measured linear
+    acceleration), by topic: stamps [s] and specific force (N×3 m/s²)."""
+    path = Path(path)
+    streams: dict[str, tuple[list[float], list[tuple[float, float, float]]]] = defaultdict(
+        lambda: ([], []))
+    try:
+        for recorded, msg in decoded_messages(path):
+            if recorded.type_name != "sensor_msgs/msg/Imu" or \
+                    msg.linear_acceleration_covariance[0] == -1:
+                continue
+            a = msg.linear_acceleration
+            times, values = streams[recorded.topic]
+            times.append(stamp_s(msg))
+            values.append((a.x, a.y, a.z))
+    except (McapError, OSError, ValueError) as error:
+        raise RecordingError(f"{path}: {error}") from None
+    return {topic: (np.array(t), np.array(v)) for topic, (t, v) in streams.items()}

@@ -1,0 +1,105 @@
+"""The launcher with real node processes when something goes wrong: a source that cannot be
+opened, a node killed mid-run, Ctrl-C during start-up. The graph ends within seconds, names the
+cause on the console, and never hangs or prints a traceback."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+from conftest import NTSC, random_frames, write_lossless_clip
+from ros_helpers import SdsGraphRun, pid_alive, wait_until
+
+pytestmark = pytest.mark.ros
+
+
+@pytest.fixture(scope="module")
+def clip(tmp_path_factory):
+    frames = random_frames(10, 120, 160, seed=3)
+    return write_lossless_clip(tmp_path_factory.mktemp("failures") / "clip.mp4", frames, NTSC)
+
+
+def camera_and_recorder(repo: Path, folder: Path) -> Path:
+    """A graph file: a flooding, endlessly repeating camera whose frames the recorder acks."""
+    params = repo / "config" / "params"
+    graph = {"nodes": [
+        {"name": "camera", "plugin": "sds_camera.frame_source_node:FrameSourceNode",
+         "params": str(params / "frame_source.yaml"), "required": True,
+         "parameters": {"pacing": "flood", "ack_consumers": 1, "repeat": 0},
+         "remap": {"image": "/camera/image", "frame_ack": "/camera/frame_ack"}},
+        {"name": "recorder", "plugin": "sds_record.recorder_node:RecorderNode",
+         "params": str(params / "recorder.yaml"), "parameters": {"ack_for": ["/camera/image"]},
+         "remap": {"frame_ack": "/camera/frame_ack"}},
+    ]}
+    path = folder / "camera_and_recorder.yaml"
+    path.write_text(yaml.safe_dump(graph))
+    return path
+
+
+def test_a_source_that_cannot_be_opened_ends_the_drop_graph_with_its_cause(repo, tmp_path):
+    rig = repo / "config" / "rigs" / "stelium.yaml"
+    started = time.monotonic()
+    graph = SdsGraphRun("drop.yaml", "--set", "camera.source=/nonexistent/drop.mp4",
+                        "--set", f"tracker.rig={rig}", "--set", f"recon.rig={rig}",
+                        "--set", f"recorder.output={tmp_path / 'drop.mcap'}")
+    assert graph.wait(timeout=60) == 2
+    assert time.monotonic() - started < 30, graph.output()
+    output = graph.output()
+    assert "camera (camera) exited with code 2: video file /nonexistent/drop.mp4 does not " \
+           "exist; stopping the graph" in output
+    assert "wrote 0 messages" in output          # the recorder closed its file
+    assert "Traceback" not in output and "rosout" not in output, output
+
+
+def test_sds_run_on_a_missing_video_fails_in_seconds_with_one_line(repo, tmp_path):
+    rig = repo / "config" / "rigs" / "stelium.yaml"
+    done = subprocess.run([str(Path(sys.executable).with_name("sds")), "run", "--video",
+                           str(tmp_path / "nope.mp4"), "--rig", str(rig), "--out",
+                           str(tmp_path / "run")], capture_output=True, text=True, timeout=120,
+                          env=dict(os.environ), check=False)
+    assert done.returncode == 2, done.stdout + done.stderr
+    last = done.stderr.strip().splitlines()[-1]
+    assert last.startswith("sds run: camera (camera) exited with code 2: video file") \
+        and "nope.mp4 does not exist" in last, done.stderr
+    assert "Traceback" not in done.stdout + done.stderr
+
+
+def test_a_killed_consumer_stops_the_graph_and_is_named(repo, tmp_path, clip):
+    graph_file = camera_and_recorder(repo, tmp_path)
+    graph = SdsGraphRun(str(graph_file), "--set", f"camera.source={clip}",
+                        "--set", f"recorder.output={tmp_path / 'killed.mcap'}")
+    graph.wait_for_line("recording /camera/image", timeout=60)
+    time.sleep(1.0)   # frames flow, the camera waits on the recorder's acks
+    pids = dict(zip(("camera", "recorder"), graph.child_pids(), strict=True))
+    os.kill(pids["recorder"], signal.SIGKILL)
+    assert graph.wait(timeout=30) == 128 + signal.SIGKILL
+    output = graph.output()
+    assert "recorder (recorder) was killed by SIGKILL" in output
+    assert "stopping the graph" in output and "Traceback" not in output, output
+    assert wait_until(lambda: not pid_alive(pids["camera"]), timeout=10), output
+
+
+def test_a_file_fed_graph_ends_by_itself_once_the_file_is_done(clip):
+    graph = SdsGraphRun("camera_monitor.yaml", "--set", f"camera.source={clip}",
+                        "--set", "camera.linger_s=0.5")
+    assert graph.wait(timeout=60) == 0, graph.output()
+    assert "end of" in graph.output() and "published 10 frames" in graph.output()
+
+
+@pytest.mark.parametrize("delay_s", [0.3, 1.5, 4.0])
+def test_ctrl_c_at_any_moment_of_start_up_is_clean(repo, tmp_path, clip, delay_s):
+    rig = repo / "config" / "rigs" / "stelium.yaml"
+    graph = SdsGraphRun("drop.yaml", "--set", f"camera.source={clip}",
+                        "--set", f"tracker.rig={rig}", "--set", f"recon.rig={rig}",
+                        "--set", f"recorder.output={tmp_path / 'stopped.mcap'}")
+    time.sleep(delay_s)
+    graph.popen.send_signal(signal.SIGINT)
+    # 130: `sds` itself was still loading, "sds: interrupted"; 0: the graph stopped cleanly.
+    assert graph.wait(timeout=60) in (0, 130), graph.output()
+    assert "Traceback" not in graph.output() and "rosout" not in graph.output(), graph.output()
