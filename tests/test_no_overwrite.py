@@ -106,3 +106,22 @@ def test_calibration_and_camera_files_are_kept(tmp_path: Path) -> None:
                  ["camera", "camera-info", rig]):
         refused(sds(*args, "--out", str(existing)), "exists")
         assert existing.read_text() == "kept: true\n"
+
+
+def test_reports_rerun_files_and_tables_are_kept(tmp_path: Path) -> None:
+    analysis = tmp_path / "analysis"
+    analysis.mkdir()
+    (analysis / "analysis.json").write_text("{}")
+    refused(sds("analyze", str(REPO / "README.md"), "--out", str(analysis)),
+            "holds an analysis already")
+    rrd = tmp_path / "run.rrd"
+    rrd.write_text("kept")
+    refused(sds("view", str(REPO / "README.md"), "--out", str(rrd)), "exists")
+    table = tmp_path / "resolution"
+    table.mkdir()
+    (table / "resolution.csv").write_text("kept")
+    refused(sds("resolution", "--out", str(table)), "exists")
+    assert (analysis / "analysis.json").read_text() == "{}" and rrd.read_text() == "kept"
+    assert (table / "resolution.csv").read_text() == "kept"
+    done = sds("resolution", "--out", str(table), "--overwrite")
+    assert done.returncode == 0 and (table / "resolution.csv").read_text() != "kept"

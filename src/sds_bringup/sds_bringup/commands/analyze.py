@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from sds_bringup.commands import CommandError
+from sds_bringup.commands import CommandError, add_overwrite, refuse_existing
 from sds_bringup.paths import CONFIG
 
 
@@ -34,6 +34,7 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
                         help="expected frequency of a mode, e.g. lateral_1=1.9 (repeatable)")
     parser.add_argument("--truth", type=Path,
                         help="a simulation's truth/run.json: the report gives each error")
+    add_overwrite(parser, "replace the report of an earlier analysis in --out")
     parser.set_defaults(run=run, command="analyze")
 
 
@@ -56,6 +57,8 @@ def run(args: argparse.Namespace) -> int:
 
     from sds_bringup.analyze import analyse_recording
 
+    refuse_existing(args.out / "analysis.json", args.overwrite,
+                    "exists: the folder holds an analysis already")
     options = AnalysisOptions(args.start_s, args.end_s, args.forcing_s, args.gravity,
                               expected_frequencies(args.expected))
     analysis = analyse_recording(args.recording, args.rig, options)

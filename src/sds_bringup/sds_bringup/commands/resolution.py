@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from sds_bringup.commands import add_overwrite, refuse_existing
 from sds_bringup.paths import CONFIG
 
 
@@ -27,6 +28,7 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
                         help="radii of the diode rings, drawn dashed")
     parser.add_argument("--out", type=Path, default=Path("resolution"),
                         help="directory for resolution.csv and resolution.png")
+    add_overwrite(parser, "replace an earlier table and plot in --out")
     parser.set_defaults(run=run, command="resolution")
 
 
@@ -36,6 +38,7 @@ def run(args: argparse.Namespace) -> int:
     from sds_recon.camera import load_camera
     from sds_recon.resolution import plot_resolution, table_text, vertical_resolution
 
+    refuse_existing(args.out / "resolution.csv", args.overwrite)
     camera = load_camera(args.camera)
     start, stop, step = args.radii_mm
     radii = np.arange(start, stop + step / 2, step)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from sds_bringup.commands import CommandError
+from sds_bringup.commands import CommandError, add_overwrite, refuse_existing
 from sds_bringup.paths import CONFIG
 
 
@@ -22,6 +22,7 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
                         help="rig file for the container, beams and beam paths")
     parser.add_argument("--image-scale", type=float, default=0.25)
     parser.add_argument("--image-every", type=int, default=1, help="log every Nth frame")
+    add_overwrite(parser, "replace an existing .rrd file")
     parser.set_defaults(run=run, command="view")
 
 
@@ -33,6 +34,7 @@ def run(args: argparse.Namespace) -> int:
     output = args.out or args.recording.with_suffix(".rrd")
     if not args.recording.is_file():
         raise CommandError(f"{args.recording}: no such recording")
+    refuse_existing(output, args.overwrite)
     conversion = mcap_to_rrd(args.recording, output, load_rig(args.rig), args.image_scale,
                              args.image_every)
     print(f"sds view: {conversion.shown} messages shown ({conversion.skipped} of types the "

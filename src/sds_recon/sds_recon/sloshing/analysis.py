@@ -28,7 +28,12 @@ MATCH_TOLERANCE = 0.15
 """A component matches an expected frequency within ±15 %."""
 TILT_STEP_DEG = 0.5
 """Frames whose tilt stays within this of a plateau's median belong to it."""
-MIN_PLATEAU_FRAMES = 5
+MIN_PLATEAU_S = 0.5
+"""A tilt table holds each angle this long or more (as `sds calibrate rig --video` asks); a
+sloshing surface holds a tilt for a few frames around each extreme (at most 0.27 s in the
+simulated drops)."""
+STILL_MM = 0.1
+"""Largest median over the spots of a plateau's height standard deviation [mm] (noise: 0.02)."""
 MIN_MENISCUS_POINTS = 200
 MIN_CYCLES = 3
 """A component with fewer cycles than this in the window is noted as doubtful."""
@@ -130,14 +135,23 @@ def _significant(fit: DampedSinusoidFit, component: DampedSinusoid, min_snr: flo
 
 
 def _pick(fit: DampedSinusoidFit, expected_hz: float | None, min_snr: float
-          ) -> DampedSinusoid | None:
-    """The component nearest the expected frequency (within 15 %), else the largest."""
-    candidates = [c for c in fit.components if _significant(fit, c, min_snr)]
-    if expected_hz is not None:
-        candidates = [c for c in candidates
-                      if abs(c.natural_frequency_hz / expected_hz - 1) <= MATCH_TOLERANCE]
-        candidates.sort(key=lambda c: abs(c.natural_frequency_hz - expected_hz))
-    return candidates[0] if candidates else None
+          ) -> tuple[DampedSinusoid | None, str]:
+    """The significant component nearest the expected frequency (within 15 %), else the
+    largest: the dominant oscillation is always reported, with a note when the theory
+    expected another frequency."""
+    candidates = [c for c in fit.components if _significant(fit, c, min_snr)]  # largest first
+    if not candidates:
+        return None, ""
+    if expected_hz is None:
+        return candidates[0], ""
+    near = [c for c in candidates
+            if abs(c.natural_frequency_hz / expected_hz - 1) <= MATCH_TOLERANCE]
+    if near:
+        return min(near, key=lambda c: abs(c.natural_frequency_hz - expected_hz)), ""
+    dominant = candidates[0]
+    off = dominant.natural_frequency_hz / expected_hz - 1
+    return dominant, (f"the theory expects {expected_hz:.3f} Hz; the dominant oscillation is "
+                      f"{off:+.0%} from it (wrong gravity, fill level or rig?)")
 
 
 def analyze_series(name: str, time_s: np.ndarray, values: np.ndarray, unit: str,
@@ -149,13 +163,13 @@ def analyze_series(name: str, time_s: np.ndarray, values: np.ndarray, unit: str,
     fit = component = None
     try:
         fit = fit_damped_sinusoids(time_s, values, options.max_components, start_s, end_s)
-        component = _pick(fit, expected_hz, options.min_snr)
+        component, disagreement = _pick(fit, expected_hz, options.min_snr)
+        notes += [disagreement] if disagreement else []
     except DecayError as error:
         notes.append(f"{pencil_method}: {error}")
     if component is None:
         if fit is not None:
-            near = f" near {expected_hz:.3f} Hz" if expected_hz else ""
-            notes.append(f"no oscillation{near} above the noise (SNR < {options.min_snr:g})")
+            notes.append(f"no oscillation above the noise (SNR < {options.min_snr:g})")
         return ModeResult(name, time_s, values, unit, fit, None, (), tuple(notes))
     frequency = component.natural_frequency_hz
     estimates = [fit.estimate(component, pencil_method)]
@@ -223,7 +237,7 @@ def tof_quick_estimate(time_s: np.ndarray, range_mm: np.ndarray, options: Analys
 
 
 def tilt_steps(recording: SurfaceRecording) -> list[TiltStep]:
-    """Static plateaus of the per-frame plane tilt; two or more apart make a tilt series."""
+    """Still plateaus of the per-frame plane tilt; two or more apart make a tilt series."""
     tilts = np.full((len(recording.time_s), 2), np.nan)
     for frame, points in enumerate(recording.points_mm):
         if np.isfinite(points).all(axis=1).sum() >= 3:
@@ -237,8 +251,13 @@ def tilt_steps(recording: SurfaceRecording) -> list[TiltStep]:
             current.append(int(frame))
         else:
             plateaus.append([int(frame)])
+    period_s = float(np.median(np.diff(recording.time_s))) if len(recording.time_s) > 1 else 1.0
     steps = []
-    for frames in (p for p in plateaus if len(p) >= MIN_PLATEAU_FRAMES):
+    for frames in (p for p in plateaus if len(p) * period_s >= MIN_PLATEAU_S - 1e-9):
+        # a tilt-table plateau is still; a sloshing surface passes through tilts it holds for
+        # a few frames while every spot's height moves by millimetres
+        if np.nanmedian(np.nanstd(recording.points_mm[frames, :, 2], axis=0)) > STILL_MM:
+            continue
         plane = fit_plane(recording.points_mm[frames].reshape(-1, 3))
         steps.append(TiltStep(float(recording.time_s[frames[0]]),
                               float(recording.time_s[frames[-1]]), len(frames), plane.p00_mm,

@@ -79,14 +79,25 @@ def _json_safe(value):
     return value
 
 
-def _plot_modes(modes: tuple[ModeResult, ...], window: tuple[float, float], path: Path) -> None:
-    """Each mode's samples, fitted model and decay envelope, against the time since the
-    first sample of the first mode [s]."""
-    origin = float(np.nanmin(modes[0].time_s)) if len(modes[0].time_s) else 0.0
+def spectrum_limit_hz(analysis: SloshingAnalysis) -> float:
+    """The spectrum plot's upper frequency [Hz]: 1.3 × the highest theoretical or measured
+    mode frequency (a measured mode the theory does not expect stays on the plot)."""
+    measured = [e.frequency_hz for m in analysis.modes + analysis.tof for e in m.estimates[:1]]
+    return 1.3 * max([m.frequency_hz for m in analysis.theory] + measured + [1.0])
+
+
+def _plot_modes(modes: tuple[ModeResult, ...], tof: tuple[ModeResult, ...],
+                window: tuple[float, float], path: Path) -> None:
+    """Each mode's samples (modal coordinate q, or the ToF's range), fitted model and decay
+    envelope, against the time since the first sample of the first series [s]."""
+    panels = [(m, m.name, f"q [{m.unit}]") for m in modes] + \
+        [(m, f"{m.name} (ToF)", f"ToF range [{m.unit}]") for m in tof]
+    first = panels[0][0]
+    origin = float(np.nanmin(first.time_s)) if len(first.time_s) else 0.0
     window = (window[0] - origin, window[1] - origin)
-    fig, axes = plt.subplots(len(modes), 1, figsize=(10, 2.6 * len(modes)), squeeze=False,
+    fig, axes = plt.subplots(len(panels), 1, figsize=(10, 2.6 * len(panels)), squeeze=False,
                              sharex=True)
-    for ax, mode in zip(axes[:, 0], modes, strict=True):
+    for ax, (mode, name, ylabel) in zip(axes[:, 0], panels, strict=True):
         ax.plot(mode.time_s - origin, mode.values, ".", ms=2.5, color="0.35", label="measured")
         ax.axvspan(*window, color="tab:blue", alpha=0.06, label="analysis window")
         if mode.fit is not None and mode.component is not None:
@@ -99,11 +110,11 @@ def _plot_modes(modes: tuple[ModeResult, ...], window: tuple[float, float], path
                 ax.plot(t - origin, mode.fit.offset + sign * envelope, "--", lw=1.0,
                         color="tab:orange", label="envelope" if sign == 1 else None)
             best = mode.estimates[0]
-            ax.set_title(f"{mode.name}: f = {best.frequency_hz:.4f} Hz, "
+            ax.set_title(f"{name}: f = {best.frequency_hz:.4f} Hz, "
                          f"ζ = {best.damping_ratio:.4f} ({best.method})", fontsize=9)
         else:
-            ax.set_title(f"{mode.name}: {'; '.join(mode.notes)}", fontsize=9)
-        ax.set_ylabel(f"q [{mode.unit}]")
+            ax.set_title(f"{name}: {'; '.join(mode.notes)}", fontsize=9)
+        ax.set_ylabel(ylabel)
         ax.grid(alpha=0.3)
     if axes[0, 0].get_legend_handles_labels()[0]:
         axes[0, 0].legend(fontsize=7, loc="upper right", ncol=4)
@@ -133,7 +144,7 @@ def _plot_spectrum(analysis: SloshingAnalysis, path: Path) -> None:
         ax.axvline(theory.frequency_hz, color="k", ls=":", lw=1.0)
         ax.text(theory.frequency_hz, top * 0.2 ** (row % 2),
                 f" {theory.name}\n {theory.frequency_hz:.2f} Hz", fontsize=7, va="top")
-    ax.set_xlim(0, max([m.frequency_hz for m in analysis.theory] + [1.0]) * 1.6)
+    ax.set_xlim(0, spectrum_limit_hz(analysis))
     ax.set_xlabel("frequency [Hz]")
     ax.set_ylabel("amplitude")
     gravity = analysis.gravity_m_s2
@@ -222,7 +233,7 @@ def write_report(analysis: SloshingAnalysis, directory: str | Path,
     json_path = directory / "analysis.json"
     json_path.write_text(json.dumps(_json_safe(result), indent=2) + "\n")
     figures = [directory / "modes.png", directory / "spectrum.png"]
-    _plot_modes(analysis.modes + analysis.tof, analysis.window_s, figures[0])
+    _plot_modes(analysis.modes, analysis.tof, analysis.window_s, figures[0])
     _plot_spectrum(analysis, figures[1])
     if np.isfinite(analysis.meniscus[1]).any():
         figures.append(directory / "meniscus.png")
