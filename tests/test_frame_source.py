@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import threading
 from pathlib import Path
 
 import cv2
@@ -16,6 +17,7 @@ from sds_camera.frame_source import (
     Region,
     VideoFileSource,
     open_source,
+    read_ahead,
     select,
 )
 
@@ -116,3 +118,22 @@ def test_image_folder_needs_images_and_a_frame_rate(tmp_path):
     cv2.imwrite(str(tmp_path / "a.png"), np.zeros((4, 4), np.uint8))
     with pytest.raises(FrameSourceError, match="fps"):
         ImageFolderSource(tmp_path, 0.0)
+
+
+def test_read_ahead_keeps_order_raises_in_place_and_stops_with_its_consumer():
+    def frames(fail_at: int | None = None):
+        for index in range(20):
+            if index == fail_at:
+                raise FrameSourceError(f"corrupt at {index}")
+            yield index
+
+    assert list(read_ahead(frames())) == list(range(20))
+    got = []
+    with pytest.raises(FrameSourceError, match="corrupt at 7"):
+        for item in read_ahead(frames(fail_at=7)):
+            got.append(item)
+    assert got == list(range(7))
+    stream = read_ahead(frames(), depth=2)
+    assert next(stream) == 0
+    stream.close()   # the consumer stops: the producer thread ends
+    assert not any(t.name == "read_ahead" and t.is_alive() for t in threading.enumerate())

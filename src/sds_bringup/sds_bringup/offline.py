@@ -14,7 +14,14 @@ from pathlib import Path
 
 import numpy as np
 from sds_camera.camera_imu import CameraImu
-from sds_camera.frame_source import FrameSource, FrameSourceError, Region, open_source, select
+from sds_camera.frame_source import (
+    FrameSource,
+    FrameSourceError,
+    Region,
+    open_source,
+    read_ahead,
+    select,
+)
 from sds_camera.image_msg import msg_to_image
 from sds_camera.imu_msg import imu_samples
 from sds_recon.reconstruction import (
@@ -76,14 +83,15 @@ def video_frames(path: Path, rig: Rig, fps: float = 0.0) -> Iterator[RedFrame]:
     except FrameSourceError:
         source.close()
         raise
-    return _red_frames(source, region)
+    return read_ahead(_red_frames(source, region))
 
 
 def _red_frames(source: FrameSource, region: Region) -> Iterator[RedFrame]:
+    """The region's red channel of each frame, copied (the full frame is let go at once)."""
     try:
         for frame in source.frames():
-            yield RedFrame(frame.index, frame.time_ns * 1e-9, select(frame.image, region, "red"),
-                           (region.x, region.y))
+            red = np.ascontiguousarray(select(frame.image, region, "red"))
+            yield RedFrame(frame.index, frame.time_ns * 1e-9, red, (region.x, region.y))
     finally:
         source.close()
 
@@ -94,7 +102,7 @@ def mcap_frames(path: Path) -> Iterator[RedFrame]:
     types = {type_name for type_name, _ in recorded_topics(path).values()}
     if "sensor_msgs/msg/Image" not in types:
         raise RecordingError(f"{path}: the recording has no camera frames (sensor_msgs/Image)")
-    return _recorded_frames(path)
+    return read_ahead(_recorded_frames(path))
 
 
 def _recorded_frames(path: Path) -> Iterator[RedFrame]:
@@ -142,7 +150,7 @@ class RunTables:
     def __init__(self, writer: ResultsWriter, rig: Rig) -> None:
         self.writer = writer
         self.rig = rig
-        self.point_rows: list[tuple] = []
+        self._kept: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # time, id, X Y Z
 
     def add_spots(self, frame: int, time_s: float, rows: list[tuple]) -> None:
         """Spot rows (laser_id, x, y, x_raw, y_raw, sigma, intensity, flags) of a frame."""
@@ -152,17 +160,19 @@ class RunTables:
     def add_points(self, frame: int, time_s: float, points: SurfacePoints,
                    rejected: np.ndarray | None = None) -> None:
         """Point rows; `rejected` marks those left out of the frame's fits (and the analysis)."""
-        flags = np.zeros(len(points.laser_ids), int) if rejected is None else \
-            np.asarray(rejected, dtype=int)
-        rows = [(frame, time_s, int(i), *p, s, m, r) for i, p, s, m, r in zip(
-            points.laser_ids, points.points_mm, points.height_sigma_mm,
-            points.miss_distance_mm, flags, strict=True)]
-        self.writer.add("points", rows)
-        self.point_rows += [row for row in rows if not row[-1]]
+        count = len(points.laser_ids)
+        flags = np.zeros(count, int) if rejected is None else np.asarray(rejected, dtype=int)
+        xyz = np.asarray(points.points_mm, dtype=float).reshape(count, 3)
+        self.writer.add_columns("points", [frame, time_s, points.laser_ids, xyz[:, 0],
+                                           xyz[:, 1], xyz[:, 2], points.height_sigma_mm,
+                                           points.miss_distance_mm, flags])
+        kept = flags == 0
+        self._kept.append((np.full(int(kept.sum()), time_s),
+                           np.asarray(points.laser_ids)[kept], xyz[kept]))
 
     def add_line(self, frame: int, time_s: float, x, y, sigma, peak, flags) -> None:
-        self.writer.add("line", [(frame, time_s, *row) for row in zip(
-            x, y, sigma, peak, flags, strict=True)])
+        """The line's samples of a frame (arrays, one per image row)."""
+        self.writer.add_columns("line", [frame, time_s, x, y, sigma, peak, flags])
 
     def add_fit(self, frame: int, time_s: float, fits: SurfaceFits) -> None:
         """One frame's fits row: plane, points used and rejected, modal amplitudes."""
@@ -193,10 +203,10 @@ class RunTables:
 
     def recording(self, source: str):
         """The points as the analysis reads them."""
-        if not self.point_rows:
+        if not any(len(ids) for _, ids, _ in self._kept):
             raise RecordingError(f"{source}: no surface point was reconstructed")
-        rows = np.array([(r[1], r[2], r[3], r[4], r[5]) for r in self.point_rows])
-        return recording_from_rows(rows[:, 0], rows[:, 1].astype(int), rows[:, 2:5], source)
+        time_s, ids, xyz = (np.concatenate(parts) for parts in zip(*self._kept, strict=True))
+        return recording_from_rows(time_s, ids.astype(int), xyz, source)
 
 
 def process_frames(frames: Iterator[RedFrame], rig: Rig, tables: RunTables,
@@ -262,7 +272,7 @@ def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:
             frames += 1
         elif name == "sds_msgs/msg/LaserLineProfile":
             tables.add_line(msg.frame_index, time_s, msg.x_px, msg.y_px, msg.sigma_px,
-                            msg.peak_intensity, msg.flags)
+                            msg.peak_intensity, np.frombuffer(bytearray(msg.flags), np.uint8))
         elif name == "sensor_msgs/msg/PointCloud2":
             cloud = cloud_points(msg)
             if cloud is not None:   # its frame is known once every spots message is read

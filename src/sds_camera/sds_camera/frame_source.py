@@ -6,11 +6,13 @@ top-left pixel. Times are nanoseconds since the first frame of the stream.
 
 from __future__ import annotations
 
+import queue
+import threading
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol
+from typing import Protocol, TypeVar
 
 import cv2
 import numpy as np
@@ -18,6 +20,11 @@ import numpy as np
 CHANNELS = ("bgr", "red", "green", "blue", "gray")
 IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".bmp", ".jpg", ".jpeg", ".pgm", ".ppm")
 _CHANNEL_INDEX = {"blue": 0, "green": 1, "red": 2}
+
+
+T = TypeVar("T")
+READ_AHEAD = 3
+"""Frames decoded ahead of their consumer by `read_ahead`."""
 
 
 class FrameSourceError(RuntimeError):
@@ -212,3 +219,43 @@ def open_source(spec: str, fps: float = 0.0) -> FrameSource:
     if path.is_dir():
         return ImageFolderSource(path, fps)
     return VideoFileSource(path)
+
+
+def read_ahead(items: Iterator[T], depth: int = READ_AHEAD) -> Iterator[T]:
+    """The same items, produced by a background thread up to `depth` ahead, so that decoding
+    (OpenCV releases the GIL) overlaps the consumer's work; the producer's error is raised
+    at its place in the stream, and a consumer that stops early stops the thread."""
+    buffer: queue.Queue[tuple[str, object]] = queue.Queue(maxsize=depth)
+    stop = threading.Event()
+
+    def put(kind: str, value: object) -> None:
+        while not stop.is_set():
+            try:
+                buffer.put((kind, value), timeout=0.1)
+                return
+            except queue.Full:
+                continue
+
+    def produce() -> None:
+        try:
+            for item in items:
+                if stop.is_set():
+                    return
+                put("item", item)
+            put("end", None)
+        except BaseException as error:  # handed to the consumer, raised there
+            put("error", error)
+
+    thread = threading.Thread(target=produce, name="read_ahead", daemon=True)
+    thread.start()
+    try:
+        while True:
+            kind, value = buffer.get()
+            if kind == "end":
+                return
+            if kind == "error":
+                raise value  # type: ignore[misc]
+            yield value  # type: ignore[misc]
+    finally:
+        stop.set()
+        thread.join(timeout=5.0)

@@ -13,9 +13,11 @@ import csv
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Any
 
 import numpy as np
+import pyarrow as pa
+import pyarrow.csv as pa_csv
+from numpy.typing import ArrayLike
 
 FLAGS_DOC = ("bit flags: 1 lost, 2 saturated, 4 reflection suspected, 8 off its image path, "
              "16 replaced by the Hampel filter")
@@ -93,9 +95,58 @@ COLUMNS: dict[str, dict[str, str]] = {
 """Every table's columns and what they mean (written as columns.json)."""
 
 
+INTEGER_COLUMNS = frozenset({"frame", "laser_id", "valid", "flags", "point_count", "rejected",
+                             "rejected_count"})
+"""Columns of whole numbers; every other column is a float (NaN written as an empty cell)."""
+BATCH_ROWS = 65536
+"""Rows a table buffers before they are formatted and written in one go."""
+
+
+class _TableFile:
+    """One table's CSV file: a header row, then rows written in batches by pyarrow's CSV
+    writer (shortest round-trip floats, NaN as an empty cell)."""
+
+    def __init__(self, path: Path, header: list[str]) -> None:
+        self.header = header
+        self._stream = path.open("wb")
+        self._stream.write((",".join(header) + "\n").encode())
+        self._columns: list[list[np.ndarray]] = [[] for _ in header]
+        self._rows = 0
+
+    def append(self, columns: list[np.ndarray]) -> None:
+        """Columns of equal length, in the header's order."""
+        for chunks, column in zip(self._columns, columns, strict=True):
+            chunks.append(column)
+        self._rows += len(columns[0])
+        if self._rows >= BATCH_ROWS:
+            self.flush()
+
+    def flush(self) -> None:
+        """Write the buffered rows."""
+        if not self._rows:
+            return
+        arrays = []
+        for name, chunks in zip(self.header, self._columns, strict=True):
+            if name in INTEGER_COLUMNS:
+                arrays.append(pa.array(np.concatenate(chunks).astype(np.int64)))
+            else:
+                values = np.concatenate(chunks).astype(np.float64)
+                arrays.append(pa.array(values, mask=~np.isfinite(values)))
+        table = pa.Table.from_arrays(arrays, names=self.header)
+        pa_csv.write_csv(table, self._stream, pa_csv.WriteOptions(include_header=False,
+                                                                  quoting_style="none"))
+        self._columns = [[] for _ in self.header]
+        self._rows = 0
+
+    def close(self) -> None:
+        """Write what is buffered and close the file."""
+        self.flush()
+        self._stream.close()
+
+
 class ResultsWriter:
-    """Streams rows into the tables' CSV files (opened at their first row); a folder that
-    holds results already is refused unless `overwrite`."""
+    """Streams rows into the tables' CSV files (opened at their first row, written in batches);
+    a folder that holds results already is refused unless `overwrite`."""
 
     def __init__(self, directory: str | Path, overwrite: bool = False) -> None:
         self.directory = Path(directory)
@@ -105,22 +156,25 @@ class ResultsWriter:
             raise FileExistsError(f"{self.directory} holds results already ({earlier[0]}, …): "
                                   "another folder, or --overwrite")
         self.directory.mkdir(parents=True, exist_ok=True)
-        self._files: dict[str, IO[str]] = {}
-        self._writers: dict[str, Any] = {}
+        self._tables: dict[str, _TableFile] = {}
         self._modal_names: tuple[str, ...] | None = None
 
-    def _writer(self, table: str, header: list[str]):
-        if table not in self._writers:
-            stream = (self.directory / f"{table}.csv").open("w", newline="")
-            self._files[table] = stream
-            self._writers[table] = csv.writer(stream)
-            self._writers[table].writerow(header)
-        return self._writers[table]
+    def _table(self, table: str, header: list[str]) -> _TableFile:
+        if table not in self._tables:
+            self._tables[table] = _TableFile(self.directory / f"{table}.csv", header)
+        return self._tables[table]
+
+    def add_columns(self, table: str, columns: list[ArrayLike]) -> None:
+        """Rows of a table as columns of equal length, in the order of COLUMNS[table]."""
+        arrays = [np.atleast_1d(np.asarray(c)) for c in columns]
+        length = max(len(a) for a in arrays)
+        self._table(table, list(COLUMNS[table])).append(
+            [np.broadcast_to(a, (length,)) for a in arrays])
 
     def add(self, table: str, rows: list[tuple]) -> None:
-        """Rows of a table (values in the order of COLUMNS[table]); NaN is written empty."""
-        writer = self._writer(table, list(COLUMNS[table]))
-        writer.writerows(tuple(_cell(v) for v in row) for row in rows)
+        """Rows of a table (values in the order of COLUMNS[table]; None or NaN: empty)."""
+        if rows:
+            self.add_columns(table, [np.array(c, dtype=float) for c in zip(*rows, strict=True)])
 
     def add_fit(self, row: tuple, modal_names: tuple[str, ...], amplitudes: list[float]) -> None:
         """One frame's fit; the modal columns are fixed by the first frame that has them."""
@@ -129,15 +183,16 @@ class ResultsWriter:
         names = self._modal_names or ()
         header = [c for c in COLUMNS["fits"] if c != "<mode>_mm"] + [f"{n}_mm" for n in names]
         values = dict(zip(modal_names, amplitudes, strict=True))
-        self._writer("fits", header).writerow(
-            [_cell(v) for v in row] + [_cell(values.get(n, float("nan"))) for n in names])
+        cells = [*row, *(values.get(n, np.nan) for n in names)]
+        table = self._table("fits", header)
+        table.append([np.array([c], dtype=float) for c in cells[:len(table.header)]])
 
     def close(self, analysis: dict | None = None) -> list[Path]:
         """Close the tables, write columns.json (and analysis.json); the files written."""
-        for stream in self._files.values():
-            stream.close()
-        written = [self.directory / f"{table}.csv" for table in self._files]
-        described = {table: COLUMNS[table] for table in self._files}
+        for table in self._tables.values():
+            table.close()
+        written = [self.directory / f"{table}.csv" for table in self._tables]
+        described = {table: COLUMNS[table] for table in self._tables}
         (self.directory / "columns.json").write_text(json.dumps(described, indent=2,
                                                                 ensure_ascii=False) + "\n")
         written.append(self.directory / "columns.json")
@@ -145,12 +200,6 @@ class ResultsWriter:
             (self.directory / "analysis.json").write_text(json.dumps(analysis, indent=2) + "\n")
             written.append(self.directory / "analysis.json")
         return written
-
-
-def _cell(value: Any) -> Any:
-    if isinstance(value, float | np.floating):
-        return "" if not np.isfinite(value) else repr(float(value))
-    return value
 
 
 @dataclass(frozen=True)
@@ -175,13 +224,11 @@ def _read_table(path: Path) -> np.ndarray | None:
     with path.open(newline="") as stream:
         rows = list(csv.reader(stream))
     header, body = rows[0], rows[1:]
-    integers = {"frame", "laser_id", "valid", "flags", "point_count", "rejected",
-                "rejected_count"}
-    dtype = [(name, np.int64 if name in integers else np.float64) for name in header]
+    dtype = [(name, np.int64 if name in INTEGER_COLUMNS else np.float64) for name in header]
     table = np.zeros(len(body), dtype=dtype)
     for index, name in enumerate(header):
         values = [row[index] for row in body]
-        if name in integers:
+        if name in INTEGER_COLUMNS:
             table[name] = [int(v) for v in values]
         else:
             table[name] = [float(v) if v else np.nan for v in values]
