@@ -152,7 +152,7 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
-    from sds_recon.qos import stream_qos
+    from sds_ros.qos import stream_qos
     from sensor_msgs.msg import PointCloud2
 
     from sds_msgs.msg import LaserSpotArray

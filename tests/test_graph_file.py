@@ -9,7 +9,7 @@ import rclpy
 from rclpy.node import Node
 from sds_bringup.graph import GraphFileError, apply_overrides, composed, load_graph
 from sds_bringup.launcher import group_processes
-from sds_bringup.node_host import load_plugin
+from sds_ros.node_host import load_plugin
 
 
 def test_shipped_graph_loads_with_existing_parameter_files_and_plugins(repo):

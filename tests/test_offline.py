@@ -68,6 +68,8 @@ def test_bad_input_gives_one_line_and_exit_2(repo: Path, tmp_path: Path) -> None
     one_line_error(sds("process", "--mcap", str(tmp_path / "no_frames.mcap"), "--rig", str(rig),
                        "--out", str(tmp_path / "c")), "no camera frames")
     one_line_error(sds("export", str(tmp_path / "no_frames.mcap"), "--out",
+                       str(tmp_path / "d")), "carries no rig")
+    one_line_error(sds("export", str(tmp_path / "no_frames.mcap"), "--rig", str(rig), "--out",
                        str(tmp_path / "d")), "no laser spots")
     one_line_error(sds("export", str(tmp_path / "missing.mcap"), "--out", str(tmp_path / "e")),
                    "no such recording")

@@ -10,7 +10,7 @@ import xml.etree.ElementTree as ElementTree
 import pytest
 from ros_helpers import RELIABLE, Probe, wait_until
 from sds_bringup.ros_env import graph_environment
-from sds_recon.qos import start_when_consumed, stream_qos
+from sds_ros.qos import start_when_consumed, stream_qos
 from std_msgs.msg import Header
 
 pytestmark = pytest.mark.ros

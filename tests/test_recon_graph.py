@@ -8,13 +8,13 @@ import numpy as np
 import psutil
 import pytest
 from ros_helpers import Probe, SdsGraphRun, wait_until
-from sds_recon.qos import stream_qos
-from sds_recon.recon_node import cloud_dtype
 from sds_recon.reconstruction import LINE_LASER_ID
 from sds_recon.rig import load_rig
 from sds_recon.sloshing.running import RunningAnalysis
 from sds_recon.sloshing.theory import ModeShape
 from sds_recon.sloshing_node import SloshingNode
+from sds_ros.point_cloud import cloud_dtype
+from sds_ros.qos import stream_qos
 from sds_sim.optics import line_laser_rays, ray_surface_points
 from sds_sim.surface import ModeMotion, Surface
 from sensor_msgs.msg import PointCloud2
@@ -95,15 +95,17 @@ def test_spots_and_line_in_point_cloud_and_fit_out(repo):
     assert sorted(points["laser_id"]) == [d.laser_id for d in rig.diodes if d.laser_id != 3]
     expected = truth[[d.laser_id for d in rig.diodes].index(0)]
     row = points[points["laser_id"] == 0][0]
-    assert [row["x"], row["y"], row["z"]] == pytest.approx(expected, abs=1e-4)
-    xyz = np.column_stack([points["x"], points["y"], points["z"]])
+    # metres on the topic (REP-103), the truth in mm
+    assert [row["x"], row["y"], row["z"]] == pytest.approx(expected / 1000, abs=1e-7)
+    xyz = np.column_stack([points["x"], points["y"], points["z"]]) * 1000
     truth_by_id = {d.laser_id: t for d, t in zip(rig.diodes, truth, strict=True)}
     assert np.max(np.abs(xyz - np.array([truth_by_id[i] for i in points["laser_id"]]))) < 1e-4
-    assert (points["height_sigma_mm"] > 0.005).all() and (points["height_sigma_mm"] < 0.1).all()
-    assert np.max(points["miss_distance_mm"]) < 1e-6
+    sigma_mm = points["height_sigma"] * 1000
+    assert (sigma_mm > 0.005).all() and (sigma_mm < 0.1).all()
+    assert np.max(points["miss_distance"]) < 1e-9
     line = cloud_points(line_clouds[0])
     assert (line["laser_id"] == LINE_LASER_ID).all() and len(line) == len(line_truth)
-    line_xyz = np.column_stack([line["x"], line["y"], line["z"]])
+    line_xyz = np.column_stack([line["x"], line["y"], line["z"]]) * 1000
     assert np.max(np.abs(line_xyz - line_truth)) < 1e-4
     fit = fits[0]
     assert fit.frame_index == 7 and fit.point_count == 19

@@ -287,7 +287,8 @@ def points_rows(recording: SurfaceRecording) -> tuple[np.ndarray, np.ndarray, np
 
 
 def write_points_mcap(recording: SurfaceRecording, path: Path) -> None:
-    """The recording as PointCloud2 messages on /points, as the reconstruction node sends."""
+    """The recording as PointCloud2 messages on /points, in metres as the reconstruction node
+    sends them (written with rosbags' message definition and the mcap writer, not ours)."""
     typestore = get_typestore(Stores.ROS2_KILTED)
     msgdef, _ = typestore.generate_msgdef("sensor_msgs/msg/PointCloud2", ros_version=2)
     fields = [{"name": n, "offset": o, "datatype": d, "count": 1}
@@ -301,7 +302,7 @@ def write_points_mcap(recording: SurfaceRecording, path: Path) -> None:
             keep = np.isfinite(points).all(axis=1)
             cloud = np.zeros(int(keep.sum()), dtype)
             for axis, name in enumerate("xyz"):
-                cloud[name] = points[keep, axis]
+                cloud[name] = points[keep, axis] / 1000
             cloud["laser_id"] = recording.laser_ids[keep]
             stamp_ns = round(time_s * 1e9)
             writer.write_message("/points", schema, {
@@ -321,7 +322,8 @@ def test_mcap_reads_back_the_points_it_was_given(repo: Path, tmp_path: Path) -> 
     back = read_surface_recording(tmp_path / "run.mcap")
     np.testing.assert_array_equal(back.laser_ids, recording.laser_ids)
     np.testing.assert_allclose(back.time_s, recording.time_s, atol=1e-9)
-    np.testing.assert_allclose(back.points_mm, recording.points_mm.astype(np.float32),
+    # float32 metres on the topic: 24 bits of mantissa
+    np.testing.assert_allclose(back.points_mm, recording.points_mm, rtol=2e-7, atol=1e-9,
                                equal_nan=True)
 
 
@@ -444,10 +446,11 @@ def test_mcap_times_are_seconds_from_the_first_frame_and_a_window_must_be_one(
     write_points_mcap(shifted, tmp_path / "drop.mcap")
     back = read_surface_recording(tmp_path / "drop.mcap")
     np.testing.assert_allclose(back.time_s, recording.time_s - recording.time_s[0], atol=1e-6)
+    rig = str(scenario.rig_file)   # written by hand: the file carries no rig
     done = run_sds("analyze", str(tmp_path / "drop.mcap"), "--start-s", "1.5", "--end-s", "1.0",
-                   "--out", str(tmp_path / "analysis"))
+                   "--rig", rig, "--out", str(tmp_path / "analysis"))
     assert done.returncode == 2 and "ends before it starts" in done.stderr, done.stderr
     assert len(done.stderr.strip().splitlines()) == 1
     good = run_sds("analyze", str(tmp_path / "drop.mcap"), "--start-s", "1.5", "--gravity", "0",
-                   "--out", str(tmp_path / "analysis"))
+                   "--rig", rig, "--out", str(tmp_path / "analysis"))
     assert good.returncode == 0 and "free decay 1.500–" in good.stdout, good.stdout

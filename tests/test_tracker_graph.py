@@ -18,10 +18,11 @@ from ros_helpers import Probe, SdsGraphRun
 from rosbags.highlevel import AnyReader
 from rrd_helpers import rrd_entities
 from sds_camera.camera_imu import read_camera_imu
-from sds_recon.qos import stream_qos
 from sds_recon.results import load_results
 from sds_recon.rig import load_rig
 from sds_record.mcap_files import McapRecorder, read_messages
+from sds_record.recorded_series import recorded_rig
+from sds_ros.qos import stream_qos
 from sds_sim.scenario import load_scenario
 from sds_sim.simulate import SimulationOutput, simulate
 from sensor_msgs.msg import Image, PointCloud2
@@ -250,6 +251,19 @@ def test_sds_process_gives_the_graphs_spots_points_and_fits(drop_run: DropRun) -
                        atol=1e-9)
     assert offline.analysis["modes"][0]["mode"] == "lateral_1"
     assert (processed / "report.html").is_file()
+
+
+def test_the_recording_carries_its_rig(drop_run: DropRun) -> None:
+    """The reconstruction node's /recon/rig (camera inline) gives back the rig file's rig, so
+    export, view and process --mcap need no rig file (test_export_round_trip uses none)."""
+    rig, recorded = load_rig(drop_run.rig_file), recorded_rig(drop_run.recording)
+    assert recorded is not None and recorded.camera_file is None
+    assert [d.laser_id for d in recorded.diodes] == [d.laser_id for d in rig.diodes]
+    np.testing.assert_allclose([d.direction for d in recorded.diodes],
+                               [d.direction for d in rig.diodes], atol=1e-12)
+    world = np.array([[10.0, -20.0, 1.0], [40.0, 5.0, -2.0]])
+    np.testing.assert_allclose(recorded.project(world), rig.project(world), atol=1e-6)
+    assert recorded.container == rig.container and recorded.fluid == rig.fluid
 
 
 def test_an_unfinished_recording_is_read_to_its_last_chunk_and_said_so(

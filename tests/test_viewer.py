@@ -15,9 +15,11 @@ from rclpy.serialization import serialize_message
 from ros_helpers import LATCHED, RELIABLE, Probe, SdsGraphRun
 from rrd_helpers import rrd_entities
 from sds_camera.image_msg import image_to_msg
-from sds_recon.recon_node import cloud_dtype, points_to_cloud
-from sds_recon.rig import load_rig
+from sds_recon.reconstruction import SurfacePoints
+from sds_recon.rig import load_rig, rig_document
 from sds_record.mcap_files import McapRecorder
+from sds_ros.point_cloud import points_to_cloud
+from std_msgs.msg import String
 
 from sds_msgs.msg import CameraModel, LaserSpot, LaserSpotArray, SurfaceFit
 
@@ -37,11 +39,12 @@ def frame_messages(rig, index: int) -> list[tuple[str, str, object]]:
     spots.header.stamp = stamp
     spots.spots = [LaserSpot(laser_id=d.laser_id, x_px=1900.0 + d.laser_id, y_px=1080.0,
                              sigma_px=0.05) for d in rig.diodes]
-    cloud = np.zeros(len(rig.diodes), cloud_dtype())
-    cloud["x"] = [d.emitter_mm[0] for d in rig.diodes]
-    cloud["y"] = [d.emitter_mm[1] for d in rig.diodes]
-    cloud["z"] = 0.1 * index
-    cloud["laser_id"] = [d.laser_id for d in rig.diodes]
+    count = len(rig.diodes)
+    points = SurfacePoints(np.array([d.laser_id for d in rig.diodes]),
+                           np.column_stack([[d.emitter_mm[0] for d in rig.diodes],
+                                            [d.emitter_mm[1] for d in rig.diodes],
+                                            np.full(count, 0.1 * index)]),
+                           np.full(count, 0.02), np.zeros(count))
     fit = SurfaceFit(frame_index=index, p00_mm=0.1 * index, p10=0.01, p01=0.0,
                      tilt_x_rad=-0.01, tilt_y_rad=0.0, rmse_mm=0.02,
                      mode_names=["mean", "lateral_1_cos"], modal_amplitudes_mm=[0.0, 1.0])
@@ -49,7 +52,8 @@ def frame_messages(rig, index: int) -> list[tuple[str, str, object]]:
     return [("/camera/image", "sensor_msgs/msg/Image", image_to_msg(image, stamp, "camera")),
             ("/tracker/spots", "sds_msgs/msg/LaserSpotArray", spots),
             ("/recon/points", "sensor_msgs/msg/PointCloud2",
-             points_to_cloud(spots.header, cloud)),
+             points_to_cloud(spots.header, points.laser_ids, points.points_mm,
+                             points.height_sigma_mm, points.miss_distance_mm)),
             ("/recon/surface_fit", "sds_msgs/msg/SurfaceFit", fit)]
 
 
@@ -60,6 +64,8 @@ def test_sds_view_turns_a_recording_into_rerun_entities(repo: Path, tmp_path: Pa
     model.roi.x_offset, model.roi.y_offset = 1365, 519
     recording.add_topic("/camera/camera_model", "sds_msgs/msg/CameraModel", latched=True)
     recording.write("/camera/camera_model", serialize_message(model), 0, 0)
+    recording.add_topic("/recon/rig", "std_msgs/msg/String", latched=True)   # as the graph's
+    recording.write("/recon/rig", serialize_message(String(data=rig_document(rig))), 0, 0)
     for index in range(3):
         for topic, type_name, msg in frame_messages(rig, index):
             recording.add_topic(topic, type_name)

@@ -139,6 +139,6 @@ class ArduinoBridgeNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Run the node alone in this process."""
-    from sds_bringup.node_host import run_nodes
+    from sds_ros.node_host import run_nodes
 
     raise SystemExit(run_nodes([(ArduinoBridgeNode, "arduino", False)], args))

@@ -16,20 +16,30 @@ from sds_recon.sloshing.analysis import (
 )
 from sds_recon.sloshing.gravity import gravity_regime
 from sds_recon.sloshing.recording import RecordingError, read_points_csv, read_series_csv
-from sds_record.recorded_series import read_accelerations, read_surface_recording
+from sds_record.recorded_series import (
+    read_accelerations,
+    read_surface_recording,
+    recording_rig,
+)
+
+from sds_bringup.paths import CONFIG
 
 ARDUINO_LOG_SUFFIXES = (".txt", ".log")
+DEFAULT_RIG = CONFIG / "rigs" / "stelium.yaml"
+"""The rig of a table or log analysed without --rig: the seed's."""
 
 
-def analyse_recording(path: Path, rig_file: Path, options: AnalysisOptions
+def analyse_recording(path: Path, rig_file: Path | None, options: AnalysisOptions
                       ) -> SloshingAnalysis:
-    """The analysis of an MCAP, a points or time-series CSV, or an Arduino log (ToF)."""
-    rig = load_rig(rig_file)
+    """The analysis of an MCAP (with its own rig unless `rig_file` is given), a points or
+    time-series CSV, or an Arduino log (ToF) (with `rig_file`, default the seed's rig)."""
     if not path.is_file():
         raise RecordingError(f"{path}: no such file")
     suffix = path.suffix.lower()
     if suffix == ".mcap":
-        return analyze(read_surface_recording(path), rig, with_gravity_regime(path, options))
+        return analyze(read_surface_recording(path), recording_rig(path, rig_file),
+                       with_gravity_regime(path, options))
+    rig = load_rig(rig_file or DEFAULT_RIG)
     if suffix in ARDUINO_LOG_SUFFIXES:
         records, rejected = read_log(path)
         tof = [r for r in records if r.kind == "TOF" and r.values[1] == 0]

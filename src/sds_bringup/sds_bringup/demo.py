@@ -104,7 +104,7 @@ def _watch(launcher: Launcher, expected_frames: int | None, serial_lines: list[b
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
-    from sds_recon.qos import stream_qos
+    from sds_ros.qos import stream_qos
 
     from sds_msgs.msg import LaserSpotArray
 

@@ -75,7 +75,7 @@ class GraphProcess:
             {"plugin": e.plugin, "name": e.name, "ros_args": e.ros_args(), "required": e.required}
             for e in self.entries
         ]
-        return [sys.executable, "-O", "-m", "sds_bringup.node_process", json.dumps(specs)]
+        return [sys.executable, "-O", "-m", "sds_ros.node_process", json.dumps(specs)]
 
 
 def group_processes(entries: list[NodeEntry]) -> list[GraphProcess]:

@@ -35,16 +35,10 @@ from sds_recon.results import ResultsWriter
 from sds_recon.rig import Rig
 from sds_recon.sloshing.analysis import AnalysisOptions, analyze
 from sds_recon.sloshing.estimators import DecayError
-from sds_recon.sloshing.recording import (
-    RecordingError,
-    cloud_points,
-    cloud_rejected,
-    cloud_xyz,
-    recording_from_rows,
-    stamp_s,
-)
+from sds_recon.sloshing.recording import RecordingError, recording_from_rows
 from sds_recon.sloshing.report import write_report
 from sds_record.mcap_files import decoded_messages, recorded_topics
+from sds_ros.point_cloud import read_cloud, stamp_s
 from sds_tracker.spots import LOST
 from sds_tracker.tracker import FrameTracker, TrackedSpot, parse_seeds, tracker_config
 from tqdm import tqdm
@@ -274,12 +268,11 @@ def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:
             tables.add_line(msg.frame_index, time_s, msg.x_px, msg.y_px, msg.sigma_px,
                             msg.peak_intensity, np.frombuffer(bytearray(msg.flags), np.uint8))
         elif name == "sensor_msgs/msg/PointCloud2":
-            cloud = cloud_points(msg)
+            cloud = read_cloud(msg)
             if cloud is not None:   # its frame is known once every spots message is read
                 clouds.append((stamp, time_s, SurfacePoints(
-                    cloud["laser_id"].astype(int), cloud_xyz(cloud),
-                    cloud["height_sigma_mm"].astype(float),
-                    cloud["miss_distance_mm"].astype(float)), cloud_rejected(cloud)))
+                    cloud.laser_ids, cloud.points_mm, cloud.height_sigma_mm,
+                    cloud.miss_distance_mm), cloud.rejected))
         elif name == "sds_msgs/msg/SurfaceFit":
             _add_fit_message(tables, msg, time_s)
         elif name == "sensor_msgs/msg/Imu" and recorded.topic == CAMERA_IMU_TOPIC:

@@ -82,6 +82,6 @@ class FrameMonitorNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Run the node alone in this process."""
-    from sds_bringup.node_host import run_nodes
+    from sds_ros.node_host import run_nodes
 
     raise SystemExit(run_nodes([(FrameMonitorNode, "frame_monitor", False)], args))

@@ -6,7 +6,11 @@ import threading
 
 import numpy as np
 from rclpy.node import Node
-from sensor_msgs.msg import PointCloud2, PointField
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sds_ros.point_cloud import points_to_cloud
+from sds_ros.qos import start_when_consumed, stream_qos
+from sensor_msgs.msg import PointCloud2
+from std_msgs.msg import String
 
 from sds_msgs.msg import (
     LaserLineProfile,
@@ -14,7 +18,6 @@ from sds_msgs.msg import (
     LaserSpotArray,
     SurfaceFit,
 )
-from sds_recon.qos import start_when_consumed, stream_qos
 from sds_recon.reconstruction import (
     SurfaceFits,
     SurfacePoints,
@@ -22,45 +25,9 @@ from sds_recon.reconstruction import (
     reconstruct_line,
     reconstruct_spots,
 )
-from sds_recon.rig import Rig, RigError, load_rig
+from sds_recon.rig import Rig, RigError, load_rig, rig_document
 
-CLOUD_FIELDS = (("x", np.float32), ("y", np.float32), ("z", np.float32),
-                ("laser_id", np.uint16), ("height_sigma_mm", np.float32),
-                ("miss_distance_mm", np.float32), ("rejected", np.uint8))
-DATATYPES = {np.float32: PointField.FLOAT32, np.uint16: PointField.UINT16,
-             np.uint8: PointField.UINT8}
 EXIT_CONFIG_ERROR = 2
-
-
-def cloud_dtype() -> np.dtype:
-    """Packed layout of one cloud point."""
-    return np.dtype([(name, kind) for name, kind in CLOUD_FIELDS])
-
-
-def cloud_of(points: SurfacePoints, rejected: np.ndarray | None = None) -> np.ndarray:
-    """The cloud rows (`cloud_dtype`) of reconstructed points; `rejected` marks those left
-    out of the frame's fits."""
-    cloud = np.zeros(len(points.laser_ids), cloud_dtype())
-    for axis, name in enumerate("xyz"):
-        cloud[name] = points.points_mm[:, axis]
-    cloud["laser_id"] = points.laser_ids
-    cloud["height_sigma_mm"] = points.height_sigma_mm
-    cloud["miss_distance_mm"] = points.miss_distance_mm
-    if rejected is not None:
-        cloud["rejected"] = rejected
-    return cloud
-
-
-def points_to_cloud(header, points: np.ndarray) -> PointCloud2:
-    """A PointCloud2 from a structured array of `cloud_dtype` (one row, unordered)."""
-    dtype = cloud_dtype()
-    msg = PointCloud2(header=header, height=1, width=len(points), is_bigendian=False,
-                      point_step=dtype.itemsize, row_step=dtype.itemsize * len(points),
-                      is_dense=True)
-    msg.fields = [PointField(name=name, offset=dtype.fields[name][1], datatype=DATATYPES[kind],
-                             count=1) for name, kind in CLOUD_FIELDS]
-    msg.data = points.astype(dtype).tobytes()
-    return msg
 
 
 def surface_fit_msg(msg: LaserSpotArray, points: SurfacePoints, fits: SurfaceFits
@@ -110,6 +77,11 @@ class ReconstructionNode(Node):
         self._points_pub = self.create_publisher(PointCloud2, "points", stream_qos())
         self._line_pub = self.create_publisher(PointCloud2, "line_points", stream_qos())
         self._fit_pub = self.create_publisher(SurfaceFit, "surface_fit", stream_qos())
+        # The rig, camera inline, latched: a recording carries what it was measured with.
+        self._rig_pub = self.create_publisher(String, "rig", QoSProfile(
+            depth=1, reliability=ReliabilityPolicy.RELIABLE,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        self._rig_pub.publish(String(data=rig_document(self._rig)))
         consumers = int(self.get_parameter("wait_for_consumers").value)
         fit_consumers = int(self.get_parameter("wait_for_fit_consumers").value) or consumers
         # No input is taken before every output has its consumers (e.g. the recorder).
@@ -130,7 +102,9 @@ class ReconstructionNode(Node):
         fits = fit_surface(result, self._rig.container.radius_mm)
         header = msg.header
         header.frame_id = self._frame_id
-        self._points_pub.publish(points_to_cloud(header, cloud_of(result, fits.rejected)))
+        self._points_pub.publish(points_to_cloud(header, result.laser_ids, result.points_mm,
+                                                  result.height_sigma_mm,
+                                                  result.miss_distance_mm, fits.rejected))
         self._fit_pub.publish(surface_fit_msg(msg, result, fits))
 
     def _on_line(self, msg: LaserLineProfile) -> None:
@@ -138,11 +112,12 @@ class ReconstructionNode(Node):
                                   msg.sigma_px, self._default_sigma)
         header = msg.header
         header.frame_id = self._frame_id
-        self._line_pub.publish(points_to_cloud(header, cloud_of(result)))
+        self._line_pub.publish(points_to_cloud(header, result.laser_ids, result.points_mm,
+                                                result.height_sigma_mm, result.miss_distance_mm))
 
 
 def main(args: list[str] | None = None) -> None:
     """Run the node alone in this process."""
-    from sds_bringup.node_host import run_nodes
+    from sds_ros.node_host import run_nodes
 
     raise SystemExit(run_nodes([(ReconstructionNode, "recon", False)], args))

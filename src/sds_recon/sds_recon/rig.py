@@ -13,7 +13,13 @@ import yaml
 from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
-from sds_recon.camera.model import CameraModel, CameraModelError, load_camera, read_yaml
+from sds_recon.camera.model import (
+    CameraModel,
+    CameraModelError,
+    camera_from_dict,
+    load_camera,
+    read_yaml,
+)
 from sds_recon.geometry import RigidTransform
 
 WORLD_FRAME = ("origin on the container axis at the flat liquid surface (fill level), Z up "
@@ -78,7 +84,7 @@ class Rig:
     container: Container
     fluid: Fluid
     gravity_m_s2: float
-    camera_file: Path
+    camera_file: Path | None   # None: the camera model came inline (a recording's rig)
     calibration: dict[str, Any] | None = None   # what `sds calibrate rig` found (uncertainties)
 
     @property
@@ -190,9 +196,10 @@ def rig_from_dict(content: Any, base: Path) -> Rig:
     camera_section = _section(content, "camera")
     if "model" not in camera_section:
         raise RigError("camera.model is missing (a camera file, config/cameras/*.yaml)")
-    camera_file = (base / str(camera_section["model"])).resolve()
-    try:
-        camera = load_camera(camera_file)
+    model = camera_section["model"]
+    camera_file = None if isinstance(model, dict) else (base / str(model)).resolve()
+    try:   # a mapping: the camera file's content inline (a recording's rig, `rig_document`)
+        camera = camera_from_dict(model) if camera_file is None else load_camera(camera_file)
     except CameraModelError as error:
         raise RigError(f"camera.model: {error}") from error
     pose = camera_pose(_vector(camera_section, "position_mm", "camera"),
@@ -262,15 +269,23 @@ def _numbers(values: ArrayLike) -> list[float]:
     return [float(f"{v:.12g}") + 0.0 for v in np.asarray(values, dtype=float)]
 
 
-def rig_to_dict(rig: Rig, directory: Path) -> dict[str, Any]:
-    """The rig file's mapping, with the camera file path relative to `directory`."""
-    camera_to_world = Rotation.from_matrix(rig.world_to_camera.rotation.T)
+def _camera_reference(rig: Rig, directory: Path | None) -> str | dict[str, Any]:
+    """camera.model: the camera file relative to `directory`, or (no directory, or a rig
+    whose camera came inline) the camera model's mapping itself."""
+    if directory is None or rig.camera_file is None:
+        return rig.camera.to_dict()
     try:
-        camera_file = rig.camera_file.relative_to(directory.resolve())
+        return str(rig.camera_file.relative_to(directory.resolve()))
     except ValueError:
-        camera_file = Path(os.path.relpath(rig.camera_file, directory.resolve()))
+        return os.path.relpath(rig.camera_file, directory.resolve())
+
+
+def rig_to_dict(rig: Rig, directory: Path | None) -> dict[str, Any]:
+    """The rig file's mapping, with the camera file path relative to `directory` (None: the
+    camera model inline, a self-contained rig)."""
+    camera_to_world = Rotation.from_matrix(rig.world_to_camera.rotation.T)
     content: dict[str, Any] = {
-        "camera": {"model": str(camera_file),
+        "camera": {"model": _camera_reference(rig, directory),
                    "position_mm": _numbers(rig.camera_position_mm),
                    "orientation_xyz_deg": _numbers(camera_to_world.as_euler("xyz",
                                                                             degrees=True))},
@@ -299,6 +314,25 @@ def _diode_entry(diode: LaserDiode) -> dict[str, Any]:
     if not diode.tracked:
         entry["tracked"] = False
     return entry
+
+
+def rig_document(rig: Rig) -> str:
+    """The rig as one self-contained YAML document, its camera model inline: what a recording
+    carries (`/recon/rig`), readable on a machine without the rig's files."""
+    return yaml.safe_dump(rig_to_dict(rig, None), sort_keys=False, default_flow_style=None,
+                          width=100)
+
+
+def rig_from_document(text: str, source: str) -> Rig:
+    """The rig of `rig_document`'s text; `source` names it in errors."""
+    try:
+        content = yaml.safe_load(text)
+    except yaml.YAMLError as error:
+        raise RigError(f"{source}: not YAML: {error}") from error
+    try:
+        return rig_from_dict(content, Path.cwd())
+    except RigError as error:
+        raise RigError(f"{source}: {error}") from error
 
 
 def save_rig(rig: Rig, path: str | Path, comment: str = "") -> Path:

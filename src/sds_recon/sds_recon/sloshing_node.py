@@ -7,11 +7,11 @@ from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
 from rclpy.node import Node
+from sds_ros.point_cloud import stamp_s
+from sds_ros.qos import start_when_consumed, stream_qos
 
 from sds_msgs.msg import SloshingEstimate, SurfaceFit
-from sds_recon.qos import start_when_consumed, stream_qos
 from sds_recon.sloshing.modal import ModalSeries
-from sds_recon.sloshing.recording import stamp_s
 from sds_recon.sloshing.running import RunningAnalysis
 
 FIT_QUEUE_DEPTH = 1000
@@ -99,6 +99,6 @@ class SloshingNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Run the node alone in this process."""
-    from sds_bringup.node_host import run_nodes
+    from sds_ros.node_host import run_nodes
 
     raise SystemExit(run_nodes([(SloshingNode, "sloshing", False)], args))

@@ -11,7 +11,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
 from rosgraph_msgs.msg import Clock
-from sds_recon.qos import stream_qos
+from sds_ros.qos import stream_qos
 from std_msgs.msg import Header
 
 from sds_record.mcap_files import header_stamp_ns, read_messages, recorded_topics
@@ -90,7 +90,7 @@ class PlayerNode(Node):
         """One publisher per played topic before anything is sent (so that subscribers, a
         recorder's discovery, can find them all first). Frames are volatile, as the frame
         source's; every other topic is transient-local: it feeds the chain's transient-local
-        readers (`sds_recon.qos`) and volatile ones alike, also from recordings made when the
+        readers (`sds_ros.qos`) and volatile ones alike, also from recordings made when the
         topic was volatile."""
         selected = {t for t in self._p["topics"] if t}
         for topic, (type_name, _latched) in recorded_topics(self._p["input"]).items():
@@ -188,6 +188,6 @@ class PlayerNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Run the node alone in this process."""
-    from sds_bringup.node_host import run_nodes
+    from sds_ros.node_host import run_nodes
 
     raise SystemExit(run_nodes([(PlayerNode, "player", True)], args))

@@ -1,4 +1,4 @@
-"""What the analysis reads from a recording: the surface points and every accelerometer.
+"""What the tools read from a recording: its rig, the surface points, every accelerometer.
 
 Both come through the one reader (`mcap_files.decoded_messages`), so an unfinished recording
 is read up to its last complete chunk with a warning. Times are in seconds from the first
@@ -14,17 +14,13 @@ from pathlib import Path
 import numpy as np
 from mcap.exceptions import McapError
 from sds_recon.reconstruction import LINE_LASER_ID
-from sds_recon.sloshing.recording import (
-    RecordingError,
-    SurfaceRecording,
-    cloud_points,
-    cloud_rejected,
-    cloud_xyz,
-    recording_from_rows,
-    stamp_s,
-)
+from sds_recon.rig import Rig, load_rig, rig_from_document
+from sds_recon.sloshing.recording import RecordingError, SurfaceRecording, recording_from_rows
+from sds_ros.point_cloud import read_cloud, stamp_s
 
 from sds_record.mcap_files import decoded_messages
+
+RIG_TOPIC = "/recon/rig"
 
 
 def read_surface_recording(path: str | Path) -> SurfaceRecording:
@@ -35,14 +31,13 @@ def read_surface_recording(path: str | Path) -> SurfaceRecording:
     tof_time, tof_range = [], []
     try:
         for recorded, msg in decoded_messages(path):
-            if recorded.type_name == "sensor_msgs/msg/PointCloud2":
-                cloud = cloud_points(msg)
-                if cloud is not None:
-                    cloud = cloud[~cloud_rejected(cloud)]
-                if cloud is not None and len(cloud):
-                    rows["time"].append(np.full(len(cloud), stamp_s(msg)))
-                    rows["id"].append(cloud["laser_id"].astype(int))
-                    rows["xyz"].append(cloud_xyz(cloud))
+            cloud = read_cloud(msg) if recorded.type_name == "sensor_msgs/msg/PointCloud2" \
+                else None
+            if cloud is not None and (~cloud.rejected).any():
+                kept = ~cloud.rejected
+                rows["time"].append(np.full(int(kept.sum()), stamp_s(msg)))
+                rows["id"].append(cloud.laser_ids[kept])
+                rows["xyz"].append(cloud.points_mm[kept])
             elif recorded.type_name == "sensor_msgs/msg/Range" and np.isfinite(msg.range):
                 tof_time.append(stamp_s(msg))
                 tof_range.append(msg.range * 1e3)
@@ -76,3 +71,23 @@ def read_accelerations(path: str | Path) -> dict[str, tuple[np.ndarray, np.ndarr
     except (McapError, OSError, ValueError) as error:
         raise RecordingError(f"{path}: {error}") from None
     return {topic: (np.array(t), np.array(v)) for topic, (t, v) in streams.items()}
+
+
+def recorded_rig(path: str | Path) -> Rig | None:
+    """The rig a recording carries (the reconstruction node's latched `/recon/rig`, camera
+    inline); None for a recording made without it."""
+    document = None
+    for _, msg in decoded_messages(path, [RIG_TOPIC]):
+        document = msg.data
+    return None if document is None else rig_from_document(document, f"{path} {RIG_TOPIC}")
+
+
+def recording_rig(path: str | Path, rig_file: str | Path | None) -> Rig:
+    """The rig file given, else the one the recording carries; an error saying so if none."""
+    if rig_file is not None:
+        return load_rig(rig_file)
+    rig = recorded_rig(path)
+    if rig is None:
+        raise RecordingError(f"{path} carries no rig ({RIG_TOPIC}: recorded without the "
+                             "reconstruction node, or before recordings carried it): give --rig")
+    return rig

@@ -103,7 +103,7 @@ class RecorderNode(Node):
         """Reliable, keep-last `queue_depth` for images and SMALL_MESSAGE_DEPTH for the rest
         (a burst of small messages, e.g. the camera IMU's 600 per second, must not overflow
         the queue while a 4K frame is written); transient-local when every publisher is (a
-        latched topic, a stream of `sds_recon.qos`); None while the topic has no publisher."""
+        latched topic, a stream of `sds_ros.qos`); None while the topic has no publisher."""
         publishers = self.get_publishers_info_by_topic(topic)
         if not publishers:
             return None
@@ -140,6 +140,6 @@ class RecorderNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Run the node alone in this process."""
-    from sds_bringup.node_host import run_nodes
+    from sds_ros.node_host import run_nodes
 
     raise SystemExit(run_nodes([(RecorderNode, "recorder", False)], args))

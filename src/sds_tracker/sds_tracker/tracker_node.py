@@ -8,8 +8,8 @@ from collections import deque
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sds_camera.image_msg import msg_to_image
-from sds_recon.qos import start_when_consumed, stream_qos
 from sds_recon.rig import load_rig
+from sds_ros.qos import start_when_consumed, stream_qos
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 
@@ -149,7 +149,7 @@ class TrackerNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Run the node alone in this process."""
-    from sds_bringup.node_host import run_nodes
+    from sds_ros.node_host import run_nodes
 
     raise SystemExit(run_nodes([(TrackerNode, "tracker", False)], args))
 

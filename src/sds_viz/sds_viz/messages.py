@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from sds_camera.image_msg import msg_to_image
 from sds_recon.reconstruction import LINE_LASER_ID
-from sds_recon.sloshing.recording import cloud_points, cloud_xyz, stamp_s
+from sds_ros.point_cloud import read_cloud, stamp_s
 
 from sds_msgs.msg import LaserSpot
 from sds_viz.scene import RerunScene
@@ -41,10 +41,10 @@ def _line(scene: RerunScene, msg) -> None:
 
 
 def _cloud(scene: RerunScene, msg) -> None:
-    cloud = cloud_points(msg)
+    cloud = read_cloud(msg)
     if cloud is None:
         return
-    ids, points = cloud["laser_id"].astype(int), cloud_xyz(cloud)
+    ids, points = cloud.laser_ids, cloud.points_mm
     line = ids == LINE_LASER_ID
     if line.any():
         scene.log_line_points(points[line])

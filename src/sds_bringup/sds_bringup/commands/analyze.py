@@ -6,7 +6,6 @@ import argparse
 from pathlib import Path
 
 from sds_bringup.commands import CommandError, add_overwrite, refuse_existing
-from sds_bringup.paths import CONFIG
 
 
 def add_parser(commands: argparse._SubParsersAction) -> None:
@@ -20,8 +19,9 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
                     "report.html and figures.")
     parser.add_argument("recording", type=Path,
                         help="MCAP, points CSV, time-series CSV or Arduino log")
-    parser.add_argument("--rig", type=Path, default=CONFIG / "rigs" / "stelium.yaml",
-                        help="the rig file (container, liquid, gravity for the theory)")
+    parser.add_argument("--rig", type=Path,
+                        help="the rig file: container, liquid, gravity for the theory (default: "
+                             "an MCAP's own rig; for tables and logs config/rigs/stelium.yaml)")
     parser.add_argument("--out", type=Path, default=Path("analysis"),
                         help="folder for analysis.json, report.html and figures")
     parser.add_argument("--start-s", type=float, help="free decay starts here [s]")

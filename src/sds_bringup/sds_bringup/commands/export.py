@@ -6,7 +6,6 @@ import argparse
 from pathlib import Path
 
 from sds_bringup.commands import CommandError, add_overwrite
-from sds_bringup.paths import CONFIG
 
 
 def add_parser(commands: argparse._SubParsersAction) -> None:
@@ -16,8 +15,8 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
         description="Write the result files of a recording of the graph (see README, "
                     "'Result files').")
     parser.add_argument("recording", type=Path)
-    parser.add_argument("--rig", type=Path, default=CONFIG / "rigs" / "stelium.yaml",
-                        help="the rig file")
+    parser.add_argument("--rig", type=Path,
+                        help="the rig file (default: the one the recording carries)")
     parser.add_argument("--out", type=Path, required=True,
                         help="folder for the result files (refused if it holds results)")
     add_overwrite(parser, "replace the results of an earlier export in --out")
@@ -28,14 +27,14 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Result files and the analysis report of one recording."""
     from sds_recon.results import ResultsWriter
-    from sds_recon.rig import load_rig
     from sds_recon.sloshing.analysis import AnalysisOptions
+    from sds_record.recorded_series import recording_rig
 
     from sds_bringup.offline import RunTables, export_recording, finish_analysis
 
     if not args.recording.is_file():
         raise CommandError(f"{args.recording}: no such recording")
-    rig = load_rig(args.rig)
+    rig = recording_rig(args.recording, args.rig)
     tables = RunTables(ResultsWriter(args.out, args.overwrite), rig)
     frames = export_recording(args.recording, rig, tables)
     note = finish_analysis(tables, str(args.recording), args.out,

@@ -17,7 +17,9 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
     inputs = parser.add_mutually_exclusive_group(required=True)
     inputs.add_argument("--video", type=Path, help="video file, or image folder (with --fps)")
     inputs.add_argument("--mcap", type=Path, help="recording with camera frames")
-    parser.add_argument("--rig", type=Path, required=True, help="the rig file")
+    parser.add_argument("--rig", type=Path,
+                        help="the rig file (needed with --video; with --mcap, default: the one "
+                             "the recording carries)")
     parser.add_argument("--out", type=Path, required=True,
                         help="folder for the result files (refused if it holds results)")
     add_overwrite(parser, "replace the results of an earlier run in --out")
@@ -42,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
     from sds_recon.rig import load_rig
     from sds_recon.sloshing.analysis import AnalysisOptions
     from sds_recon.sloshing.gravity import gravity_regime
-    from sds_record.recorded_series import read_accelerations
+    from sds_record.recorded_series import read_accelerations, recording_rig
 
     from sds_bringup.offline import (
         RunTables,
@@ -56,7 +58,9 @@ def run(args: argparse.Namespace) -> int:
     source = args.video or args.mcap
     if not source.exists():
         raise CommandError(f"{source}: no such file")
-    rig = load_rig(args.rig)
+    if args.video and args.rig is None:
+        raise CommandError("--video needs --rig (the rig the video was taken with)")
+    rig = load_rig(args.rig) if args.video else recording_rig(source, args.rig)
     writer = ResultsWriter(args.out, args.overwrite)
     if args.calibrate_lasers:
         if args.surfaces is None:

@@ -6,7 +6,6 @@ import argparse
 from pathlib import Path
 
 from sds_bringup.commands import CommandError, add_overwrite, refuse_existing
-from sds_bringup.paths import CONFIG
 
 
 def add_parser(commands: argparse._SubParsersAction) -> None:
@@ -18,8 +17,9 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
                     "with `rerun FILE.rrd`).")
     parser.add_argument("recording", type=Path)
     parser.add_argument("--out", type=Path, help="the .rrd file (default: beside the MCAP)")
-    parser.add_argument("--rig", type=Path, default=CONFIG / "rigs" / "stelium.yaml",
-                        help="rig file for the container, beams and beam paths")
+    parser.add_argument("--rig", type=Path,
+                        help="rig file for the container, beams and beam paths (default: the "
+                             "one the recording carries)")
     parser.add_argument("--image-scale", type=float, default=0.25)
     parser.add_argument("--image-every", type=int, default=1, help="log every Nth frame")
     add_overwrite(parser, "replace an existing .rrd file")
@@ -29,14 +29,18 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Convert and say how many messages the scene shows."""
     from sds_recon.rig import load_rig
+    from sds_record.recorded_series import recorded_rig
     from sds_viz.from_mcap import mcap_to_rrd
 
     output = args.out or args.recording.with_suffix(".rrd")
     if not args.recording.is_file():
         raise CommandError(f"{args.recording}: no such recording")
     refuse_existing(output, args.overwrite)
-    conversion = mcap_to_rrd(args.recording, output, load_rig(args.rig), args.image_scale,
-                             args.image_every)
+    rig = load_rig(args.rig) if args.rig else recorded_rig(args.recording)
+    if rig is None:
+        print(f"sds view: {args.recording} carries no rig and no --rig was given: the "
+              "container, beams and beam paths are not drawn")
+    conversion = mcap_to_rrd(args.recording, output, rig, args.image_scale, args.image_every)
     print(f"sds view: {conversion.shown} messages shown ({conversion.skipped} of types the "
           f"scene does not show) in {output}")
     return 0

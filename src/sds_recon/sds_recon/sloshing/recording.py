@@ -15,8 +15,6 @@ import numpy as np
 
 from sds_recon.reconstruction import LINE_LASER_ID
 
-POINT_FIELD_TYPES = {1: "i1", 2: "u1", 3: "<i2", 4: "<u2", 5: "<i4", 6: "<u4", 7: "<f4", 8: "<f8"}
-"""sensor_msgs/PointField datatype → numpy type (little-endian clouds)."""
 POINTS_COLUMNS = ("frame", "t_s", "laser_id", "X_mm", "Y_mm", "Z_mm")
 
 
@@ -75,36 +73,6 @@ def read_points_csv(path: str | Path) -> SurfaceRecording:
     except ValueError as error:
         raise RecordingError(f"{path}: {error}") from None
     return recording_from_rows(times, ids, points, str(path))
-
-
-def cloud_points(msg) -> np.ndarray | None:
-    """The points of a decoded PointCloud2 with a laser_id field (structured: x, y, z,
-    laser_id and whatever else it carries), else None."""
-    names = [f.name for f in msg.fields]
-    if "laser_id" not in names or msg.is_bigendian:
-        return None
-    dtype = np.dtype({"names": names, "offsets": [f.offset for f in msg.fields],
-                      "formats": [POINT_FIELD_TYPES[f.datatype] for f in msg.fields],
-                      "itemsize": msg.point_step})
-    return np.frombuffer(bytes(msg.data), dtype, count=msg.width * msg.height)
-
-
-def cloud_rejected(cloud: np.ndarray) -> np.ndarray:
-    """Per point: left out of its frame's fits (the cloud's `rejected` field; clouds recorded
-    before that field existed reject nothing)."""
-    if cloud.dtype.names is not None and "rejected" in cloud.dtype.names:
-        return cloud["rejected"].astype(bool)
-    return np.zeros(len(cloud), dtype=bool)
-
-
-def cloud_xyz(cloud: np.ndarray) -> np.ndarray:
-    """A cloud's points as N×3 float [mm]."""
-    return np.column_stack([cloud["x"], cloud["y"], cloud["z"]]).astype(float)
-
-
-def stamp_s(msg) -> float:
-    """A message's header stamp [s] (rclpy's messages or decoded from MCAP: the same fields)."""
-    return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
 
 
 def read_series_csv(path: str | Path) -> tuple[np.ndarray, dict[str, np.ndarray]]:

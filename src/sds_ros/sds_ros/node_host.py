@@ -2,7 +2,7 @@
 
 A hosted node class takes (node_name, cli_args=...) like rclpy's Node. It may offer
 `finished` (threading.Event), `exit_code` (int) and `close()`; the host uses them if present.
-The launcher runs it as `python -m sds_bringup.node_process SPEC_JSON`, where SPEC_JSON is
+The launcher runs it as `python -m sds_ros.node_process SPEC_JSON`, where SPEC_JSON is
 a list of {"plugin": "module:Class", "name": ..., "ros_args": [...], "required": bool}.
 """
 

@@ -1,0 +1,8 @@
+"""The ROS layer: what every SDS node stands on, and nothing the algorithms need.
+
+`node_host` runs one or more nodes in a process until a required one finishes or a signal
+arrives (`node_process` is the program the launcher starts); `qos` holds the measuring chain's
+QoS and the start-up wait for consumers; `point_cloud` is the surface cloud's layout on
+`/recon/points` and `/recon/line_points` (metres, REP-103) and its reader. Algorithm packages
+import nothing from here; nodes and tools do.
+"""

@@ -1,0 +1,105 @@
+"""The surface point cloud on /recon/points and /recon/line_points (sensor_msgs/PointCloud2).
+
+One unordered row (height 1) per reconstructed point, little-endian, in the rig's world frame
+(`frame_id` world), in SI units as ROS tools expect (REP-103):
+
+    x, y, z          float32  surface point [m]
+    laser_id         uint16   diode id; 65535 for the line laser
+    height_sigma     float32  one-sigma height uncertainty [m]
+    miss_distance    float32  distance between camera ray and beam, Eq. 9 [m]; NaN for the line
+    rejected         uint8    1: left out of the frame's fits as not on the surface
+
+Recordings made before this layout carry x, y, z in mm and the fields `height_sigma_mm` and
+`miss_distance_mm`; `read_cloud` reads both layouts and gives mm, the unit of the algorithms
+and the result files.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+from sensor_msgs.msg import PointCloud2, PointField
+
+CLOUD_FIELDS = (("x", np.float32), ("y", np.float32), ("z", np.float32),
+                ("laser_id", np.uint16), ("height_sigma", np.float32),
+                ("miss_distance", np.float32), ("rejected", np.uint8))
+POINT_FIELD_TYPES = {PointField.INT8: "i1", PointField.UINT8: "u1", PointField.INT16: "<i2",
+                     PointField.UINT16: "<u2", PointField.INT32: "<i4", PointField.UINT32: "<u4",
+                     PointField.FLOAT32: "<f4", PointField.FLOAT64: "<f8"}
+"""sensor_msgs/PointField datatype → numpy type (little-endian clouds)."""
+_DATATYPES = {np.float32: PointField.FLOAT32, np.uint16: PointField.UINT16,
+              np.uint8: PointField.UINT8}
+MM_PER_M = 1000.0
+
+
+def cloud_dtype() -> np.dtype:
+    """Packed layout of one cloud point."""
+    return np.dtype([(name, kind) for name, kind in CLOUD_FIELDS])
+
+
+def points_to_cloud(header, laser_ids: ArrayLike, points_mm: ArrayLike,
+                    height_sigma_mm: ArrayLike, miss_distance_mm: ArrayLike,
+                    rejected: ArrayLike | None = None) -> PointCloud2:
+    """The PointCloud2 of reconstructed points [mm in, m out]; `rejected` marks the points
+    left out of the frame's fits."""
+    dtype = cloud_dtype()
+    ids = np.asarray(laser_ids)
+    rows = np.zeros(len(ids), dtype)
+    xyz = np.asarray(points_mm, dtype=float).reshape(len(ids), 3)
+    for axis, name in enumerate("xyz"):
+        rows[name] = xyz[:, axis] / MM_PER_M
+    rows["laser_id"] = ids
+    rows["height_sigma"] = np.asarray(height_sigma_mm, dtype=float) / MM_PER_M
+    rows["miss_distance"] = np.asarray(miss_distance_mm, dtype=float) / MM_PER_M
+    if rejected is not None:
+        rows["rejected"] = rejected
+    msg = PointCloud2(header=header, height=1, width=len(rows), is_bigendian=False,
+                      point_step=dtype.itemsize, row_step=dtype.itemsize * len(rows),
+                      is_dense=True)
+    msg.fields = [PointField(name=name, offset=dtype.fields[name][1], datatype=_DATATYPES[kind],
+                             count=1) for name, kind in CLOUD_FIELDS]
+    msg.data = rows.tobytes()
+    return msg
+
+
+@dataclass(frozen=True)
+class CloudPoints:
+    """A surface cloud read back, in mm: the points and which were left out of the fits."""
+
+    laser_ids: np.ndarray          # (N,)
+    points_mm: np.ndarray          # (N, 3)
+    height_sigma_mm: np.ndarray    # (N,)
+    miss_distance_mm: np.ndarray   # (N,), NaN for the line laser
+    rejected: np.ndarray           # (N,) bool
+
+
+def read_cloud(msg) -> CloudPoints | None:
+    """The points of a PointCloud2 (rclpy's or decoded from MCAP) with a laser_id field, in
+    mm, whichever layout it has; None for a cloud without laser ids or big-endian."""
+    names = [f.name for f in msg.fields]
+    if "laser_id" not in names or msg.is_bigendian:
+        return None
+    dtype = np.dtype({"names": names, "offsets": [f.offset for f in msg.fields],
+                      "formats": [POINT_FIELD_TYPES[f.datatype] for f in msg.fields],
+                      "itemsize": msg.point_step})
+    rows = np.frombuffer(bytes(msg.data), dtype, count=msg.width * msg.height)
+    metres = "height_sigma_mm" not in names   # the layout before SI units was in mm
+    scale = MM_PER_M if metres else 1.0
+    suffix = "" if metres else "_mm"
+
+    def optional(name: str) -> np.ndarray:   # a cloud of another writer may lack it: NaN
+        return rows[name].astype(float) * scale if name in names else np.full(len(rows), np.nan)
+
+    rejected = rows["rejected"].astype(bool) if "rejected" in names else \
+        np.zeros(len(rows), dtype=bool)   # clouds recorded before the field existed
+    return CloudPoints(rows["laser_id"].astype(int),
+                       np.column_stack([rows["x"], rows["y"], rows["z"]]).astype(float) * scale,
+                       optional(f"height_sigma{suffix}"), optional(f"miss_distance{suffix}"),
+                       rejected)
+
+
+def stamp_s(msg) -> float:
+    """A message's header stamp [s] (rclpy's messages or decoded from MCAP: the same fields)."""
+    return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
