@@ -1,9 +1,11 @@
 """`sds demo` and `sds run`: the whole measuring chain as real node processes, then the analysis.
 
 The graph is config/graphs/drop.yaml (frame source → tracker → reconstruction, recorder) plus
-arduino.yaml (the serial bridge) and view.yaml (Rerun, saved to .rrd). The demo simulates a
-drop, feeds the simulator's Arduino stream through a pseudo-terminal, and compares the
-analysis with the simulator's truth.
+arduino.yaml (the serial bridge), and view.yaml (a live Rerun viewer) where there is a display.
+The Rerun file is written from the recording once the graph is done: complete, where the live
+viewer's best-effort subscriptions may skip frames. The demo simulates a drop, feeds the
+simulator's Arduino stream through a pseudo-terminal, and compares the analysis with the
+simulator's truth.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from sds_recon.sloshing.report import summary_lines, truth_from_run, write_repor
 from sds_record.recorded_series import read_surface_recording
 from sds_sim.scenario import load_scenario
 from sds_sim.simulate import simulate
+from sds_viz.from_mcap import mcap_to_rrd
 from tqdm import tqdm
 
 from sds_bringup.analyze import with_gravity_regime
@@ -55,10 +58,18 @@ class RunOutputs:
     """The needed node that failed and why (None if none did)."""
 
 
-def graph_entries(overrides: list[str]):
-    """The full chain: drop.yaml, arduino.yaml and view.yaml, with overrides."""
-    entries = [e for name in GRAPHS for e in load_graph(CONFIG / "graphs" / name)]
-    return apply_overrides(entries, overrides)
+def live_view() -> bool:
+    """Whether a live viewer can be shown (a display)."""
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+def graph_entries(overrides: list[str], viewer: bool):
+    """The chain: drop.yaml and arduino.yaml, with view.yaml if `viewer`, with overrides (the
+    viewer's are left out without it)."""
+    graphs = GRAPHS if viewer else tuple(g for g in GRAPHS if g != "view.yaml")
+    entries = [e for name in graphs for e in load_graph(CONFIG / "graphs" / name)]
+    return apply_overrides(entries, [o for o in overrides
+                                     if viewer or not o.startswith("viewer.")])
 
 
 def run_graph(overrides: list[str], out: Path, expected_frames: int | None,
@@ -70,14 +81,17 @@ def run_graph(overrides: list[str], out: Path, expected_frames: int | None,
     domain_id = pick_domain_id()
     environment = graph_environment(domain_id)
     os.environ.update(environment)
-    # The camera waits for tracker, recorder and viewer; the tracker for reconstruction,
-    # recorder, viewer and the progress bar; the reconstruction and the running sloshing
-    # estimates for recorder and viewer (the fits also for the sloshing node).
+    # The camera waits for tracker and recorder; the tracker for reconstruction, recorder and
+    # the progress bar; the reconstruction and the running sloshing estimates for the
+    # recorder (the fits also for the sloshing node); each for the live viewer too if any.
+    viewer = live_view()
+    extra = int(viewer)
     entries = graph_entries([*overrides, f"recorder.output={outputs.recording.resolve()}",
-                             f"viewer.output={outputs.rerun.resolve()}",
-                             "camera.wait_for_subscribers=3", "tracker.wait_for_consumers=4",
-                             "recon.wait_for_consumers=2", "recon.wait_for_fit_consumers=3",
-                             "sloshing.wait_for_consumers=2"])
+                             "viewer.spawn=true", f"camera.wait_for_subscribers={2 + extra}",
+                             f"tracker.wait_for_consumers={3 + extra}",
+                             f"recon.wait_for_consumers={1 + extra}",
+                             f"recon.wait_for_fit_consumers={2 + extra}",
+                             f"sloshing.wait_for_consumers={1 + extra}"], viewer)
     cable = plug_in(port) if serial_lines is not None and port is not None else None
     with outputs.log.open("w") as log:
         launcher = Launcher(entries, environment, output=log, console=sys.stderr)
@@ -185,8 +199,10 @@ def height_errors(truth_spots: Path, points: np.ndarray) -> np.ndarray:
 
 def analyse_run(recording: Path, rig: Rig, out: Path, options: AnalysisOptions,
                 truth_run: Path | None = None, overwrite: bool = True) -> dict:
-    """Result files, the analysis report; the results as a dictionary. The run's own folder:
-    an earlier run's results are replaced (the caller checked `overwrite`)."""
+    """Result files, the Rerun file (from the recording: every frame), the analysis report;
+    the results as a dictionary. The run's own folder: an earlier run's results are replaced
+    (the caller checked `overwrite`)."""
+    mcap_to_rrd(recording, recording.with_suffix(".rrd"), rig)
     tables = RunTables(ResultsWriter(out / "results", overwrite), rig)
     export_recording(recording, rig, tables)
     tables.writer.close()
