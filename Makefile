@@ -9,7 +9,7 @@ STAMPS := $(VENV_ABS)/.sds-stamps
 BUILD := build
 PY_PACKAGES := sds_ros sds_recon sds_arduino sds_sim sds_camera sds_tracker sds_record sds_viz sds_bringup
 
-.PHONY: setup test lint demo bench clean distclean
+.PHONY: setup test test-unit lint demo bench clean distclean
 
 setup: $(STAMPS)/packages
 
@@ -37,6 +37,10 @@ lint: setup
 test: lint
 	$(BIN)/python -m pytest
 
+# Everything that starts no ROS graph (tests marked `ros` are left out).
+test-unit: lint
+	$(BIN)/python -m pytest -m "not ros"
+
 demo: setup
 	$(BIN)/sds demo
 
@@ -44,6 +48,7 @@ bench: setup
 	$(BIN)/python bench/frame_path.py
 	$(BIN)/python bench/graph.py --minutes 2
 	$(BIN)/python bench/self_calibration.py
+	$(BIN)/python bench/process.py
 
 clean:
 	rm -rf $(BUILD) .pytest_cache .ruff_cache demo_output
