@@ -6,12 +6,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 from scipy import stats
 from sds_sim.render import FrameRenderer
 from sds_sim.scenario import load_scenario
 from sds_tracker.hampel import HampelBank
 from sds_tracker.spots import HAMPEL_REPLACED, SpotSettings, subtract_line_centroid
-from sds_tracker.tracker import FrameTracker, is_lost
+from sds_tracker.tracker import TRACKING_PARAMETERS, FrameTracker, is_lost
 
 
 def run_tracker(repo: Path, frames: int, overrides: dict) -> dict:
@@ -152,3 +153,12 @@ def test_the_line_is_subtracted_from_a_spot_beside_it() -> None:
     assert np.hypot(*(plain - spot)) > 0.5                         # the line pulls it
     found = subtract_line_centroid(light, line_x, spot + np.array([1.5, -1.0]), settings)
     assert found is not None and np.hypot(*(found - spot)) < 0.1
+
+
+def test_the_parameter_file_states_the_trackers_own_defaults(repo: Path) -> None:
+    """config/params/tracker.yaml documents every tracking parameter with the value the code
+    defaults to (TrackerConfig and its settings): the two cannot drift apart."""
+    document = yaml.safe_load((repo / "config" / "params" / "tracker.yaml").read_text())
+    documented = document["/**"]["ros__parameters"]
+    for name, value in TRACKING_PARAMETERS.items():
+        assert documented[name] == value, name

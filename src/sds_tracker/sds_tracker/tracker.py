@@ -42,11 +42,15 @@ class TrackerConfig:
     path_heights_mm: tuple[float, float] = (-30.0, 40.0)   # surface heights the paths span
 
 
+_DEFAULT = TrackerConfig()
 TRACKING_PARAMETERS: dict[str, Any] = {
-    "hampel_window": 5, "window_px": 24, "threshold": 30.0, "prior_sigma_px": 8.0,
-    "path_tolerance_px": 4.0, "line_band_px": 30, "path_heights_mm": [-30.0, 40.0],
-    "seeds": [0.0]}
-"""The tracking parameters (config/params/tracker.yaml documents them) and their defaults."""
+    "hampel_window": _DEFAULT.hampel_window, "window_px": _DEFAULT.spots.window_px,
+    "threshold": _DEFAULT.spots.threshold, "prior_sigma_px": _DEFAULT.spots.prior_sigma_px,
+    "path_tolerance_px": _DEFAULT.spots.path_tolerance_px, "line_band_px": _DEFAULT.line.band_px,
+    "path_heights_mm": list(_DEFAULT.path_heights_mm), "seeds": [0.0]}
+"""The tracking parameters a node or `sds process` may set, with their defaults: those of
+TrackerConfig, SpotSettings and LineSettings (one source; config/params/tracker.yaml documents
+each, and a test holds it to these values)."""
 
 
 def tracker_config(values: Mapping[str, Any]) -> TrackerConfig:
