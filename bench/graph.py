@@ -65,7 +65,7 @@ def stage_times(video: Path, rig) -> dict[str, float]:
     from rclpy.serialization import serialize_message
     from sds_camera.frame_source import Region, open_source, select
     from sds_camera.image_msg import image_to_msg
-    from sds_recon.reconstruction import fit_surface, reconstruct_line, reconstruct_spots
+    from sds_recon.reconstruction import reconstruct_frame, reconstruct_line
     from sds_record.mcap_files import McapRecorder
     from sds_tracker.spots import LOST
     from sds_tracker.tracker import FrameTracker
@@ -93,11 +93,8 @@ def stage_times(video: Path, rig) -> dict[str, float]:
         times["tracking"].append(time.perf_counter() - start)
         start = time.perf_counter()
         for _, spots in ready:
-            found = [s for s in spots if not s.flags & LOST]
-            points = reconstruct_spots(rig, [s.laser_id for s in found],
-                                       [[s.x_px, s.y_px] for s in found],
-                                       [s.sigma_px for s in found])
-            fit_surface(points.points_mm, rig.container.radius_mm)
+            reconstruct_frame(rig, [s.laser_id for s in spots], [[s.x_px, s.y_px] for s in spots],
+                              [s.sigma_px for s in spots], [bool(s.flags & LOST) for s in spots])
         reconstruct_line(rig, np.column_stack([line.x_px, line.y_px]), line.sigma_px)
         times["triangulation"].append(time.perf_counter() - start)
         start = time.perf_counter()

@@ -27,9 +27,8 @@ from sds_camera.imu_msg import imu_samples
 from sds_recon.reconstruction import (
     SurfaceFits,
     SurfacePoints,
-    fit_surface,
+    reconstruct_frame,
     reconstruct_line,
-    reconstruct_spots,
 )
 from sds_recon.results import ResultsWriter
 from sds_recon.rig import Rig
@@ -219,11 +218,10 @@ def process_frames(frames: Iterator[RedFrame], rig: Rig, tables: RunTables,
             time_s = times.pop(frame)
             tables.add_spots(frame, time_s, [(s.laser_id, s.x_px, s.y_px, s.x_raw_px, s.y_raw_px,
                                               s.sigma_px, s.peak, s.flags) for s in spots])
-            found = [s for s in spots if not s.flags & LOST]
-            points = reconstruct_spots(rig, [s.laser_id for s in found],
-                                       [[s.x_px, s.y_px] for s in found],
-                                       [s.sigma_px for s in found], beam_weight, default_sigma)
-            fits = fit_surface(points, rig.container.radius_mm)
+            points, fits = reconstruct_frame(
+                rig, [s.laser_id for s in spots], [[s.x_px, s.y_px] for s in spots],
+                [s.sigma_px for s in spots], [bool(s.flags & LOST) for s in spots], beam_weight,
+                default_sigma)
             tables.add_points(frame, time_s, points, fits.rejected)
             tables.add_fit(frame, time_s, fits)
 

@@ -21,9 +21,8 @@ from sds_msgs.msg import (
 from sds_recon.reconstruction import (
     SurfaceFits,
     SurfacePoints,
-    fit_surface,
+    reconstruct_frame,
     reconstruct_line,
-    reconstruct_spots,
 )
 from sds_recon.rig import Rig, RigError, load_rig, rig_document
 
@@ -95,11 +94,11 @@ class ReconstructionNode(Node):
         self.create_subscription(LaserLineProfile, "line", self._on_line, stream_qos())
 
     def _on_spots(self, msg: LaserSpotArray) -> None:
-        spots = [s for s in msg.spots if not s.flags & LaserSpot.FLAG_LOST]
-        result = reconstruct_spots(
+        spots = msg.spots
+        result, fits = reconstruct_frame(
             self._rig, [s.laser_id for s in spots], [[s.x_px, s.y_px] for s in spots],
-            [s.sigma_px for s in spots], self._beam_weight, self._default_sigma)
-        fits = fit_surface(result, self._rig.container.radius_mm)
+            [s.sigma_px for s in spots], [bool(s.flags & LaserSpot.FLAG_LOST) for s in spots],
+            self._beam_weight, self._default_sigma)
         header = msg.header
         header.frame_id = self._frame_id
         self._points_pub.publish(points_to_cloud(header, result.laser_ids, result.points_mm,

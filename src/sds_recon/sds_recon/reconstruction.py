@@ -107,3 +107,17 @@ def fit_surface(points: SurfacePoints, radius_mm: float) -> SurfaceFits:
     except ValueError:
         modal = None   # too few points: no amplitudes rather than invented ones
     return SurfaceFits(plane, modal, rejected)
+
+
+def reconstruct_frame(rig: Rig, laser_ids: ArrayLike, pixels: ArrayLike, sigma_px: ArrayLike,
+                      lost: ArrayLike, beam_weight: float = 0.5, default_sigma_px: float = 0.1
+                      ) -> tuple[SurfacePoints, SurfaceFits]:
+    """One frame's spots to its surface, the step the reconstruction node, `sds process` and
+    the benchmarks share: lost spots left out, the others triangulated (Eq. 9) and fitted
+    (Eq. 12 and the modes, outliers rejected)."""
+    found = ~np.asarray(lost, dtype=bool)
+    points = reconstruct_spots(rig, np.asarray(laser_ids)[found],
+                               np.asarray(pixels, dtype=float).reshape(-1, 2)[found],
+                               np.asarray(sigma_px, dtype=float)[found], beam_weight,
+                               default_sigma_px)
+    return points, fit_surface(points, rig.container.radius_mm)
