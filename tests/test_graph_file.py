@@ -89,3 +89,22 @@ def test_bad_overrides_are_refused(repo):
     for override in ("camera.rate", "nobody.rate=1", "camera=1"):
         with pytest.raises(GraphFileError):
             apply_overrides(entries, [override])
+
+
+def test_the_graph_environment_keeps_what_the_user_set_about_discovery() -> None:
+    from sds_bringup.ros_env import graph_domain_id, graph_environment
+
+    assert graph_environment(5, base={})["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+    chosen = graph_environment(5, base={"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET",
+                                        "ROS_STATIC_PEERS": "10.0.0.2"})
+    assert chosen["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "SUBNET"
+    assert chosen["ROS_STATIC_PEERS"] == "10.0.0.2" and chosen["ROS_DOMAIN_ID"] == "5"
+    across = graph_environment(5, base={"ROS_STATIC_PEERS": "10.0.0.2"}, network=True)
+    assert across["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"   # + the named peers only
+    with pytest.raises(ValueError, match="ROS_STATIC_PEERS"):
+        graph_environment(5, base={}, network=True)
+    assert graph_domain_id(None, base={"ROS_DOMAIN_ID": "33"}) == 33
+    assert graph_domain_id(12, base={"ROS_DOMAIN_ID": "33"}) == 12
+    assert 1 <= graph_domain_id(None, base={}) <= 101
+    with pytest.raises(ValueError, match="--domain-id"):
+        graph_domain_id(None, network=True, base={})

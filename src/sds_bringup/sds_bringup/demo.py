@@ -36,7 +36,7 @@ from sds_bringup.graph import apply_overrides, load_graph
 from sds_bringup.launcher import Launcher
 from sds_bringup.offline import RunTables, export_recording
 from sds_bringup.paths import CONFIG
-from sds_bringup.ros_env import graph_environment, pick_domain_id
+from sds_bringup.ros_env import graph_domain_id, graph_environment
 
 DEMO_SCENARIO = CONFIG / "scenarios" / "drop_4p7s.yaml"
 GRAPHS = ("drop.yaml", "arduino.yaml", "view.yaml")
@@ -78,7 +78,7 @@ def run_graph(overrides: list[str], out: Path, expected_frames: int | None,
     with a progress bar; node logs go to out/graph.log. The recorder refuses an existing
     recording unless the overrides say `recorder.overwrite=true`."""
     outputs = RunOutputs(out / "recording.mcap", out / "recording.rrd", out / "graph.log")
-    domain_id = pick_domain_id()
+    domain_id = graph_domain_id(None)
     environment = graph_environment(domain_id)
     os.environ.update(environment)
     # The camera waits for tracker and recorder; the tracker for reconstruction, recorder and

@@ -24,15 +24,41 @@ def pick_domain_id() -> int:
     return random.SystemRandom().randint(1, MAX_DOMAIN_ID)
 
 
-def graph_environment(domain_id: int, base: Mapping[str, str] | None = None) -> dict[str, str]:
-    """Environment for a graph process: its domain, localhost-only discovery, fast transport."""
+def graph_domain_id(requested: int | None, network: bool = False,
+                    base: Mapping[str, str] | None = None) -> int:
+    """The graph's domain: `requested` (--domain-id), else the user's ROS_DOMAIN_ID, else (one
+    machine) a random one; a graph across machines needs one both sides name."""
+    env = os.environ if base is None else base
+    if requested is not None:
+        return requested
+    if env.get("ROS_DOMAIN_ID"):
+        return int(env["ROS_DOMAIN_ID"])
+    if network:
+        raise ValueError("a graph across machines needs one domain on every machine: give "
+                         "--domain-id N (or set ROS_DOMAIN_ID) on each")
+    return pick_domain_id()
+
+
+def graph_environment(domain_id: int, base: Mapping[str, str] | None = None,
+                      network: bool = False) -> dict[str, str]:
+    """Environment for a graph process: its domain, discovery, fast transport.
+
+    Discovery: what the user set (ROS_AUTOMATIC_DISCOVERY_RANGE, ROS_STATIC_PEERS) is kept.
+    Otherwise one machine: LOCALHOST; across machines (`network`): LOCALHOST plus the peers
+    named in ROS_STATIC_PEERS only, so that no other machine of the network joins the graph.
+    """
     if not 0 <= domain_id <= MAX_DOMAIN_ID:
         raise ValueError(f"ROS domain id {domain_id} is outside 0..{MAX_DOMAIN_ID}")
     env = dict(os.environ if base is None else base)
+    if network and not env.get("ROS_STATIC_PEERS") and \
+            not env.get("ROS_AUTOMATIC_DISCOVERY_RANGE"):
+        raise ValueError("--network meets only the machines named in ROS_STATIC_PEERS (their "
+                         "addresses, ';'-separated); set it, or ROS_AUTOMATIC_DISCOVERY_RANGE="
+                         "SUBNET to meet every machine of the subnet")
     env.update(LARGE_IMAGE_TRANSPORT)
     env["FASTDDS_DEFAULT_PROFILES_FILE"] = str(FASTDDS_PROFILES)
     env["ROS_DOMAIN_ID"] = str(domain_id)
-    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     env["PYTHONUNBUFFERED"] = "1"
     env["RCUTILS_COLORIZED_OUTPUT"] = "0"
     return env

@@ -18,7 +18,11 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
     parser.add_argument("--compose", action="store_true",
                         help="host every node in one process instead of one process each")
     parser.add_argument("--domain-id", type=int, default=None,
-                        help="ROS_DOMAIN_ID for the graph (default: a random one in 1..101)")
+                        help="ROS_DOMAIN_ID for the graph (default: the environment's, else a "
+                             "random one in 1..101)")
+    parser.add_argument("--network", action="store_true",
+                        help="part of a graph across machines: discover this machine and the "
+                             "peers in ROS_STATIC_PEERS, one domain (--domain-id) on all")
     parser.set_defaults(run=run, command="graph")
 
 
@@ -26,11 +30,15 @@ def run(args: argparse.Namespace) -> int:
     """Run the graph until it ends; its exit code."""
     from sds_bringup.graph import apply_overrides, composed, load_graph
     from sds_bringup.launcher import Launcher
-    from sds_bringup.ros_env import graph_environment, pick_domain_id
+    from sds_bringup.ros_env import graph_domain_id, graph_environment
 
     entries = apply_overrides(load_graph(args.graph_file), args.overrides)
     if args.compose:
         entries = composed(entries)
-    domain_id = pick_domain_id() if args.domain_id is None else args.domain_id
-    print(f"sds graph: {args.graph_file} on ROS_DOMAIN_ID={domain_id} (localhost only)")
-    return Launcher(entries, graph_environment(domain_id)).run()
+    domain_id = graph_domain_id(args.domain_id, args.network)
+    environment = graph_environment(domain_id, network=args.network)
+    peers = environment.get("ROS_STATIC_PEERS", "")
+    print(f"sds graph: {args.graph_file} on ROS_DOMAIN_ID={domain_id}, discovery "
+          f"{environment['ROS_AUTOMATIC_DISCOVERY_RANGE']}" + (f" + peers {peers}" if peers
+                                                              else ""))
+    return Launcher(entries, environment).run()
