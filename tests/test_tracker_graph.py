@@ -4,6 +4,7 @@ then the recording replayed through tracker and reconstruction gives the same re
 from __future__ import annotations
 
 import csv
+import shutil
 import subprocess
 import sys
 import time
@@ -290,6 +291,29 @@ def test_an_unfinished_recording_is_read_to_its_last_chunk_and_said_so(
             and done.stderr.strip().splitlines()[-1].startswith("sds analyze: ")), (command, output)
     exported = load_results(drop_run.folder / "cut_export")
     assert len(set(exported.spots["frame"])) == cut
+
+
+def test_sds_process_runs_a_campaign_in_parallel_and_reports_the_file_that_fails(
+        drop_run: DropRun) -> None:
+    """A folder of videos (two drops and a broken file): each drop's results in its own
+    folder, the broken file named with its reason, the others finished, exit code 2."""
+    campaign = drop_run.folder / "campaign"
+    campaign.mkdir()
+    for name in ("drop_a.mp4", "drop_b.mp4"):
+        shutil.copy(drop_run.output.video, campaign / name)
+    (campaign / "drop_c.mp4").write_bytes(b"not a video" * 100)
+    out = drop_run.folder / "campaign_results"
+    done = sds("process", "--video", str(campaign), "--rig", str(drop_run.rig_file), "--out",
+               str(out), "--no-progress", "--jobs", "2")
+    assert done.returncode == 2, done.stdout + done.stderr
+    assert "2 of 3 inputs processed" in done.stdout and "1 failed" in done.stdout, done.stdout
+    failure = [line for line in done.stdout.splitlines() if "drop_c.mp4:" in line]
+    assert len(failure) == 1 and "Traceback" not in done.stdout + done.stderr, done.stdout
+    first, second = load_results(out / "drop_a"), load_results(out / "drop_b")
+    assert sorted(set(first.spots["frame"])) == list(range(30))
+    np.testing.assert_array_equal(first.spots["x_px"], second.spots["x_px"])   # same video
+    assert (out / "drop_a" / "report.html").is_file()
+    assert not (out / "drop_c" / "spots.csv").exists()
 
 
 def test_export_round_trip_equals_the_graphs_messages(drop_run: DropRun) -> None:

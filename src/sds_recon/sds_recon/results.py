@@ -144,17 +144,23 @@ class _TableFile:
         self._stream.close()
 
 
+def refuse_results(directory: Path) -> None:
+    """FileExistsError when `directory` holds result files already."""
+    earlier = [name for name in [*(f"{t}.csv" for t in COLUMNS), "columns.json"]
+               if (directory / name).exists()]
+    if earlier:
+        raise FileExistsError(f"{directory} holds results already ({earlier[0]}, …): "
+                              "another folder, or --overwrite")
+
+
 class ResultsWriter:
     """Streams rows into the tables' CSV files (opened at their first row, written in batches);
     a folder that holds results already is refused unless `overwrite`."""
 
     def __init__(self, directory: str | Path, overwrite: bool = False) -> None:
         self.directory = Path(directory)
-        earlier = [name for name in [*(f"{t}.csv" for t in COLUMNS), "columns.json"]
-                   if (self.directory / name).exists()]
-        if earlier and not overwrite:
-            raise FileExistsError(f"{self.directory} holds results already ({earlier[0]}, …): "
-                                  "another folder, or --overwrite")
+        if not overwrite:
+            refuse_results(self.directory)
         self.directory.mkdir(parents=True, exist_ok=True)
         self._tables: dict[str, _TableFile] = {}
         self._modal_names: tuple[str, ...] | None = None

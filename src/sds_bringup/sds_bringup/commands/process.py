@@ -1,27 +1,40 @@
-"""`sds process`: the graph's tracker, reconstruction and analysis in one process, no graph."""
+"""`sds process`: the graph's tracker, reconstruction and analysis in one process, no graph.
+
+Several videos or recordings (or a folder of them) are processed in parallel, one process per
+core, one result folder each under --out, with one progress bar; a file that fails is named with
+its reason and the others go on (exit code 2 if any failed).
+"""
 
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 
 from sds_bringup.commands import CommandError, add_overwrite
+
+VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv", ".m4v")
 
 
 def add_parser(commands: argparse._SubParsersAction) -> None:
     """Register `sds process`."""
     parser = commands.add_parser(
-        "process", help="track, reconstruct and analyse a video or recording, no ROS graph",
+        "process", help="track, reconstruct and analyse videos or recordings, no ROS graph",
         description="Run the graph's tracker, reconstruction and analysis in one process (the "
-                    "parameters of config/graphs/drop.yaml) and write the result files.")
+                    "parameters of config/graphs/drop.yaml) and write the result files. "
+                    "Several inputs (or a folder of them) run in parallel, one result folder "
+                    "each (--out/<name>).")
     inputs = parser.add_mutually_exclusive_group(required=True)
-    inputs.add_argument("--video", type=Path, help="video file, or image folder (with --fps)")
-    inputs.add_argument("--mcap", type=Path, help="recording with camera frames")
+    inputs.add_argument("--video", type=Path, nargs="+",
+                        help="video files, a folder of videos, or one image folder (with --fps)")
+    inputs.add_argument("--mcap", type=Path, nargs="+",
+                        help="recordings with camera frames, or a folder of them")
     parser.add_argument("--rig", type=Path,
                         help="the rig file (needed with --video; with --mcap, default: the one "
-                             "the recording carries)")
+                             "each recording carries)")
     parser.add_argument("--out", type=Path, required=True,
-                        help="folder for the result files (refused if it holds results)")
+                        help="folder for the result files (refused if it holds results); with "
+                             "several inputs, one subfolder each")
     add_overwrite(parser, "replace the results of an earlier run in --out")
     parser.add_argument("--fps", type=float, default=0.0,
                         help="frame rate of an image folder [1/s]")
@@ -33,12 +46,62 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
     parser.add_argument("--surfaces", type=Path,
                         help="known surface per image: frame, tilt_x_deg, tilt_y_deg"
                              "[, offset_mm] (frame k = k-th image)")
+    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
+                        help="inputs processed at once (default: one per core)")
     parser.add_argument("--no-progress", action="store_true")
     parser.set_defaults(run=run, command="process")
 
 
+def expand_inputs(paths: list[Path], suffixes: tuple[str, ...]) -> list[Path]:
+    """The inputs: files as given, folders replaced by the files of `suffixes` in them (a
+    folder without such files stays one input: an image folder)."""
+    inputs: list[Path] = []
+    for path in paths:
+        if not path.exists():
+            raise CommandError(f"{path}: no such file")
+        found = sorted(p for p in path.iterdir() if p.suffix.lower() in suffixes) \
+            if path.is_dir() else []
+        inputs += found or [path]
+    stems = [p.stem for p in inputs]
+    if len(inputs) > 1 and len(set(stems)) < len(stems):
+        raise CommandError("two inputs have the same name: their result folders would clash")
+    return inputs
+
+
 def run(args: argparse.Namespace) -> int:
-    """Result files and the analysis report of one video or recording."""
+    """Result files and the analysis report of each video or recording."""
+    from sds_recon.results import refuse_results
+    from sds_recon.rig import load_rig
+    from sds_record.recorded_series import recording_rig
+
+    from sds_bringup.offline import calibrate_from_images
+
+    is_video = args.video is not None
+    inputs = expand_inputs(args.video or args.mcap, VIDEO_SUFFIXES if is_video else (".mcap",))
+    if is_video and args.rig is None:
+        raise CommandError("--video needs --rig (the rig the video was taken with)")
+    outs = [args.out] if len(inputs) == 1 else [args.out / source.stem for source in inputs]
+    if not args.overwrite:   # before any work: a refused folder is named at once
+        for out in outs:
+            refuse_results(out)
+    rig_file = args.rig
+    if args.calibrate_lasers:
+        if args.surfaces is None:
+            raise CommandError("--calibrate-lasers needs --surfaces")
+        designed = load_rig(args.rig) if args.rig else recording_rig(inputs[0], None)
+        calibration_out = args.out if len(inputs) == 1 else args.out / "calibration"
+        _, rig_file = calibrate_from_images(designed, args.calibrate_lasers, args.surfaces,
+                                            calibration_out)
+        print(f"sds process: calibrated rig written to {rig_file}")
+    if len(inputs) == 1:
+        print(process_one(inputs[0], is_video, rig_file, args.out, args, not args.no_progress))
+        return 0
+    return process_many(inputs, is_video, rig_file, args)
+
+
+def process_one(source: Path, is_video: bool, rig_file: Path | None, out: Path,
+                args: argparse.Namespace, progress: bool) -> str:
+    """One input's result files and report; its summary line."""
     from sds_camera.camera_imu import read_camera_imu
     from sds_recon.results import ResultsWriter
     from sds_recon.rig import load_rig
@@ -48,39 +111,67 @@ def run(args: argparse.Namespace) -> int:
 
     from sds_bringup.offline import (
         RunTables,
-        calibrate_from_images,
         finish_analysis,
         mcap_frames,
         process_frames,
         video_frames,
     )
 
-    source = args.video or args.mcap
-    if not source.exists():
-        raise CommandError(f"{source}: no such file")
-    if args.video and args.rig is None:
-        raise CommandError("--video needs --rig (the rig the video was taken with)")
-    rig = load_rig(args.rig) if args.video else recording_rig(source, args.rig)
-    writer = ResultsWriter(args.out, args.overwrite)
-    if args.calibrate_lasers:
-        if args.surfaces is None:
-            raise CommandError("--calibrate-lasers needs --surfaces")
-        rig, rig_path = calibrate_from_images(rig, args.calibrate_lasers, args.surfaces,
-                                              args.out)
-        print(f"sds process: calibrated rig written to {rig_path}")
-    frames = video_frames(source, rig, args.fps) if args.video else mcap_frames(source)
+    rig = load_rig(rig_file) if is_video else recording_rig(source, rig_file)
+    writer = ResultsWriter(out, args.overwrite)
+    frames = video_frames(source, rig, args.fps) if is_video else mcap_frames(source)
     tables = RunTables(writer, rig)
-    count = process_frames(frames, rig, tables, progress=not args.no_progress)
-    imu = read_camera_imu(source) if args.video else None
-    accelerometers = read_accelerations(source) if args.mcap else {}
+    count = process_frames(frames, rig, tables, progress=progress)
+    imu = read_camera_imu(source) if is_video else None
+    accelerometers = {} if is_video else read_accelerations(source)
     if imu is not None:
         tables.add_camera_imu(imu)
         accelerometers["camera IMU"] = (imu.accel_time_s, imu.accel_m_s2)
     gravity, regime = args.gravity, ""
     if gravity is None:
         gravity, regime = gravity_regime(accelerometers)
-    note = finish_analysis(tables, str(source), args.out, AnalysisOptions(gravity_m_s2=gravity))
+    note = finish_analysis(tables, str(source), out, AnalysisOptions(gravity_m_s2=gravity))
     notes = "; ".join(n for n in (regime, note) if n)
-    print(f"sds process: {count} frames of {source} -> {args.out}" + (f" ({notes})" if notes
-                                                                       else ""))
-    return 0
+    return f"sds process: {count} frames of {source} -> {out}" + (f" ({notes})" if notes
+                                                                   else "")
+
+
+def _process_in_worker(source: Path, is_video: bool, rig_file: Path | None, out: Path,
+                       args: argparse.Namespace) -> tuple[bool, str]:
+    """One input in a worker process: (done, summary line or the failure's one line)."""
+    from sds_bringup.cli import input_errors
+
+    try:
+        return True, process_one(source, is_video, rig_file, out, args, progress=False)
+    except Exception as error:
+        if not isinstance(error, input_errors()):
+            raise
+        return False, f"sds process: {source}: {error}"
+
+
+def process_many(inputs: list[Path], is_video: bool, rig_file: Path | None,
+                 args: argparse.Namespace) -> int:
+    """The inputs in parallel (`--jobs` worker processes), one result folder each under
+    --out, one progress bar; every failure is reported, the others finish (exit code 2 if any
+    failed)."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    from tqdm import tqdm
+
+    jobs = max(1, min(args.jobs, len(inputs)))
+    failed = 0
+    # spawn: a fresh interpreter per worker (no forked threads of this one)
+    with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+        futures = [pool.submit(_process_in_worker, source, is_video, rig_file,
+                               args.out / source.stem, args) for source in inputs]
+        with tqdm(total=len(inputs), desc="inputs", unit="file",
+                  disable=args.no_progress) as bar:
+            for future in as_completed(futures):
+                done, line = future.result()
+                failed += not done
+                bar.write(line)
+                bar.update()
+    print(f"sds process: {len(inputs) - failed} of {len(inputs)} inputs processed into "
+          f"{args.out}" + (f", {failed} failed (above)" if failed else ""))
+    return 2 if failed else 0
