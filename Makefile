@@ -33,6 +33,7 @@ $(STAMPS)/packages: $(STAMPS)/sds_msgs $(foreach p,$(PY_PACKAGES),src/$(p)/setup
 
 lint: setup
 	$(BIN)/ruff check .
+	$(BIN)/mypy $(foreach p,$(PY_PACKAGES),src/$(p)/$(p))
 
 test: lint
 	$(BIN)/python -m pytest

@@ -58,7 +58,7 @@ class ArduinoBridgeNode(Node):
         self.create_subscription(SyncEvent, "camera_sync", self._on_camera_sync, QoSProfile(
             depth=10, reliability=ReliabilityPolicy.RELIABLE,
             durability=DurabilityPolicy.TRANSIENT_LOCAL))
-        self._reported = None
+        self._reported: str | None = None
         self.create_timer(float(self._p["stats_period_s"]), self._report)
         self._thread = threading.Thread(target=self._read, name="serial", daemon=True)
         self._thread.start()

@@ -27,6 +27,10 @@ BIN_S = 1.0
 class DeviceClock:
     """Unwraps micros() and maps device time [s] to host time [s]."""
 
+    _bins: deque[list[float]]    # [second of device time, device time, lowest host − device]
+    _last_ticks: int | None      # the last micros() value seen
+    _elapsed_us: int
+
     def __init__(self, window_s: float = WINDOW_S) -> None:
         self.window_s = window_s
         self.reset()
@@ -61,8 +65,8 @@ class DeviceClock:
 
     def reset(self) -> None:
         """Forget the mapping (a new device session: micros() from 0)."""
-        self._bins: deque[list[float]] = deque()
-        self._last_ticks: int | None = None
+        self._bins = deque()
+        self._last_ticks = None
         self._elapsed_us = 0
         self.offset_s = float("nan")
         self.rate = 1.0

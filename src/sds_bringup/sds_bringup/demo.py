@@ -248,7 +248,10 @@ def print_summary(out: Path, scenario, simulation, outputs: RunOutputs, result: 
     """The demo's summary: files, modes against the truth, heights, spots, the Arduino."""
     results = load_results(out / "results")
     spots, points = results.spots, results.points
-    frames = len(set(spots["frame"].tolist())) if spots is not None else 0
+    if spots is None or points is None:
+        print(f"demo failed: no spots or points in {out / 'results'}", file=sys.stderr)
+        return 1
+    frames = len(set(spots["frame"].tolist()))
     errors = height_errors(simulation.spots, points[points["laser_id"] != 65535])
     log = outputs.log.read_text()
     arduino = [line for line in log.splitlines() if "final: records" in line]

@@ -191,17 +191,17 @@ class Launcher:
         """SIGTERM to every live process, then SIGKILL after the grace period. (SIGTERM, not
         SIGINT: a process still starting Python dies of it quietly, where SIGINT would raise
         KeyboardInterrupt with a traceback; the node host handles both alike.)"""
-        live = [p for p in self.processes if p.popen and p.popen.poll() is None]
-        for process in live:
-            process.popen.send_signal(signal.SIGTERM)
+        live = [(p.name, p.popen) for p in self.processes if p.popen and p.popen.poll() is None]
+        for _, popen in live:
+            popen.send_signal(signal.SIGTERM)
         deadline = time.monotonic() + self.grace_period_s
-        for process in live:
+        for name, popen in live:
             try:
-                process.popen.wait(timeout=max(0.0, deadline - time.monotonic()))
+                popen.wait(timeout=max(0.0, deadline - time.monotonic()))
             except subprocess.TimeoutExpired:
-                self._say(process.name, f"did not stop in {self.grace_period_s:.0f} s: killed")
-                process.popen.kill()
-                process.popen.wait()
+                self._say(name, f"did not stop in {self.grace_period_s:.0f} s: killed")
+                popen.kill()
+                popen.wait()
         for thread in self._log_threads:
             thread.join(timeout=2.0)
         for process in self.processes:

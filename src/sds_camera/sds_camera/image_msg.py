@@ -34,7 +34,7 @@ def image_to_msg(image: np.ndarray, stamp: Time, frame_id: str) -> Image:
     msg.is_bigendian = 0
     msg.step = image.strides[0]
     data = array.array("B")
-    data.frombytes(memoryview(image).cast("B"))
+    data.frombytes(image.data.cast("B"))
     msg.data = data
     return msg
 

@@ -80,12 +80,12 @@ def reconstruct_spots(rig: Rig, laser_ids: ArrayLike, pixels: ArrayLike, sigma_p
 def reconstruct_line(rig: Rig, pixels: ArrayLike, sigma_px: ArrayLike,
                      default_sigma_px: float = 0.1) -> SurfacePoints:
     """Eqs. 10–11 for the line's samples (finite pixels)."""
-    pixels = np.asarray(pixels, dtype=float).reshape(-1, 2)
-    found = np.isfinite(pixels).all(axis=1)
-    pixels = pixels[found]
+    samples = np.asarray(pixels, dtype=float).reshape(-1, 2)
+    found = np.isfinite(samples).all(axis=1)
+    samples = samples[found]
     sigma = _sigmas(np.asarray(sigma_px, dtype=float)[found], default_sigma_px)
-    points = triangulate_plane(rig, pixels) if len(pixels) else np.empty((0, 3))
-    heights_sigma = plane_height_sigma(rig, pixels, sigma) if len(pixels) else np.empty(0)
+    points = triangulate_plane(rig, samples) if len(samples) else np.empty((0, 3))
+    heights_sigma = plane_height_sigma(rig, samples, sigma) if len(samples) else np.empty(0)
     keep = np.isfinite(points).all(axis=1)
     return SurfacePoints(np.full(int(keep.sum()), LINE_LASER_ID), points[keep],
                          heights_sigma[keep], np.full(int(keep.sum()), np.nan))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import threading
 from concurrent.futures import Future, ThreadPoolExecutor
+from typing import Any
 
 import numpy as np
 from rclpy.node import Node
@@ -32,7 +33,7 @@ class SloshingNode(Node):
 
     def __init__(self, node_name: str = "sloshing", **node_kwargs) -> None:
         super().__init__(node_name, **node_kwargs)
-        values = {name: self.declare_parameter(name, default).value
+        values: dict[str, Any] = {name: self.declare_parameter(name, default).value
                   for name, default in PARAMETERS.items()}
         self._running = RunningAnalysis(float(values["estimate_period_s"]),
                                         window_s=float(values["estimate_window_s"]))

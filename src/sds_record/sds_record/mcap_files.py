@@ -213,7 +213,7 @@ def recorded_topics(path: str | Path) -> dict[str, tuple[str, bool]]:
     path = Path(path)
     summary = _summary(path)
     if summary is not None:
-        schemas, channels = summary.schemas, summary.channels.values()
+        schemas, channels = summary.schemas, list(summary.channels.values())
     else:
         records = list(r for r in _linear_records(path) if not isinstance(r, Message))
         schemas = {r.id: r for r in records if isinstance(r, Schema)}

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from rclpy.duration import Duration
 from rclpy.node import Node
+from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
 from rosgraph_msgs.msg import Clock
@@ -58,7 +59,7 @@ class PlayerNode(Node):
         self._stop = threading.Event()
         self._pending: dict[int, int] = {}   # stamp [ns] -> acks still awaited
         self._acks = threading.Condition()
-        self._outputs: dict[str, object] = {}
+        self._outputs: dict[str, Publisher] = {}
         try:
             self._remaps = parse_remaps(self._p["remap"])
             self._check_parameters()

@@ -60,12 +60,14 @@ def _register(type_name: str) -> None:
 def _nested_types(type_name: str) -> list[str]:
     """Message types named by a registered type's fields (rosbags' field descriptions)."""
     _, fields = _typestore().fielddefs[type_name]
-    nested = []
+    nested: list[str] = []
     for _, (kind, detail) in fields:
         if kind.name == "NAME":
-            nested.append(detail)
-        elif kind.name in ("ARRAY", "SEQUENCE") and detail[0][0].name == "NAME":
-            nested.append(detail[0][1])
+            nested.append(str(detail))
+        elif kind.name in ("ARRAY", "SEQUENCE") and isinstance(detail, tuple):
+            element = detail[0]   # detail: ((element kind, element type), size)
+            if isinstance(element, tuple) and getattr(element[0], "name", "") == "NAME":
+                nested.append(str(element[1]))
     return nested
 
 

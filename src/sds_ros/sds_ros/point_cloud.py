@@ -58,7 +58,8 @@ def points_to_cloud(header, laser_ids: ArrayLike, points_mm: ArrayLike,
     msg = PointCloud2(header=header, height=1, width=len(rows), is_bigendian=False,
                       point_step=dtype.itemsize, row_step=dtype.itemsize * len(rows),
                       is_dense=True)
-    msg.fields = [PointField(name=name, offset=dtype.fields[name][1], datatype=_DATATYPES[kind],
+    offsets = {name: dtype.fields[name][1] for name in dtype.names or ()} if dtype.fields else {}
+    msg.fields = [PointField(name=name, offset=offsets[name], datatype=_DATATYPES[kind],
                              count=1) for name, kind in CLOUD_FIELDS]
     msg.data = rows.tobytes()
     return msg

@@ -81,8 +81,8 @@ class FrameRenderer:
     def _background(self) -> np.ndarray:
         """Static scene: dim textured surroundings, black liquid, the container's rim."""
         level = self.scenario.sensor.background
-        texture = self.rng.normal(0.0, 1.0, (self.height // 8 + 1, self.width // 8 + 1))
-        texture = cv2.resize(texture.astype(np.float32), (self.width, self.height),
+        coarse = self.rng.normal(0.0, 1.0, (self.height // 8 + 1, self.width // 8 + 1))
+        texture = cv2.resize(coarse.astype(np.float32), (self.width, self.height),
                              interpolation=cv2.INTER_CUBIC)
         image = level * (1.0 + 0.15 * texture)
         rim_px = self.scenario.rig.rim_px(self.camera, samples=721)
@@ -178,6 +178,8 @@ class FrameRenderer:
 
     def _line_points(self, surface, time_s: float) -> np.ndarray:
         line = self.scenario.rig.line_laser
+        if line is None:   # a rig without a line laser: no line points
+            return np.zeros((0, 3))
         origins = np.repeat(line.emitter_mm[None, :], len(self.line_directions), axis=0)
         return ray_surface_points(surface, origins, self.line_directions, time_s)
 
@@ -279,9 +281,9 @@ class _Layer:
     def speckle(self, rng: np.random.Generator, strength: float) -> None:
         """Multiply every window by a grainy (≈1 px) positive speckle pattern."""
         for index, (bounds, values) in enumerate(self._windows):
-            grain = cv2.GaussianBlur(rng.standard_normal(values.shape).astype(np.float32),
-                                     (0, 0), 0.7)
-            grain /= max(float(grain.std()), 1e-6)
+            blurred = cv2.GaussianBlur(rng.standard_normal(values.shape).astype(np.float32),
+                                       (0, 0), 0.7)
+            grain = blurred / max(float(blurred.std()), 1e-6)
             self._windows[index] = (bounds, values * np.clip(1 + strength * grain, 0, None))
 
     def windows(self):

@@ -92,9 +92,9 @@ def simulate(scenario: Scenario, directory: Path, codec: str = "h264",
     try:
         for index in tqdm(range(scenario.frame_count), desc="rendering", unit="frame",
                           disable=not progress):
-            frame, truth = renderer.render(index)
+            frame, frame_truth = renderer.render(index)
             sink.write(frame)
-            truths.append(truth)
+            truths.append(frame_truth)
     finally:
         sink.close()
     arduino, truth = directory / "arduino", directory / "truth"

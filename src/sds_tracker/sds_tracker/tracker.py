@@ -63,7 +63,7 @@ def tracker_config(values: Mapping[str, Any]) -> TrackerConfig:
                            path_tolerance_px=float(p["path_tolerance_px"])),
         line=LineSettings(band_px=int(p["line_band_px"]), threshold=float(p["threshold"])),
         hampel_window=int(p["hampel_window"]),
-        path_heights_mm=tuple(float(v) for v in p["path_heights_mm"]))
+        path_heights_mm=(float(p["path_heights_mm"][0]), float(p["path_heights_mm"][1])))
 
 
 def parse_seeds(values: list[float]) -> dict[int, tuple[float, float]]:

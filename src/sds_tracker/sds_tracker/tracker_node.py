@@ -106,6 +106,8 @@ class TrackerNode(Node):
         self._track(msg)
 
     def _track(self, msg: Image, acknowledge: bool = True) -> None:
+        """Track one frame (the camera model, and so the region's offset, is known)."""
+        assert self._offset is not None   # _on_image keeps frames until the model comes
         image = msg_to_image(msg)
         red = image[..., 2] if image.ndim == 3 else image
         frame = self._frame

@@ -36,11 +36,11 @@ def run(args: argparse.Namespace) -> int:
     log = read_arduino_log(args.arduino)
     links = link_clocks(args.video, log, load_rig(args.rig),
                         tuple(args.led_roi) if args.led_roi else None)
-    if links.acceleration is None and links.led_offset_s is None:
-        raise CommandError("no link: the video has no camera IMU (or no excitation in both "
-                           "records) and no --led-roi with an LED switch")
     best = links.acceleration.offset_s if links.acceleration is not None else \
         links.led_offset_s
+    if best is None:
+        raise CommandError("no link: the video has no camera IMU (or no excitation in both "
+                           "records) and no --led-roi with an LED switch")
     a = links.acceleration
     print("acceleration: " + (f"camera − device = {a.offset_s:+.5f} s ± {a.sigma_s * 1e3:.2f} ms"
                               f" (device time {a.window_s[0]:.2f}–{a.window_s[1]:.2f} s)"

@@ -117,7 +117,12 @@ def process_one(source: Path, is_video: bool, rig_file: Path | None, out: Path,
         video_frames,
     )
 
-    rig = load_rig(rig_file) if is_video else recording_rig(source, rig_file)
+    if not is_video:
+        rig = recording_rig(source, rig_file)
+    elif rig_file is None:
+        raise CommandError("--video needs --rig (the rig the video was taken with)")
+    else:
+        rig = load_rig(rig_file)
     writer = ResultsWriter(out, args.overwrite)
     frames = video_frames(source, rig, args.fps) if is_video else mcap_frames(source)
     tables = RunTables(writer, rig)

@@ -65,6 +65,8 @@ def correct_outliers(calibration: Calibration, images: dict[str, Path], board: C
             views.append(view)
             continue
         gray = cv2.imread(str(images[view.name]), cv2.IMREAD_GRAYSCALE)
+        if gray is None:
+            raise ValueError(f"{images[view.name]}: cannot be read again")
         predicted = calibration.camera.project(pose.apply(view.object_points[bad]))
         redetected = refine_corners(gray, predicted,
                                     subpix_half_windows(view.image_points, board)[bad])

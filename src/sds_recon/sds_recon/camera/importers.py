@@ -68,9 +68,9 @@ def matlab_fisheye_camera(mapping_coefficients: ArrayLike, image_size: ArrayLike
     MATLAB's StretchMatrix [[c, d], [e, 1]] acts on (x, y) offsets, so it is the seed's Q with
     e_seed = d and m_seed = e; a0 > 0 and the axis is +z, as in SDS.
     """
-    a0, a2, a3, a4 = (float(v) for v in mapping_coefficients)
-    rows, cols = (int(v) for v in image_size)
-    cx, cy = (float(v) - 1.0 for v in distortion_center)
+    a0, a2, a3, a4 = np.asarray(mapping_coefficients, dtype=float).tolist()
+    rows, cols = np.asarray(image_size, dtype=float).astype(int).tolist()
+    cx, cy = (np.asarray(distortion_center, dtype=float) - 1.0).tolist()
     stretch = np.asarray(stretch_matrix, dtype=float)
     if stretch[1, 1] != 1.0:
         raise CameraModelError(f"StretchMatrix must be [c d; e 1], got {stretch.tolist()}")

@@ -167,7 +167,7 @@ def analyze_series(name: str, time_s: np.ndarray, values: np.ndarray, unit: str,
         notes += [disagreement] if disagreement else []
     except DecayError as error:
         notes.append(f"{pencil_method}: {error}")
-    if component is None:
+    if component is None or fit is None:
         if fit is not None:
             notes.append(f"no oscillation above the noise (SNR < {options.min_snr:g})")
         return ModeResult(name, time_s, values, unit, fit, None, (), tuple(notes))
@@ -244,13 +244,13 @@ def tilt_steps(recording: SurfaceRecording) -> list[TiltStep]:
             plane = fit_plane(points)
             tilts[frame] = np.degrees([plane.tilt_x_rad, plane.tilt_y_rad])
     plateaus: list[list[int]] = []
-    for frame in np.flatnonzero(np.isfinite(tilts).all(axis=1)):
+    for still in np.flatnonzero(np.isfinite(tilts).all(axis=1)).tolist():
         current = plateaus[-1] if plateaus else None
-        if current and np.all(np.abs(tilts[frame] - np.median(tilts[current], axis=0))
+        if current and np.all(np.abs(tilts[still] - np.median(tilts[current], axis=0))
                               <= TILT_STEP_DEG):
-            current.append(int(frame))
+            current.append(still)
         else:
-            plateaus.append([int(frame)])
+            plateaus.append([still])
     period_s = float(np.median(np.diff(recording.time_s))) if len(recording.time_s) > 1 else 1.0
     steps = []
     for frames in (p for p in plateaus if len(p) * period_s >= MIN_PLATEAU_S - 1e-9):
@@ -313,7 +313,7 @@ def analyze(recording: SurfaceRecording, rig: Rig, options: AnalysisOptions | No
                                 start, options.end_s, options, expected.get(coordinate.name))
         modes.append(ModeResult(**{**vars(result),
                                    "azimuth_deg": float(np.degrees(coordinate.azimuth_rad))}))
-    tof = ()
+    tof: tuple[ModeResult, ...] = ()
     if len(recording.tof_time_s) >= 16:
         tof = (tof_quick_estimate(recording.tof_time_s, recording.tof_range_mm, options,
                                   expected.get("lateral_1"), (float(start), end)),)

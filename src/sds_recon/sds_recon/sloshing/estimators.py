@@ -270,7 +270,8 @@ def _extrema(time_s: np.ndarray, values: np.ndarray, period_s: float
         peaks, _ = signal.find_peaks(sign * values, distance=distance)
         found += [(*_parabolic_peak(time_s, sign * values, int(p)), sign) for p in peaks]
     found.sort()
-    times, heights = [], []
+    times: list[float] = []
+    heights: list[tuple[float, float]] = []   # height, sign (+1 maximum, -1 minimum)
     for when, height, sign in found:   # keep alternation: a max must follow a min
         if heights and sign == heights[-1][1]:
             if height > heights[-1][0]:

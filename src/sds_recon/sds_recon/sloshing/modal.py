@@ -37,7 +37,8 @@ def modal_series(time_s: np.ndarray, points_mm: np.ndarray, radius_mm: float,
                  modes: tuple[tuple[int, int], ...] = DEFAULT_MODES) -> ModalSeries:
     """Fit the mean level and the modes to every frame's points (F × L × 3 mm, NaN = missing)."""
     names: tuple[str, ...] = ()
-    amplitudes, rmse = [], np.full(len(time_s), np.nan)
+    amplitudes: list[np.ndarray | None] = []
+    rmse = np.full(len(time_s), np.nan)
     for frame, points in enumerate(points_mm):
         try:
             fit = fit_modes(points, radius_mm, modes)
