@@ -18,6 +18,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from ros_helpers import Probe, SdsGraphRun
 from rosbags.highlevel import AnyReader
 from rrd_helpers import rrd_entities
+from scipy.spatial.transform import Rotation
 from sds_camera.camera_imu import read_camera_imu
 from sds_recon.results import load_results
 from sds_recon.rig import load_rig
@@ -265,6 +266,23 @@ def test_the_recording_carries_its_rig(drop_run: DropRun) -> None:
     world = np.array([[10.0, -20.0, 1.0], [40.0, 5.0, -2.0]])
     np.testing.assert_allclose(recorded.project(world), rig.project(world), atol=1e-6)
     assert recorded.container == rig.container and recorded.fluid == rig.fluid
+
+
+def test_the_recording_places_the_camera_in_the_world_on_tf_static(drop_run: DropRun) -> None:
+    """/tf_static in the MCAP (read with rosbags, not our reader): world → camera_optical in
+    metres, the camera 170 mm above the surface looking down (REP-103), as Foxglove wants."""
+    rig = load_rig(drop_run.rig_file)
+    with AnyReader([drop_run.recording]) as reader:
+        connections = [c for c in reader.connections if c.topic == "/tf_static"]
+        assert connections and connections[0].msgtype == "tf2_msgs/msg/TFMessage"
+        messages = [reader.deserialize(raw, c.msgtype)
+                    for c, _, raw in reader.messages(connections=connections)]
+    transform = messages[0].transforms[0]
+    assert transform.header.frame_id == "world" and transform.child_frame_id == "camera_optical"
+    t, q = transform.transform.translation, transform.transform.rotation
+    np.testing.assert_allclose([t.x, t.y, t.z], rig.camera_position_mm / 1000, atol=1e-9)
+    optical_axis = Rotation.from_quat([q.x, q.y, q.z, q.w]).apply([0.0, 0.0, 1.0])
+    np.testing.assert_allclose(optical_axis, [0.0, 0.0, -1.0], atol=1e-9)   # looks down
 
 
 def test_an_unfinished_recording_is_read_to_its_last_chunk_and_said_so(
