@@ -389,3 +389,7 @@ def test_sds_run_measures_a_recorded_video_with_the_whole_graph(drop_run: DropRu
     assert (out / "analysis" / "report.html").is_file()
     results = load_results(out / "results")
     assert sorted(set(results.spots["frame"])) == list(range(30))
+    models = [m for m in read_ros2_messages(str(out / "recording.mcap"))
+              if m.channel.topic == "/camera/camera_model"]   # the intrinsics are recorded
+    assert models and models[0].ros_msg.model_type == load_rig(drop_run.rig_file).camera.model_name
+    assert "polynomial" in models[0].ros_msg.model_yaml

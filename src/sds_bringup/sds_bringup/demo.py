@@ -229,6 +229,7 @@ def run_demo(out: Path, seconds: float | None) -> int:
     outputs = run_graph(["recorder.overwrite=true", "camera.linger_s=60.0",
                          f"camera.source={simulation.video.resolve()}",
                          f"camera.roi={list(rig.container_region_px(rig.camera))}",
+                         f"camera.camera_model={scenario.rig.camera_file}",
                          f"camera.led_roi={[led_x - half, led_y - half, 2 * half, 2 * half]}",
                          f"tracker.rig={scenario.rig_file.resolve()}",
                          f"recon.rig={scenario.rig_file.resolve()}",
@@ -293,6 +294,8 @@ def run_live(source: str, rig_file: Path, out: Path, port: str | None,
                  f"camera.roi={list(rig.container_region_px(rig.camera))}",
                  f"tracker.rig={rig_file.resolve()}", f"recon.rig={rig_file.resolve()}",
                  f"viewer.rig={rig_file.resolve()}"]
+    if rig.camera_file is not None:   # the recorded camera_model then carries the intrinsics
+        overrides.append(f"camera.camera_model={rig.camera_file}")
     if port:
         overrides.append(f"arduino.port={port}")
     is_file = Path(source).is_file()
