@@ -64,9 +64,9 @@ def stage_times(video: Path, rig) -> dict[str, float]:
     from builtin_interfaces.msg import Time
     from rclpy.serialization import serialize_message
     from sds_camera.frame_source import Region, open_source, select
-    from sds_camera.image_msg import image_to_msg
     from sds_recon.reconstruction import reconstruct_frame, reconstruct_line
     from sds_record.mcap_files import McapRecorder
+    from sds_ros.image_msg import image_to_msg
     from sds_tracker.spots import LOST
     from sds_tracker.tracker import FrameTracker
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from builtin_interfaces.msg import Time
 from rclpy.serialization import deserialize_message, serialize_message
-from sds_camera.image_msg import image_to_msg, msg_to_image
+from sds_ros.image_msg import image_to_msg, msg_to_image
 from sensor_msgs.msg import Image
 
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from rclpy.serialization import serialize_message
-from sds_camera.camera_imu import CameraImu
-from sds_camera.imu_msg import imu_messages
+from sds_camera.camera_imu import CameraImu, imu_samples
 from sds_record.mcap_files import McapRecorder
+from sds_ros.imu_msg import imu_messages
 
 from sds_bringup.offline import CAMERA_IMU_TOPIC
 
@@ -19,7 +19,7 @@ def write_imu_mcap(imu: CameraImu, output: Path, origin_ns: int, overwrite: bool
     count = 0
     try:
         recorder.add_topic(CAMERA_IMU_TOPIC, "sensor_msgs/msg/Imu")
-        for stamp_ns, msg in imu_messages(imu, origin_ns, frame_id):
+        for stamp_ns, msg in imu_messages(imu_samples(imu), origin_ns, frame_id):
             recorder.write(CAMERA_IMU_TOPIC, serialize_message(msg), stamp_ns, stamp_ns)
             count += 1
     finally:

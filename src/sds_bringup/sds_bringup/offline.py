@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from sds_camera.camera_imu import CameraImu
+from sds_camera.camera_imu import CameraImu, imu_samples
 from sds_camera.frame_source import (
     FrameSource,
     FrameSourceError,
@@ -22,8 +22,6 @@ from sds_camera.frame_source import (
     read_ahead,
     select,
 )
-from sds_camera.image_msg import msg_to_image
-from sds_camera.imu_msg import imu_samples
 from sds_recon.reconstruction import (
     SurfaceFits,
     SurfacePoints,
@@ -37,6 +35,7 @@ from sds_recon.sloshing.estimators import DecayError
 from sds_recon.sloshing.recording import RecordingError, recording_from_rows
 from sds_recon.sloshing.report import write_report
 from sds_record.mcap_files import decoded_messages, recorded_topics
+from sds_ros.image_msg import msg_to_image
 from sds_ros.point_cloud import read_cloud, stamp_s
 from sds_tracker.spots import LOST
 from sds_tracker.tracker import FrameTracker, TrackedSpot, parse_seeds, tracker_config

@@ -128,3 +128,13 @@ def read_camera_imu(video: str | Path) -> CameraImu | None:
     if video.is_file() and video.suffix.lower() in (".mp4", ".mov"):
         return read_gopro_imu(video)
     return None
+
+
+def imu_samples(imu: CameraImu) -> list[tuple[float, str, np.ndarray]]:
+    """Every sample (time [s], "accel" or "gyro", value) in time order."""
+    samples = [(float(t), "accel", v) for t, v in zip(imu.accel_time_s, imu.accel_m_s2,
+                                                       strict=True)]
+    samples += [(float(t), "gyro", v) for t, v in zip(imu.gyro_time_s, imu.gyro_rad_s,
+                                                      strict=True)]
+    samples.sort(key=lambda sample: sample[0])
+    return samples

@@ -11,10 +11,9 @@ import numpy as np
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
+from sds_ros.image_msg import msg_to_image
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
-
-from sds_camera.image_msg import msg_to_image
 
 
 class FrameMonitorNode(Node):

@@ -16,10 +16,12 @@ from rclpy.subscription import RCLError
 from rclpy.time import Time
 from sds_recon.camera import CameraModel as CameraModelBase
 from sds_recon.camera import load_camera
+from sds_ros.image_msg import image_to_msg
+from sds_ros.imu_msg import imu_message
 from sensor_msgs.msg import Image, Imu
 from std_msgs.msg import Header
 
-from sds_camera.camera_imu import CameraImuError, read_camera_imu
+from sds_camera.camera_imu import CameraImuError, imu_samples, read_camera_imu
 from sds_camera.frame_source import (
     CHANNELS,
     Frame,
@@ -28,8 +30,6 @@ from sds_camera.frame_source import (
     open_source,
     select,
 )
-from sds_camera.image_msg import image_to_msg
-from sds_camera.imu_msg import imu_message, imu_samples
 from sds_camera.led import LedDetector
 from sds_msgs.msg import CameraModel, SyncEvent
 

@@ -7,8 +7,8 @@ from collections import deque
 
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from sds_camera.image_msg import msg_to_image
 from sds_recon.rig import load_rig
+from sds_ros.image_msg import msg_to_image
 from sds_ros.qos import start_when_consumed, stream_qos
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import numpy as np
-from sds_camera.image_msg import msg_to_image
 from sds_recon.reconstruction import LINE_LASER_ID
+from sds_ros.image_msg import msg_to_image
 from sds_ros.point_cloud import read_cloud, stamp_s
 
 from sds_msgs.msg import LaserSpot

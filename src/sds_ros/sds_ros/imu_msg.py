@@ -8,27 +8,15 @@ frame (`frame_id`), stamps = `origin_ns` + the sample's time on the video's cloc
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 
 import numpy as np
 from builtin_interfaces.msg import Time
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Header
 
-from sds_camera.camera_imu import CameraImu
-
 UNKNOWN = [-1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
 """A covariance that says "not measured" (sensor_msgs/Imu)."""
-
-
-def imu_samples(imu: CameraImu) -> list[tuple[float, str, np.ndarray]]:
-    """Every sample (time [s], "accel" or "gyro", value) in time order."""
-    samples = [(float(t), "accel", v) for t, v in zip(imu.accel_time_s, imu.accel_m_s2,
-                                                       strict=True)]
-    samples += [(float(t), "gyro", v) for t, v in zip(imu.gyro_time_s, imu.gyro_rad_s,
-                                                      strict=True)]
-    samples.sort(key=lambda sample: sample[0])
-    return samples
 
 
 def imu_message(time_s: float, sensor: str, value: np.ndarray, origin_ns: int,
@@ -48,8 +36,10 @@ def imu_message(time_s: float, sensor: str, value: np.ndarray, origin_ns: int,
     return stamp_ns, msg
 
 
-def imu_messages(imu: CameraImu, origin_ns: int, frame_id: str) -> Iterator[tuple[int, Imu]]:
-    """Every sample whose stamp is not negative, in time order."""
-    for time_s, sensor, value in imu_samples(imu):
+def imu_messages(samples: Iterable[tuple[float, str, np.ndarray]], origin_ns: int,
+                 frame_id: str) -> Iterator[tuple[int, Imu]]:
+    """Every sample (time [s], "accel" or "gyro", value; `camera_imu.imu_samples`) whose stamp
+    is not negative, in order."""
+    for time_s, sensor, value in samples:
         if origin_ns + time_s * 1e9 >= 0:
             yield imu_message(time_s, sensor, value, origin_ns, frame_id)
