@@ -53,7 +53,8 @@ def test_a_source_that_cannot_be_opened_ends_the_drop_graph_with_its_cause(repo,
     output = graph.output()
     assert "camera (camera) exited with code 2: video file /nonexistent/drop.mp4 does not " \
            "exist; stopping the graph" in output
-    assert "wrote 0 messages" in output          # the recorder closed its file
+    if (tmp_path / "drop.mcap").exists():   # the recorder had started: it closed its file
+        assert "wrote 0 messages" in output, output
     assert "Traceback" not in output and "rosout" not in output, output
 
 
