@@ -7,9 +7,9 @@ from dataclasses import fields
 
 import numpy as np
 import serial
-from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
+from sds_ros.hosted_node import HostedNode
 from sensor_msgs.msg import Imu, Range
 
 from sds_arduino.clock import DeviceClock, camera_offset_s
@@ -19,7 +19,7 @@ from sds_arduino.stream import RecordStream
 from sds_msgs.msg import SyncEvent
 
 
-class ArduinoBridgeNode(Node):
+class ArduinoBridgeNode(HostedNode):
     """Read the protocol-v1 line (pyserial), survive what a real port does, publish records.
 
     `imu` (sensor_msgs/Imu: linear acceleration [m/s²] with its covariance; orientation and
@@ -32,8 +32,6 @@ class ArduinoBridgeNode(Node):
 
     def __init__(self, node_name: str = "arduino", **node_kwargs) -> None:
         super().__init__(node_name, **node_kwargs)
-        self.finished = threading.Event()
-        self.exit_code = 0
         sensor = {f.name: f.default for f in fields(SensorSpec)}
         defaults = {"port": "/dev/ttyACM0", "baud": 115200, **sensor,
                     "reconnect_period_s": 0.2, "stats_period_s": 5.0, "align_to_camera": True}

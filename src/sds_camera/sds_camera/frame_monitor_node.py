@@ -3,26 +3,23 @@
 from __future__ import annotations
 
 import json
-import threading
 import time
 from pathlib import Path
 
 import numpy as np
-from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
+from sds_ros.hosted_node import HostedNode
 from sds_ros.image_msg import msg_to_image
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 
 
-class FrameMonitorNode(Node):
+class FrameMonitorNode(HostedNode):
     """Count received frames, ack each one on frame_ack, and write a JSON summary at the end."""
 
     def __init__(self, node_name: str = "frame_monitor", **node_kwargs) -> None:
         super().__init__(node_name, **node_kwargs)
-        self.finished = threading.Event()
-        self.exit_code = 0
         self.declare_parameter("ack", True)
         self.declare_parameter("summary_path", "")
         self.declare_parameter("report_period_s", 2.0)

@@ -10,12 +10,12 @@ from pathlib import Path
 
 import numpy as np
 from rclpy.duration import Duration
-from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.subscription import RCLError
 from rclpy.time import Time
 from sds_recon.camera import CameraModel as CameraModelBase
 from sds_recon.camera import load_camera
+from sds_ros.hosted_node import HostedNode
 from sds_ros.image_msg import image_to_msg
 from sds_ros.imu_msg import imu_message
 from sensor_msgs.msg import Image, Imu
@@ -47,13 +47,11 @@ class _EndOfStream:
         self.error = error
 
 
-class FrameSourceNode(Node):
+class FrameSourceNode(HostedNode):
     """Publish frames as sensor_msgs/Image, paced in real time or as fast as consumers ack."""
 
     def __init__(self, node_name: str = "frame_source", **node_kwargs) -> None:
         super().__init__(node_name, **node_kwargs)
-        self.finished = threading.Event()
-        self.exit_code = 0
         self.published = 0
         self._declare_parameters()
         self._stop = threading.Event()

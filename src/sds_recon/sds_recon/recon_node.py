@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-import threading
-
 import numpy as np
-from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sds_ros.hosted_node import HostedNode
 from sds_ros.point_cloud import points_to_cloud
 from sds_ros.qos import start_when_consumed, stream_qos
 from sensor_msgs.msg import PointCloud2
@@ -50,13 +48,11 @@ def surface_fit_msg(msg: LaserSpotArray, points: SurfacePoints, fits: SurfaceFit
     return fit
 
 
-class ReconstructionNode(Node):
+class ReconstructionNode(HostedNode):
     """Triangulate every valid spot (Eq. 9) and line sample (Eqs. 10–11); fit the surface."""
 
     def __init__(self, node_name: str = "recon", **node_kwargs) -> None:
         super().__init__(node_name, **node_kwargs)
-        self.finished = threading.Event()
-        self.exit_code = 0
         self.declare_parameter("rig", "")
         self.declare_parameter("beam_weight", 0.5)
         self.declare_parameter("default_sigma_px", 0.1)

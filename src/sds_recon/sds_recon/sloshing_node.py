@@ -7,7 +7,7 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
-from rclpy.node import Node
+from sds_ros.hosted_node import HostedNode
 from sds_ros.point_cloud import stamp_s
 from sds_ros.qos import start_when_consumed, stream_qos
 
@@ -22,7 +22,7 @@ PARAMETERS = {"estimate_period_s": 1.0, "estimate_window_s": 20.0, "wait_for_con
 """The node's parameters (config/params/sloshing.yaml documents them) and their defaults."""
 
 
-class SloshingNode(Node):
+class SloshingNode(HostedNode):
     """Accumulate each frame's modal amplitudes (from surface_fit) and, every
     `estimate_period_s` of recording time, estimate the lateral modes over the last
     `estimate_window_s` with every method; publish them on `sloshing`.

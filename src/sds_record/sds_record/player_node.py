@@ -7,11 +7,11 @@ import time
 from pathlib import Path
 
 from rclpy.duration import Duration
-from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
 from rosgraph_msgs.msg import Clock
+from sds_ros.hosted_node import HostedNode
 from sds_ros.qos import stream_qos
 from std_msgs.msg import Header
 
@@ -36,7 +36,7 @@ def parse_remaps(items: list[str]) -> dict[str, str]:
     return remaps
 
 
-class PlayerNode(Node):
+class PlayerNode(HostedNode):
     """Publish a recording's messages as they were (serialized), in log-time order.
 
     `pacing: recorded` keeps the recorded intervals divided by `rate`; `pacing: flood` goes as
@@ -46,8 +46,6 @@ class PlayerNode(Node):
 
     def __init__(self, node_name: str = "player", **node_kwargs) -> None:
         super().__init__(node_name, **node_kwargs)
-        self.finished = threading.Event()
-        self.exit_code = 0
         self.published = 0
         defaults = {"input": "", "topics": [""], "remap": [""], "rate": 1.0,
                     "pacing": "recorded", "start_s": 0.0, "stop_s": 0.0, "clock": True,

@@ -3,15 +3,14 @@
 from __future__ import annotations
 
 import importlib
-import threading
 from datetime import datetime
 from pathlib import Path
 
-from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from rclpy.time import Time
 from sds_recon.rig import rig_from_document
+from sds_ros.hosted_node import HostedNode
 from std_msgs.msg import Header, String
 
 from sds_record.mcap_files import McapRecorder, header_stamp_ns
@@ -32,7 +31,7 @@ def message_class(type_name: str) -> type:
     return getattr(importlib.import_module(f"{package}.{kind}"), name)
 
 
-class RecorderNode(Node):
+class RecorderNode(HostedNode):
     """Subscribe (reliably, serialized) to every topic it discovers, or to `topics`; write MCAP.
 
     Messages of the `ack_for` topics are acknowledged on frame_ack once written (the frame
@@ -45,8 +44,6 @@ class RecorderNode(Node):
 
     def __init__(self, node_name: str = "recorder", **node_kwargs) -> None:
         super().__init__(node_name, **node_kwargs)
-        self.finished = threading.Event()
-        self.exit_code = 0
         self.declare_parameter("output", "")
         self.declare_parameter("topics", [""])
         self.declare_parameter("exclude", [""])

@@ -1,7 +1,8 @@
 """The ROS layer: what every SDS node stands on, and nothing the algorithms need.
 
-`node_host` runs one or more nodes in a process until a required one finishes or a signal
-arrives (`node_process` is the program the launcher starts); `qos` holds the measuring chain's
+`hosted_node` is the base class of every node (done, exit status, close); `node_host` runs one
+or more nodes in a process until a required one finishes or a signal arrives (`node_process`
+is the program the launcher starts); `qos` holds the measuring chain's
 QoS and the start-up wait for consumers; the message codecs: `point_cloud` (the surface cloud
 on `/recon/points` and `/recon/line_points`, metres, REP-103, and its reader), `image_msg`
 (numpy ↔ sensor_msgs/Image), `imu_msg` (IMU samples → sensor_msgs/Imu). Algorithm packages

@@ -1,7 +1,8 @@
 """Host one or more nodes in one process until a required node finishes or a signal arrives.
 
-A hosted node class takes (node_name, cli_args=...) like rclpy's Node. It may offer
-`finished` (threading.Event), `exit_code` (int) and `close()`; the host uses them if present.
+A hosted node class takes (node_name, cli_args=...) like rclpy's Node; a `HostedNode`
+(sds_ros.hosted_node) also tells the host when it is done (`finished`), the exit status it asks
+for (`exit_code`), and is closed (`close()`) before it is destroyed.
 The launcher runs it as `python -m sds_ros.node_process SPEC_JSON`, where SPEC_JSON is
 a list of {"plugin": "module:Class", "name": ..., "ros_args": [...], "required": bool}.
 """
@@ -19,6 +20,8 @@ import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
+
+from sds_ros.hosted_node import HostedNode
 
 NodeFactory = Callable[..., Node]
 EXIT_STARTUP_ERROR = 3
@@ -68,9 +71,9 @@ def run_nodes(
         exit_code = EXIT_STARTUP_ERROR
     finally:
         for node in nodes:
-            if hasattr(node, "close"):
+            if isinstance(node, HostedNode):
                 node.close()
-            exit_code = max(exit_code, getattr(node, "exit_code", 0))
+                exit_code = max(exit_code, node.exit_code)
         executor.shutdown(timeout_sec=1.0)
         for node in nodes:
             node.destroy_node()
@@ -79,12 +82,11 @@ def run_nodes(
 
 
 def _failed(node: Node) -> bool:
-    return _finished(node) and getattr(node, "exit_code", 0) != 0
+    return isinstance(node, HostedNode) and node.finished.is_set() and node.exit_code != 0
 
 
 def _finished(node: Node) -> bool:
-    event = getattr(node, "finished", None)
-    return isinstance(event, threading.Event) and event.is_set()
+    return isinstance(node, HostedNode) and node.finished.is_set()
 
 
 def main() -> None:

@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import threading
 from collections import deque
 
-from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sds_recon.rig import load_rig
+from sds_ros.hosted_node import HostedNode
 from sds_ros.image_msg import msg_to_image
 from sds_ros.qos import start_when_consumed, stream_qos
 from sensor_msgs.msg import Image
@@ -25,13 +24,11 @@ WAITING_FRAMES = 30
 """Frames kept while the camera_model (region offset) has not arrived yet."""
 
 
-class TrackerNode(Node):
+class TrackerNode(HostedNode):
     """Track the rig's spots and line in every frame; frames must be the red channel or BGR."""
 
     def __init__(self, node_name: str = "tracker", **node_kwargs) -> None:
         super().__init__(node_name, **node_kwargs)
-        self.finished = threading.Event()
-        self.exit_code = 0
         for name, value in (("rig", ""), ("ack", True), *TRACKING_PARAMETERS.items(),
                             ("lost_report_frames", 15), ("wait_for_consumers", 0)):
             self.declare_parameter(name, value)

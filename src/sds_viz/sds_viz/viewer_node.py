@@ -5,9 +5,9 @@ from __future__ import annotations
 import threading
 
 import rerun as rr
-from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sds_recon.rig import RigError, load_rig
+from sds_ros.hosted_node import HostedNode
 from sensor_msgs.msg import Image, Imu, PointCloud2, Range
 
 from sds_msgs.msg import (
@@ -33,13 +33,11 @@ SUBSCRIPTIONS = (("image", Image, "sensor_msgs/msg/Image"),
 """Relative topic, message class and type name of everything the viewer shows."""
 
 
-class ViewerNode(Node):
+class ViewerNode(HostedNode):
     """Subscribe best-effort (never slowing the graph) and log every message to Rerun."""
 
     def __init__(self, node_name: str = "viewer", **node_kwargs) -> None:
         super().__init__(node_name, **node_kwargs)
-        self.finished = threading.Event()
-        self.exit_code = 0
         defaults = {"rig": "", "output": "", "connect": "", "spawn": False, "image_scale": 0.25,
                     "image_every": 1}
         for name, default in defaults.items():

@@ -1,0 +1,22 @@
+"""The base class of every SDS node: what the node host expects of the nodes it runs."""
+
+from __future__ import annotations
+
+import threading
+
+from rclpy.node import Node
+
+
+class HostedNode(Node):
+    """An rclpy node with the node host's protocol: `finished` is set when the node is done
+    (a required node then ends its process; a failed one, any process), `exit_code` is the
+    process's exit status it asks for (0: fine), `close()` runs before the node is destroyed
+    (stop threads, finish files)."""
+
+    def __init__(self, node_name: str, **node_kwargs) -> None:
+        super().__init__(node_name, **node_kwargs)
+        self.finished = threading.Event()
+        self.exit_code = 0
+
+    def close(self) -> None:
+        """Stop what the node runs beside its callbacks; nothing by default."""
