@@ -84,6 +84,19 @@ def test_bad_graph_files_are_named_in_the_error(tmp_path, text, message):
         load_graph(graph)
 
 
+def test_a_whole_number_for_a_float_parameter_is_taken_as_a_float(repo):
+    """`--set camera.linger_s=5`: ROS would refuse the integer for a double parameter and the
+    node would not start; the override gives 5.0 (an integer parameter keeps its integer)."""
+    entries = load_graph(repo / "config" / "graphs" / "camera_monitor.yaml")
+    camera = next(e for e in apply_overrides(entries, ["camera.linger_s=5",
+                                                       "camera.max_in_flight=3"])
+                  if e.name == "camera")
+    assert camera.parameters["linger_s"] == 5.0 and isinstance(camera.parameters["linger_s"],
+                                                                float)
+    assert camera.parameters["max_in_flight"] == 3 and isinstance(
+        camera.parameters["max_in_flight"], int)
+
+
 def test_bad_overrides_are_refused(repo):
     entries = load_graph(repo / "config" / "graphs" / "camera_monitor.yaml")
     for override in ("camera.rate", "nobody.rate=1", "camera=1"):

@@ -123,21 +123,25 @@ def apply_overrides(entries: list[NodeEntry], overrides: list[str]) -> list[Node
             hint = f"; did you mean {', '.join(close)}?" if close else ""
             raise GraphFileError(f"override {override!r}: node {node!r} has no parameter "
                                  f"{parameter!r}{hint}")
-        by_name[node] = replace(
-            entry, parameters={**entry.parameters, parameter: yaml.safe_load(value)}
-        )
+        parsed = yaml.safe_load(value)
+        # ROS refuses an integer for a double parameter (the node would not start): 5 → 5.0
+        if isinstance(documented.get(parameter), float) and isinstance(parsed, int) \
+                and not isinstance(parsed, bool):
+            parsed = float(parsed)
+        by_name[node] = replace(entry, parameters={**entry.parameters, parameter: parsed})
     return [by_name[entry.name] for entry in entries]
 
 
-def documented_parameters(entry: NodeEntry) -> set[str]:
-    """The parameters a node's parameter files document (empty without a file): every
-    parameter a node declares is in its config/params file, with what it means."""
-    names: set[str] = set()
+def documented_parameters(entry: NodeEntry) -> dict[str, Any]:
+    """The parameters a node's parameter files document, with their values there (empty
+    without a file): every parameter a node declares is in its config/params file, with what
+    it means."""
+    values: dict[str, Any] = {}
     for file in entry.params_files:
         document = yaml.safe_load(file.read_text()) or {}
         for section in document.values():
-            names.update((section or {}).get("ros__parameters", {}))
-    return names
+            values.update((section or {}).get("ros__parameters", {}))
+    return values
 
 
 def composed(entries: list[NodeEntry]) -> list[NodeEntry]:
