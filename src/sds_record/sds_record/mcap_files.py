@@ -191,14 +191,17 @@ def read_messages(path: str | Path, topics: Iterable[str] | None = None
                               channel.metadata.get(DURABILITY_KEY) == "transient_local")
 
 
-def decoded_messages(path: str | Path, topics: Iterable[str] | None = None
+def decoded_messages(path: str | Path, topics: Iterable[str] | None = None,
+                     types: Iterable[str] | None = None
                      ) -> Iterator[tuple[RecordedMessage, Any]]:
     """Messages with their objects, decoded by the schemas the file embeds (fields as in
-    rclpy's classes); messages of a schema-less channel are skipped."""
+    rclpy's classes); only `types` ('pkg/msg/Type') if given, so that a reader of small
+    messages does not decode the frames; messages of a schema-less channel are skipped."""
     factory = DecoderFactory()
     decoders: dict[int, Any] = {}
+    wanted_types = set(types) if types is not None else None
     for schema, channel, message in _records(Path(path), topics):
-        if schema is None:
+        if schema is None or (wanted_types is not None and schema.name not in wanted_types):
             continue
         if schema.id not in decoders:
             decoders[schema.id] = factory.decoder_for(channel.message_encoding, schema)

@@ -21,6 +21,9 @@ from sds_ros.point_cloud import read_cloud, stamp_s
 from sds_record.mcap_files import decoded_messages
 
 RIG_TOPIC = "/recon/rig"
+CLOUD_TYPE = "sensor_msgs/msg/PointCloud2"
+RANGE_TYPE = "sensor_msgs/msg/Range"
+IMU_TYPE = "sensor_msgs/msg/Imu"
 
 
 def read_surface_recording(path: str | Path) -> SurfaceRecording:
@@ -30,15 +33,14 @@ def read_surface_recording(path: str | Path) -> SurfaceRecording:
     rows: dict[str, list[np.ndarray]] = defaultdict(list)
     tof_time, tof_range = [], []
     try:
-        for recorded, msg in decoded_messages(path):
-            cloud = read_cloud(msg) if recorded.type_name == "sensor_msgs/msg/PointCloud2" \
-                else None
+        for recorded, msg in decoded_messages(path, types=(CLOUD_TYPE, RANGE_TYPE)):
+            cloud = read_cloud(msg) if recorded.type_name == CLOUD_TYPE else None
             if cloud is not None and (~cloud.rejected).any():
                 kept = ~cloud.rejected
                 rows["time"].append(np.full(int(kept.sum()), stamp_s(msg)))
                 rows["id"].append(cloud.laser_ids[kept])
                 rows["xyz"].append(cloud.points_mm[kept])
-            elif recorded.type_name == "sensor_msgs/msg/Range" and np.isfinite(msg.range):
+            elif recorded.type_name == RANGE_TYPE and np.isfinite(msg.range):
                 tof_time.append(stamp_s(msg))
                 tof_range.append(msg.range * 1e3)
     except (McapError, OSError, ValueError) as error:
@@ -60,9 +62,8 @@ def read_accelerations(path: str | Path) -> dict[str, tuple[np.ndarray, np.ndarr
     streams: dict[str, tuple[list[float], list[tuple[float, float, float]]]] = defaultdict(
         lambda: ([], []))
     try:
-        for recorded, msg in decoded_messages(path):
-            if recorded.type_name != "sensor_msgs/msg/Imu" or \
-                    msg.linear_acceleration_covariance[0] == -1:
+        for recorded, msg in decoded_messages(path, types=(IMU_TYPE,)):
+            if msg.linear_acceleration_covariance[0] == -1:
                 continue
             a = msg.linear_acceleration
             times, values = streams[recorded.topic]
