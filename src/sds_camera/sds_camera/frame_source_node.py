@@ -79,8 +79,9 @@ class FrameSourceNode(HostedNode):
         self._sync_pub = self.create_publisher(SyncEvent, "sync", QoSProfile(
             depth=10, reliability=ReliabilityPolicy.RELIABLE,
             durability=DurabilityPolicy.TRANSIENT_LOCAL))
-        x, y, width, height = ([int(v) for v in self.get_parameter("led_roi").value] + [0] * 4)[:4]
-        self._led = LedDetector((x, y, width, height)) if width > 0 else None
+        roi = [int(v) for v in self.get_parameter("led_roi").value]
+        self._led = LedDetector((roi[0], roi[1], roi[2], roi[3])) \
+            if len(roi) == 4 and roi[2] > 0 else None
         self._led_switches: dict[int, bool] = {}
         # Kept for a late subscriber (a recorder that matches after the first frames): the
         # samples of the first seconds come in a burst with the first frame.
