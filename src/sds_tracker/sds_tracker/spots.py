@@ -163,20 +163,24 @@ class SpotTracker:
         candidates = []
         for label in range(1, count):
             centre = centroids[label] + [x0, y0] + origin
-            if distance_to_path(centre, path) > s.path_tolerance_px + 2 * np.sqrt(
+            off_path = distance_to_path(centre, path)
+            if off_path > s.path_tolerance_px + 2 * np.sqrt(
                     stats[label, cv2.CC_STAT_AREA] / np.pi):
                 continue
             mass = float(signal[labels == label].sum())
             previous = self.previous[laser_id]
             prior = 1.0 if previous is None else float(np.exp(
                 -np.sum((centre - previous) ** 2) / (2 * s.prior_sigma_px**2)))
-            candidates.append((mass * prior, mass, label, centre))
+            candidates.append((off_path <= s.path_tolerance_px, mass * prior, mass, label,
+                               centre))
         if not candidates:
             return lost
-        candidates.sort(key=lambda c: c[0], reverse=True)
-        _, mass, label, centre = candidates[0]
+        # A blob centred on the path comes first: a long stretch of laser line crossing the
+        # path outweighs the spot, but its centroid lies off the path.
+        candidates.sort(key=lambda c: (c[0], c[1]), reverse=True)
+        on_path, _, mass, label, centre = candidates[0]
         flags = 0
-        if any(c[1] >= s.min_competitor * mass for c in candidates[1:]):
+        if any(c[0] == on_path and c[2] >= s.min_competitor * mass for c in candidates[1:]):
             flags |= REFLECTION_SUSPECTED
         background = float(np.median(border))
         radius = max(s.aperture_factor * np.sqrt(stats[label, cv2.CC_STAT_AREA] / np.pi), 3.0)
@@ -264,7 +268,8 @@ def subtract_line_centroid(window: np.ndarray, line_x: np.ndarray, spot: np.ndar
     every row, the spot's included (but for saturated pixels): a spot on the line keeps its
     own light and loses the line's, a spot beside it no longer leans towards it. Then the
     centroid of what is left above `clip_fraction` of its peak, in a disc of half a window,
-    iterated from `spot`.
+    iterated from the brightest 5×5 patch of what is left (a spot beside a bright line, taken
+    for one blob with it, can lie more than half a window from `spot`).
     """
     rows, columns = np.indices(window.shape)
     border = np.concatenate([window[0], window[-1], window[:, 0], window[:, -1]])
@@ -293,7 +298,10 @@ def subtract_line_centroid(window: np.ndarray, line_x: np.ndarray, spot: np.ndar
     # A saturated pixel holds less than spot plus line: nothing of the line is taken from it.
     line_light[window >= s.saturation_level] = 0.0
     left = signal - line_light
-    centre = np.asarray(spot, dtype=float)
+    # A 5×5 mean: a compact spot outweighs the few saturated line pixels left standing.
+    patch = cv2.blur(left.astype(np.float32), (5, 5))
+    row, column = np.unravel_index(int(np.argmax(patch)), patch.shape)
+    centre = np.array([column, row], dtype=float)
     for _ in range(iterations):
         inside = (columns - centre[0]) ** 2 + (rows - centre[1]) ** 2 <= reach**2
         peak = float(left[inside].max()) if inside.any() else 0.0
