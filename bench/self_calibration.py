@@ -3,7 +3,8 @@
 Each trial: a random diode layout (not stelium.yaml's), beams leaning (σ 0.6°, up to 3°), the
 camera turned up to ±2° about each axis and moved ±5 mm in height, wall reflections; eight 4K
 tilt images about one axis calibrate the nominal rig file; an unseen series about the other
-axis is tracked and fitted with the result. Prints one row per rig and the summary.
+axis is tracked and fitted with the result; the same rig is also calibrated with three tilts
+about the second axis added (the two-axis protocol). Prints one row per rig and the summary.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from sds_bringup.calibration_trial import trial
+from sds_bringup.calibration_trial import SECOND_AXIS, trial
 
 RIG = Path(__file__).resolve().parents[1] / "config" / "rigs" / "stelium.yaml"
 
@@ -25,28 +26,43 @@ def main() -> None:
     args = parser.parse_args()
     rows = []
     print("seed  wrong/spots  calibrated  unidentified  camera err deg (sigma)  cam mm  "
-          "beam max deg  unseen tilt deg / RMSE mm: self | beam-only  drop RMSE mm, missed  s")
+          "beam max deg  plane deg (sigma)  unseen tilt deg / RMSE mm: self | beam-only  "
+          "drop RMSE mm, missed  two-axis: camera deg, beam max deg, plane deg  s")
     for seed in range(args.first_seed, args.first_seed + args.rigs):
         start = time.perf_counter()
-        r = trial(seed, RIG)
+        r = trial(seed, RIG, second_axis=True)
+        two = r["two_axis"]
+        # NaN: the plane's turn about the line was not determined and kept from the rig file
+        plane_sigma = "kept" if np.isnan(r["line_plane_sigma_deg"]) else \
+            f"{r['line_plane_sigma_deg']:.3f}"
         rows.append(r)
         print(f"{seed:>4}  {r['wrong']:>3}/{r['spots']:<6}  {len(r['calibrated']):>10}  "
               f"{len(r['unidentified']):>12}  "
               f"{np.abs(r['camera_error_deg']).max():>6.3f} ({r['camera_sigma_deg'].max():.3f})"
               f"  {np.abs(r['camera_error_mm']).max():>6.3f}  "
               f"{max(r['beam_error_deg'].values()):>12.3f}  "
+              f"{r['line_plane_error_deg']:>9.3f} ({plane_sigma})  "
               f"{r['self'].tilt_error_deg:.3f} / {r['self'].heights.rmse_mm:.3f} | "
               f"{r['beam_only'].tilt_error_deg:.3f} / {r['beam_only'].heights.rmse_mm:.3f}"
               f"  {r['drop'].heights.rmse_mm:.3f}, {r['drop'].missed}/{r['drop'].spots}"
-              f" ({r['drop'].rejected} rejected)"
+              f" ({r['drop'].rejected} rejected)  {np.abs(two.camera_deg).max():.4f}, "
+              f"{max(two.beams_deg.values()):.4f}, {two.line_plane_deg:.4f}"
               f"   {time.perf_counter() - start:.1f}", flush=True)
     beams = np.concatenate([list(r["beam_error_deg"].values()) for r in rows])
+    two_beams = np.concatenate([list(r["two_axis"].beams_deg.values()) for r in rows])
     print(f"\n{len(rows)} rigs: wrong identities {sum(r['wrong'] for r in rows)}, "
           f"unidentified diodes {sum(len(r['unidentified']) for r in rows)}")
     print(f"camera angle error max {max(np.abs(r['camera_error_deg']).max() for r in rows):.3f}"
           f" deg, position {max(np.abs(r['camera_error_mm']).max() for r in rows):.3f} mm; "
           f"beams: median {np.median(beams):.3f} deg, 95 % {np.percentile(beams, 95):.3f}, "
-          f"max {beams.max():.3f}")
+          f"max {beams.max():.3f}; line plane: max "
+          f"{max(r['line_plane_error_deg'] for r in rows):.3f} deg; "
+          f"weakly determined in {sum(bool(r['weak']) for r in rows)} rigs")
+    print(f"two-axis protocol (+{len(SECOND_AXIS)} tilts about Y): camera angle error max "
+          f"{max(np.abs(r['two_axis'].camera_deg).max() for r in rows):.4f} deg, position "
+          f"{max(np.abs(r['two_axis'].camera_mm).max() for r in rows):.3f} mm; beams: median "
+          f"{np.median(two_beams):.4f} deg, max {two_beams.max():.4f}; line plane max "
+          f"{max(r['two_axis'].line_plane_deg for r in rows):.4f} deg")
     for key in ("self", "beam_only"):
         tilt = [r[key].tilt_error_deg for r in rows]
         rmse = [r[key].heights.rmse_mm for r in rows]

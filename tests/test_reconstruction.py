@@ -10,7 +10,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from sds_recon.calibration.lasers import KnownSurface, calibrate_beams, calibrate_line_plane
+from sds_recon.calibration.lasers import (
+    KnownSurface,
+    calibrate_beams,
+    calibrate_line_plane,
+    fit_plane_robust,
+)
 from sds_recon.reconstruction import SurfacePoints, fit_surface
 from sds_recon.rig import LaserDiode, Rig, load_rig
 from sds_recon.sloshing.theory import ModeShape
@@ -129,6 +134,26 @@ def test_beam_calibration_recovers_leaning_beams(rig: Rig) -> None:
     assert np.all(errors < 4 * sigmas)
     assert 0.6 < np.mean(errors / sigmas) < 2.0
     assert np.degrees(errors.max()) < 0.2
+
+
+def test_plane_fit_ignores_the_line_on_the_wall() -> None:
+    rng = np.random.default_rng(2)
+    normal = np.array([0.94, 0.007, 0.348])
+    normal /= np.linalg.norm(normal)
+    across = np.cross(normal, [0.0, 1.0, 0.0])
+    across /= np.linalg.norm(across)
+    # Eight lines fanning out by ±6 mm on the plane, 0.01 mm noise; each ends in a few points
+    # 3-12 mm off the plane (the line climbing the container's wall).
+    points = [np.outer(np.linspace(-50, 50, 60), np.cross(normal, across))
+              + (k - 3.5) * 1.7 * across * np.linspace(-1, 1, 60)[:, None] for k in range(8)]
+    points = np.concatenate(points) + rng.normal(0, 0.01, (480, 3))
+    wall = rng.choice(480, 30, replace=False)
+    points[wall] += rng.uniform(3, 12, 30)[:, None] * normal
+    fit = fit_plane_robust(points)
+    assert np.degrees(np.arccos(abs(fit.normal @ normal))) < 0.05
+    assert fit.rejected == 30 and fit.rms_mm < 0.02
+    plain = np.linalg.svd(points - points.mean(axis=0))[2][2]
+    assert np.degrees(np.arccos(abs(plain @ normal))) > 0.5    # least squares is tipped
 
 
 def test_line_plane_calibration_recovers_the_plane(rig: Rig) -> None:

@@ -16,6 +16,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 from sds_camera.frame_source import Region, select
 from sds_recon.calibration.lasers import calibrate_beams
+from sds_recon.calibration.rig_calibration import RigCalibration
+from sds_recon.calibration.rig_model import LINE_PLANE
 from sds_recon.calibration.rig_report import calibrated_rig
 from sds_recon.reconstruction import fit_surface, reconstruct_spots
 from sds_recon.rig import Rig, load_rig
@@ -31,6 +33,9 @@ from sds_bringup.rig_calibration import calibrate_images
 
 ANGLES = [0.0, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0, 35.0]
 """The seed's tilt table (Table 3)."""
+SECOND_AXIS = [12.5, 22.5, 32.5]
+"""Tilts about the second axis added to ANGLES in the two-axis protocol (none of them in the
+unseen series)."""
 GROUND_KICK = CONFIG / "scenarios" / "ground_kick.yaml"
 
 
@@ -143,10 +148,43 @@ def sloshing_drop(rig: Rig, true: Rig, scale: float, seed: int, frames: int = 30
     return DropCheck(height_errors(errors, sigmas), missed, count, rejected_count)
 
 
+@dataclass(frozen=True)
+class GeometryErrors:
+    """A calibrated rig against the true one: camera turn [deg, rotation vector] and shift
+    [mm], each beam's direction error [deg], the line plane's normal error [deg]; with the
+    fitted σ of the camera's angles [deg] and the plane's normal [deg]."""
+
+    camera_deg: np.ndarray
+    camera_sigma_deg: np.ndarray
+    camera_mm: np.ndarray
+    beams_deg: dict[int, float]
+    line_plane_deg: float
+    line_plane_sigma_deg: float
+
+
+def geometry_errors(rig: Rig, true: Rig, result: RigCalibration) -> GeometryErrors:
+    """How far the calibrated rig's camera, beams and line plane are from the true rig's."""
+    turn = Rotation.from_matrix(rig.world_to_camera.rotation
+                                @ true.world_to_camera.rotation.T).as_rotvec()
+    beams = {i: float(np.degrees(np.arccos(np.clip(rig.diode(i).direction
+                                                   @ true.diode(i).direction, -1, 1))))
+             for i in result.laser_ids}
+    plane_deg, plane_sigma = np.nan, np.nan
+    if rig.line_laser is not None and true.line_laser is not None and result.line is not None:
+        cosine = abs(rig.line_laser.normal @ true.line_laser.normal)
+        plane_deg = float(np.degrees(np.arccos(np.clip(cosine, -1, 1))))
+        # NaN where a tilt was not determined and kept from the rig file
+        plane_sigma = float(np.degrees(np.max([result.fit.sigma_of(n) for n in LINE_PLANE[:2]])))
+    return GeometryErrors(np.degrees(turn), np.degrees(result.fit.sigmas[:3]),
+                          rig.camera_position_mm - true.camera_position_mm, beams, plane_deg,
+                          plane_sigma)
+
+
 def trial(seed: int, rig_file: Path, scale: float = 1.0, errors: RigErrors | None = None,
-          drop: bool = True) -> dict[str, Any]:
+          drop: bool = True, second_axis: bool = False) -> dict[str, Any]:
     """Calibrate a random true rig (seeded) from a one-axis tilt series and check it on an
-    unseen tilt series about the other axis and (with `drop`) a 1 g sloshing drop."""
+    unseen tilt series about the other axis and (with `drop`) a 1 g sloshing drop; with
+    `second_axis`, calibrate it also with SECOND_AXIS tilts added (the two-axis protocol)."""
     rng = np.random.default_rng(seed)
     base = load_rig(rig_file)
     designed = random_layout(base, rng)
@@ -164,11 +202,13 @@ def trial(seed: int, rig_file: Path, scale: float = 1.0, errors: RigErrors | Non
         if np.nanargmin(to_spots) != result.laser_ids[d] or \
                 np.nanmin(to_spots) > np.nanmin(np.append(to_reflections, np.inf)):
             wrong += 1
-    turn = Rotation.from_matrix(rig.world_to_camera.rotation
-                                @ true.world_to_camera.rotation.T).as_rotvec()
-    beams = {i: float(np.degrees(np.arccos(np.clip(rig.diode(i).direction
-                                                   @ true.diode(i).direction, -1, 1))))
-             for i in result.laser_ids}
+    geometry = geometry_errors(rig, true, result)
+    two_axis = None
+    if second_axis:
+        extra = render_tilt_series(true, SECOND_AXIS, "y", scale, seed + 2000)
+        both, _ = calibrate_images(nominal, series.images + extra.images,
+                                   series.surfaces + extra.surfaces)
+        two_axis = geometry_errors(calibrated_rig(nominal, both), true, both)
     other = render_tilt_series(true, ANGLES, "y", scale, seed + 1000)
     # The seed's method on the same identified spots: beams alone, camera as in the rig file.
     ids = np.array(result.laser_ids)[result.diode]
@@ -182,12 +222,14 @@ def trial(seed: int, rig_file: Path, scale: float = 1.0, errors: RigErrors | Non
     rig = replace(rig, camera=base.camera)
     return {"seed": seed, "wrong": wrong, "spots": len(result.diode),
             "calibrated": list(result.laser_ids), "unidentified": dict(result.unidentified),
-            "visible": visible, "camera_error_deg": np.degrees(turn),
-            "camera_sigma_deg": np.degrees(result.fit.sigmas[:3]),
-            "camera_error_mm": rig.camera_position_mm - true.camera_position_mm,
-            "beam_error_deg": beams, "beam_sigma_deg": {d.laser_id: d.direction_sigma_deg
-                                                        for d in rig.tracked_diodes},
+            "visible": visible, "camera_error_deg": geometry.camera_deg,
+            "camera_sigma_deg": geometry.camera_sigma_deg,
+            "camera_error_mm": geometry.camera_mm,
+            "beam_error_deg": geometry.beams_deg,
+            "beam_sigma_deg": {d.laser_id: d.direction_sigma_deg for d in rig.tracked_diodes},
+            "line_plane_error_deg": geometry.line_plane_deg,
+            "line_plane_sigma_deg": geometry.line_plane_sigma_deg, "two_axis": two_axis,
             "self": unseen(rig, other), "beam_only": unseen(beam_only, other),
             "drop": sloshing_drop(rig, replace(true, camera=base.camera.scaled(scale)), scale,
                                   seed) if drop else None,
-            "not_determined": dict(result.fit.fixed)}
+            "not_determined": dict(result.fit.fixed), "weak": dict(result.fit.weak)}

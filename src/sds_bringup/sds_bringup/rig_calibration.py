@@ -20,10 +20,10 @@ from sds_recon.calibration.laser_files import read_surfaces
 from sds_recon.calibration.lasers import KnownSurface
 from sds_recon.calibration.rig_calibration import (
     CalibrationSettings,
-    LineObservations,
     RigCalibration,
     calibrate_rig,
 )
+from sds_recon.calibration.rig_model import LineObservations
 from sds_recon.calibration.rig_report import calibrated_rig, report_text, rig_report
 from sds_recon.rig import Rig, save_rig
 from sds_recon.triangulation import beam_image_path

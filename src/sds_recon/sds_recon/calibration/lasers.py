@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -13,6 +13,14 @@ from sds_recon.rig import Rig
 
 HUBER_MM = 0.2
 """Residual beyond which the plane fit down-weights a line point (robust to stray pixels)."""
+OUTLIER_MM = 1.0
+"""Residual beyond which a line point is left out of the plane fit (the line's ends on the
+container wall, a reflection taken for the line): Huber weights alone let a few such points
+tip the plane, since they sit far out along its least determined direction."""
+CONSENSUS_TRIALS = 300
+"""Random point triples tried for the plane the most points agree with (the fit's start)."""
+CONSENSUS_POINTS = 2000
+"""Points (a random subset of more) that vote for a consensus plane."""
 
 
 @dataclass(frozen=True)
@@ -47,8 +55,9 @@ class PlaneFitResult:
 
     normal: np.ndarray
     point_mm: np.ndarray
-    rms_mm: float
+    rms_mm: float                 # of the points kept
     point_count: int
+    rejected: int = 0             # points farther than OUTLIER_MM, left out
 
 
 def surface_points(rig: Rig, pixels: ArrayLike, surface: KnownSurface) -> np.ndarray:
@@ -97,34 +106,68 @@ def calibrate_beams(rig: Rig, laser_ids: ArrayLike, pixels: ArrayLike,
             for d in rig.diodes if np.any(ids == d.laser_id)]
 
 
-def fit_plane_robust(points_mm: np.ndarray, iterations: int = 20) -> PlaneFitResult:
-    """Plane through 3-D points by iteratively reweighted total least squares (Huber weights)."""
+def consensus_plane(points_mm: np.ndarray, tolerance_mm: float = OUTLIER_MM,
+                    trials: int = CONSENSUS_TRIALS, near: np.ndarray | None = None,
+                    cone_deg: float = 90.0) -> tuple[np.ndarray, np.ndarray]:
+    """Unit normal and point of the plane through three of the points with the least truncated
+    squared distance of all points (each counted up to `tolerance_mm`; random sample consensus
+    scored as MSAC, seeded: the same points give the same plane). With `near`, only planes
+    whose normal is within `cone_deg` of it are tried."""
+    rng = np.random.default_rng(0)
+    triples = rng.integers(0, len(points_mm), (trials, 3))
+    a, b, c = points_mm[triples[:, 0]], points_mm[triples[:, 1]], points_mm[triples[:, 2]]
+    normals = np.cross(b - a, c - a)
+    length = np.linalg.norm(normals, axis=1)
+    usable = length > 1e-9
+    normals = normals[usable] / length[usable, None]
+    a = a[usable]
+    if near is not None:
+        usable = np.abs(normals @ near) >= np.cos(np.radians(cone_deg))
+        normals, a = normals[usable], a[usable]
+    if not len(normals):
+        raise ValueError("no three of the points span a plane"
+                         + ("" if near is None else f" within {cone_deg}° of the expected one"))
+    scored = points_mm[rng.permutation(len(points_mm))[:CONSENSUS_POINTS]]
+    distances = np.abs((scored[None] - a[:, None]) @ normals[..., None])[..., 0]
+    best = int(np.argmin(np.sum(np.minimum(distances, tolerance_mm) ** 2, axis=1)))
+    return normals[best], a[best]
+
+
+def fit_plane_robust(points_mm: np.ndarray, iterations: int = 20, near: np.ndarray | None = None,
+                     cone_deg: float = 90.0) -> PlaneFitResult:
+    """Plane through 3-D points: started from the consensus plane (with `near`, one within
+    `cone_deg` of that normal), then iteratively reweighted total least squares (Huber
+    weights) over the points within OUTLIER_MM of it."""
     points = points_mm[np.isfinite(points_mm).all(axis=1)]
     if len(points) < 3:
         raise ValueError(f"a plane needs 3 or more points, got {len(points)}")
-    weights = np.ones(len(points))
+    normal, centre = consensus_plane(points, near=near, cone_deg=cone_deg)
     for _ in range(iterations):
+        residual = np.abs((points - centre) @ normal)
+        weights = np.where(residual <= HUBER_MM, 1.0, HUBER_MM / np.maximum(residual, 1e-12))
+        weights[residual > OUTLIER_MM] = 0.0
         centre = np.average(points, axis=0, weights=weights)
         offsets = points - centre
         normal = np.linalg.eigh((offsets * weights[:, None]).T @ offsets)[1][:, 0]
-        residual = np.abs(offsets @ normal)
-        weights = np.where(residual <= HUBER_MM, 1.0, HUBER_MM / np.maximum(residual, 1e-12))
     distances = (points - centre) @ normal
-    return PlaneFitResult(normal, centre, float(np.sqrt(np.mean(distances**2))), len(points))
+    kept = np.abs(distances) <= OUTLIER_MM
+    return PlaneFitResult(normal, centre, float(np.sqrt(np.mean(distances[kept] ** 2))),
+                          int(kept.sum()), int((~kept).sum()))
 
 
-def calibrate_line_plane(rig: Rig, pixels: ArrayLike, surfaces: list[KnownSurface]
-                         ) -> PlaneFitResult:
-    """The line laser's plane from its pixels on known surfaces (one surface per pixel)."""
+def calibrate_line_plane(rig: Rig, pixels: ArrayLike, surfaces: list[KnownSurface],
+                         cone_deg: float = 90.0) -> PlaneFitResult:
+    """The line laser's plane from its pixels on known surfaces (one surface per pixel), its
+    normal within `cone_deg` of the rig file's."""
     pixels = np.atleast_2d(np.asarray(pixels, dtype=float))
     points = np.full((len(pixels), 3), np.nan)
     for surface in set(surfaces):
         chosen = np.array([s == surface for s in surfaces])
         points[chosen] = surface_points(rig, pixels[chosen], surface)
-    result = fit_plane_robust(points)
+    near = None if rig.line_laser is None else rig.line_laser.normal
+    result = fit_plane_robust(points, near=near, cone_deg=cone_deg)
     if rig.line_laser is not None and result.normal @ rig.line_laser.normal < 0:
-        result = PlaneFitResult(-result.normal, result.point_mm, result.rms_mm,
-                                result.point_count)
+        result = replace(result, normal=-result.normal)
     return result
 
 

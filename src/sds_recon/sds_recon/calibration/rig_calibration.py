@@ -7,13 +7,16 @@
    camera pose hid come back), and fit again.
 4. Spots whose residual exceeds `outlier_sigma` are left out, and a diode whose spots do not
    fit its own beam is named unidentified, never calibrated on a wrong blob.
-5. The line laser's plane is fitted (robustly) to the line's pixels on the known surfaces,
-   seen through the fitted camera.
+5. With line pixels, the line laser's plane is started by a robust fit through the fitted
+   camera; the line pixels within OUTLIER_MM of it (not the line's ends on the wall) then join
+   the spots in one fit of camera, beams and plane. The line pixels' σ is scaled until their
+   normalised RMS is 1 (the tracker's σ is a relative weight), and line pixels beyond
+   `outlier_sigma` are left out.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -22,18 +25,19 @@ from sds_recon.calibration.identification import (
     IdentificationSettings,
     identify_spots,
 )
-from sds_recon.calibration.lasers import KnownSurface, PlaneFitResult, calibrate_line_plane
+from sds_recon.calibration.lasers import (
+    OUTLIER_MM,
+    KnownSurface,
+    PlaneFitResult,
+    calibrate_line_plane,
+    surface_points,
+)
+from sds_recon.calibration.rig_model import LineObservations
 from sds_recon.calibration.self_calibration import SelfCalibration, self_calibrate
-from sds_recon.rig import LineLaser, Rig
+from sds_recon.rig import Rig
 
-
-@dataclass(frozen=True)
-class LineObservations:
-    """Line pixels on known surfaces: frame index, pixel (N×2), σ [px]."""
-
-    frame: np.ndarray
-    pixels: np.ndarray
-    sigma_px: np.ndarray
+LINE_FITS = 4
+"""Most joint fits spent scaling the line pixels' σ and leaving out their outliers."""
 
 
 @dataclass(frozen=True)
@@ -41,6 +45,7 @@ class CalibrationSettings:
     """Search and acceptance settings of the rig calibration."""
 
     cone_deg: float = 3.0                   # beams may lean this far from the rig file
+    line_cone_deg: float = 5.0              # the line plane's normal may turn this far
     camera_turn_deg: float = 2.0            # the camera may be turned this far from the file
     gate_mm: float = 1.5                    # first identification's verification gate
     refined_gate_mm: float = 0.4            # after the first fit
@@ -63,6 +68,7 @@ class RigCalibration:
     outliers: list[tuple[int, int, float]]   # (laser id, frame, residual in σ)
     unidentified: dict[int, str]
     line_plane: PlaneFitResult | None        # the line laser's plane, through the fitted camera
+    line: LineObservations | None = None     # the line pixels the joint fit used
 
 
 def _observations(identification: Identification, blobs: list[np.ndarray],
@@ -122,11 +128,53 @@ def calibrate_rig(rig: Rig, surfaces: list[KnownSurface], blobs: list[np.ndarray
         diode = np.array([remap[d] for d in diode[keep]], int)
         frame, blob, pixels, sigma = frame[keep], blob[keep], pixels[keep], sigma[keep]
         ids = remaining
-    plane = None
+    plane, used = None, None
     if line is not None and len(line.frame) >= 3 and rig.line_laser is not None:
-        plane = calibrate_line_plane(fit.rig, line.pixels, [surfaces[f] for f in line.frame])
-        emitter = rig.line_laser.emitter_mm
-        emitter = emitter - ((emitter - plane.point_mm) @ plane.normal) * plane.normal
-        fit = replace(fit, rig=replace(fit.rig, line_laser=LineLaser(emitter, plane.normal)))
+        plane, used = _line_plane(fit.rig, surfaces, line, s.line_cone_deg)
+        # The fit starts from the rig file's normal, turned about a point among the line's
+        # points: the robust plane's normal may be anywhere in a pencil of planes the points
+        # hardly tell apart (a line running along the tilt axis), and what the data cannot
+        # determine must stay at the rig file's value.
+        start = (rig.line_laser.normal, plane.point_mm)
+        for _ in range(LINE_FITS):
+            fit = self_calibrate(rig, ids, surfaces, diode, frame, pixels, sigma,
+                                 s.fit_emitters, s.fit_camera, used, start)
+            normalised = fit.line_residuals_px / used.sigma_px
+            rms = float(np.sqrt(np.mean(normalised**2)))
+            keep = np.abs(normalised) <= s.outlier_sigma * rms
+            if keep.all() and 0.8 < rms < 1.25:
+                break
+            used = LineObservations(used.frame[keep], used.pixels[keep],
+                                    used.sigma_px[keep] * rms)
+        plane = _plane_result(fit, surfaces, used, len(line.frame))
     return RigCalibration(fit, identification, ids, diode, frame, blob, outliers, unidentified,
-                          plane)
+                          plane, used)
+
+
+def _line_points(rig: Rig, surfaces: list[KnownSurface], line: LineObservations) -> np.ndarray:
+    """The line pixels' rays ended on their known surfaces (N×3 mm)."""
+    points = np.full((len(line.frame), 3), np.nan)
+    for f in set(line.frame.tolist()):
+        mine = line.frame == f
+        points[mine] = surface_points(rig, line.pixels[mine], surfaces[f])
+    return points
+
+
+def _line_plane(rig: Rig, surfaces: list[KnownSurface], line: LineObservations,
+                cone_deg: float) -> tuple[PlaneFitResult, LineObservations]:
+    """The robust plane through the line's points (its normal within `cone_deg` of the rig
+    file's) and the line pixels within OUTLIER_MM of it."""
+    plane = calibrate_line_plane(rig, line.pixels, [surfaces[f] for f in line.frame], cone_deg)
+    distance = (_line_points(rig, surfaces, line) - plane.point_mm) @ plane.normal
+    return plane, line.subset(np.abs(distance) <= OUTLIER_MM)
+
+
+def _plane_result(fit: SelfCalibration, surfaces: list[KnownSurface], used: LineObservations,
+                  offered: int) -> PlaneFitResult:
+    """The jointly fitted plane with the RMS distance [mm] of the line points it kept."""
+    assert fit.rig.line_laser is not None
+    normal = fit.rig.line_laser.normal
+    point = fit.rig.line_laser.emitter_mm
+    distance = (_line_points(fit.rig, surfaces, used) - point) @ normal
+    return PlaneFitResult(normal, point, float(np.sqrt(np.nanmean(distance**2))), len(used.frame),
+                          offered - len(used.frame))

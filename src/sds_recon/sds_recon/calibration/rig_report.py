@@ -9,7 +9,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from sds_recon.calibration.rig_calibration import RigCalibration
-from sds_recon.calibration.rig_model import CAMERA_ROTATION, CAMERA_SHIFT
+from sds_recon.calibration.rig_model import CAMERA_ROTATION, CAMERA_SHIFT, LINE_PLANE
 from sds_recon.rig import Rig
 
 
@@ -19,6 +19,17 @@ def _deg(value: float) -> float:
 
 def _mm(value: float) -> float:
     return float(f"{value:.4g}")
+
+
+def _sigma(value: float, in_degrees: bool) -> float | None:
+    """A σ for the report: None for a parameter kept from the rig file (not fitted)."""
+    if np.isnan(value):
+        return None
+    return _deg(value) if in_degrees else _mm(value)
+
+
+def _plus_minus(sigma: float | None, digits: int = 3) -> str:
+    return "(kept from the rig file)" if sigma is None else f"± {sigma:.{digits}f}"
 
 
 def beam_sigma_deg(result: RigCalibration, laser_id: int) -> float:
@@ -39,7 +50,7 @@ def calibrated_rig(nominal: Rig, result: RigCalibration) -> Rig:
     report = rig_report(nominal, result)
     record = {key: report[key] for key in ("method", "frames", "spots", "rms_px",
                                            "camera", "line_laser", "unidentified",
-                                           "not_determined")}
+                                           "not_determined", "weakly_determined")}
     return replace(fitted, diodes=diodes, calibration=record)
 
 
@@ -52,11 +63,11 @@ def rig_report(nominal: Rig, result: RigCalibration) -> dict[str, Any]:
     camera = {
         "position_mm": [_mm(v) for v in fit.rig.camera_position_mm],
         "position_change_mm": [_mm(value[n]) for n in CAMERA_SHIFT],
-        "position_sigma_mm": [_mm(sigma[n]) for n in CAMERA_SHIFT],
+        "position_sigma_mm": [_sigma(sigma[n], False) for n in CAMERA_SHIFT],
         "orientation_xyz_deg": [float(f"{v:.6g}") for v in rotation.as_euler("xyz",
                                                                              degrees=True)],
         "rotation_change_deg": [_deg(value[n]) for n in CAMERA_ROTATION],
-        "rotation_sigma_deg": [_deg(sigma[n]) for n in CAMERA_ROTATION],
+        "rotation_sigma_deg": [_sigma(sigma[n], True) for n in CAMERA_ROTATION],
     }
     residual = np.linalg.norm(fit.spot_residuals_px, axis=1)
     beams = []
@@ -79,10 +90,16 @@ def rig_report(nominal: Rig, result: RigCalibration) -> dict[str, Any]:
     if result.line_plane is not None:
         plane = result.line_plane
         line = {"normal": [float(f"{v:.8g}") for v in plane.normal],
-                "points": plane.point_count, "rms_mm": _mm(plane.rms_mm)}
+                "point_mm": [_mm(v) for v in plane.point_mm],
+                "normal_sigma_deg": _sigma(float(np.max([sigma[n] for n in LINE_PLANE[:2]])),
+                                           True),
+                "offset_sigma_mm": _sigma(sigma[LINE_PLANE[2]], False),
+                "points": plane.point_count, "left_out": plane.rejected,
+                "rms_mm": _mm(plane.rms_mm),
+                "rms_px": float(f"{np.sqrt(np.mean(fit.line_residuals_px**2)):.3g}")}
     return {
-        "method": "joint least squares of camera pose and beams, then the line plane "
-                  "through the fitted camera (sds calibrate rig)",
+        "method": "joint least squares of camera pose, beams and the line laser's plane "
+                  "(sds calibrate rig)",
         "frames": len(result.fit.model.surfaces), "spots": len(result.diode),
         "rms_px": float(f"{fit.rms_px:.3g}"), "chi2_per_dof": float(f"{fit.chi2_per_dof:.3g}"),
         "condition_number": float(f"{fit.condition_number:.3g}"),
@@ -91,7 +108,25 @@ def rig_report(nominal: Rig, result: RigCalibration) -> dict[str, Any]:
         "outliers": [{"id": i, "frame": f, "sigma": float(f"{s:.3g}")}
                      for i, f, s in result.outliers],
         "not_determined": dict(fit.fixed),
+        "weakly_determined": _weak(fit.weak, sigma),
     }
+
+
+def _weak(weak: dict[str, str], sigma: dict[str, float]) -> dict[str, dict[str, str]]:
+    """Weakly determined parameters and their σ, grouped by the data that would determine them
+    (the largest σ first)."""
+    groups: dict[str, dict[str, str]] = {}
+    for name in sorted(weak, key=lambda n: -sigma[n] / _scale(n)):
+        shown = f"{_mm(sigma[name])} mm" if _scale(name) == 1.0 else f"{_deg(sigma[name])} deg"
+        groups.setdefault(weak[name], {})[name] = shown
+    return groups
+
+
+def _scale(name: str) -> float:
+    """A parameter's unit step: 1 mm for positions, 1° for angles."""
+    in_mm = name.startswith(("camera X", "camera Y", "camera Z", "emitter")) or \
+        name == LINE_PLANE[2]
+    return 1.0 if in_mm else float(np.radians(1.0))
 
 
 def report_text(report: dict[str, Any]) -> str:
@@ -101,11 +136,13 @@ def report_text(report: dict[str, Any]) -> str:
              f"{report['rms_px']} px, chi2/dof {report['chi2_per_dof']}, condition number "
              f"{report['condition_number']:.3g}",
              "camera position [mm] " + ", ".join(
-                 f"{p:.3f} ± {s:.3f}" for p, s in zip(camera["position_mm"],
-                                                      camera["position_sigma_mm"], strict=True)),
+                 f"{p:.3f} {_plus_minus(s)}" for p, s in zip(camera["position_mm"],
+                                                             camera["position_sigma_mm"],
+                                                             strict=True)),
              "camera turned [deg] about X, Y, Z " + ", ".join(
-                 f"{c:+.3f} ± {s:.3f}" for c, s in zip(camera["rotation_change_deg"],
-                                                       camera["rotation_sigma_deg"], strict=True)),
+                 f"{c:+.3f} {_plus_minus(s)}" for c, s in zip(camera["rotation_change_deg"],
+                                                              camera["rotation_sigma_deg"],
+                                                              strict=True)),
              f"{'beam':>4} {'spots':>5} {'lean deg':>9} {'change deg':>10} {'sigma deg':>9} "
              f"{'rms px':>7}"]
     for beam in report["beams"]:
@@ -114,12 +151,19 @@ def report_text(report: dict[str, Any]) -> str:
                      f"{beam['rms_px']:>7.3f}")
     if report["line_laser"]:
         line = report["line_laser"]
-        lines.append(f"line laser plane: {line['points']} points, RMS {line['rms_mm']} mm")
+        lines.append(f"line laser plane: {line['points']} points ({line['left_out']} left out), "
+                     f"RMS {line['rms_px']} px / {line['rms_mm']} mm, normal "
+                     f"{_plus_minus(line['normal_sigma_deg'], 4)} deg, offset "
+                     f"{_plus_minus(line['offset_sigma_mm'])} mm")
     for laser_id, why in report["unidentified"].items():
         lines.append(f"diode {laser_id} not identified, not calibrated, not tracked: {why}")
     for name, advice in report["not_determined"].items():
         lines.append(f"not determined by these surfaces, kept from the rig file: {name} "
                      f"(needs {advice})")
+    for advice, group in report["weakly_determined"].items():
+        shown = ", ".join(f"{name} ± {value}" for name, value in list(group.items())[:3])
+        more = f" and {len(group) - 3} more" if len(group) > 3 else ""
+        lines.append(f"weakly determined: {shown}{more}; {advice} would pin them down")
     if report["outliers"]:
         lines.append(f"{len(report['outliers'])} spots left out as outliers")
     return "\n".join(lines)

@@ -16,12 +16,20 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from sds_recon.calibration.lasers import KnownSurface
-from sds_recon.calibration.rig_model import RigModel
+from sds_recon.calibration.rig_model import LineObservations, RigModel
 from sds_recon.rig import Rig
 
 LIMITS = {"camera rotation": np.radians(0.2), "camera": 1.0, "beam": np.radians(0.2),
-          "emitter": 1.0}
+          "emitter": 1.0, "line plane offset": 1.0, "line plane": np.radians(0.2)}
 """Largest one-sigma uncertainty [rad or mm] at which a parameter counts as determined."""
+
+GOALS = {"camera rotation": np.radians(0.033), "camera": 0.1, "beam": np.radians(0.017),
+         "emitter": 0.1, "line plane offset": 0.1, "line plane": np.radians(0.033)}
+"""One-sigma uncertainty [rad or mm] above which a fitted parameter is reported as weakly
+determined, with the data that would pin it down: a third of the error the calibration is
+meant to reach (camera 0.1° and 0.3 mm, beams 0.05°). Tilts about one axis leave the camera's
+rotation about that axis and the beams' common lean across it at σ ≈ 0.1° (the spots see
+only their difference); three tilts about the second axis bring both to σ ≈ 0.005°."""
 
 NULL_SINGULAR = 1e-9
 """Singular values below this share of the largest (scaled Jacobian) are null directions."""
@@ -36,20 +44,24 @@ ADVICE = {
     "beam": "tilts about the second axis, or a second fill level (its spot hardly moves on "
             "these surfaces: it sits near the tilt axis)",
     "emitter": "a second fill level and tilts about the second axis",
+    "line plane": "tilts about the second axis (a line that runs along the tilt axis lies "
+                  "in nearly every plane through it)",
 }
 """What extra calibration data determines a parameter of each kind."""
 
 
-def _limit(name: str) -> float:
-    for prefix in ("camera rotation", "camera", "beam", "emitter"):
+def _limit(name: str, limits: dict[str, float] = LIMITS) -> float:
+    for prefix in limits:
         if name.startswith(prefix):
-            return LIMITS[prefix]
+            return limits[prefix]
     raise KeyError(name)
 
 
 def _advice(name: str) -> str:
     if name in ADVICE:
         return ADVICE[name]
+    if name.startswith("line plane"):
+        return ADVICE["line plane"]
     return ADVICE[name.split(" ")[0]]
 
 
@@ -62,10 +74,12 @@ class SelfCalibration:
     values: np.ndarray              # natural units (rad, mm), change from the rig file
     sigmas: np.ndarray              # one sigma, same units; NaN for fixed parameters
     fixed: dict[str, str]           # undetermined parameter → the data that would fix it
+    weak: dict[str, str]            # fitted, but σ above GOALS → the data that would help
     condition_number: float
     rms_px: float                   # spot residuals
     chi2_per_dof: float
     spot_residuals_px: np.ndarray   # N×2, observed − predicted
+    line_residuals_px: np.ndarray   # along the row, one per line pixel (empty without a line)
     model: RigModel = field(repr=False)
 
     def sigma_of(self, name: str) -> float:
@@ -87,15 +101,18 @@ def _jacobian(residuals, values: np.ndarray, scales: np.ndarray) -> np.ndarray:
 def self_calibrate(rig: Rig, laser_ids: list[int], surfaces: list[KnownSurface],
                    diode: np.ndarray, frame: np.ndarray, pixels: np.ndarray,
                    sigma_px: np.ndarray, fit_emitters: bool = False,
-                   fit_camera: bool = True) -> SelfCalibration:
-    """Fit camera pose and beams (emitters optionally) to spots on known surfaces.
+                   fit_camera: bool = True, line: LineObservations | None = None,
+                   line_plane: tuple[np.ndarray, np.ndarray] | None = None) -> SelfCalibration:
+    """Fit camera pose and beams (emitters optionally), and with `line` the line laser's plane
+    (started at `line_plane`: normal, point [mm]), to spots and line pixels on known surfaces.
 
     `diode` indexes `laser_ids` and `frame` indexes `surfaces` for each spot (`pixels` N×2,
     `sigma_px` N). Undetermined parameters are fixed one by one (the least determined first)
     until every fitted one is within LIMITS.
     """
-    model = RigModel(rig, laser_ids, surfaces, fit_emitters)
+    model = RigModel(rig, laser_ids, surfaces, fit_emitters, line, line_plane)
     sigma = np.maximum(np.asarray(sigma_px, dtype=float), 0.02)
+    line_sigma = np.maximum(line.sigma_px, 0.02) if line is not None else np.empty(0)
     free = np.ones(model.size, bool)
     if not fit_camera:
         free[:6] = False
@@ -106,7 +123,10 @@ def self_calibrate(rig: Rig, laser_ids: list[int], surfaces: list[KnownSurface],
         full = x.copy()
         full[free] = values
         spot = (model.predict(full, diode, frame) - pixels) / sigma[:, None]
-        return np.nan_to_num(spot.ravel(), nan=1e3)
+        if line is None:
+            return np.nan_to_num(spot.ravel(), nan=1e3)
+        on_line = model.line_residuals(full) / line_sigma
+        return np.nan_to_num(np.concatenate([spot.ravel(), on_line]), nan=1e3)
 
     scales = np.array(model.scales)
 
@@ -148,8 +168,12 @@ def self_calibrate(rig: Rig, laser_ids: list[int], surfaces: list[KnownSurface],
     all_sigmas = np.full(model.size, np.nan)
     all_sigmas[free] = sigmas
     spot_residuals = pixels - model.predict(x, diode, frame)
+    weak = {name: _advice(name) for name, sigma in zip(model.names, all_sigmas, strict=True)
+            if sigma > _limit(name, GOALS)}
     return SelfCalibration(
         rig=model.to_rig(x), names=model.names, values=x.copy(), sigmas=all_sigmas,
-        fixed=fixed, condition_number=float(singular[0] / max(singular[-1], 1e-300)),
+        fixed=fixed, weak=weak, condition_number=float(singular[0] / max(singular[-1], 1e-300)),
         rms_px=float(np.sqrt(np.nanmean(np.sum(spot_residuals**2, axis=1)))),
-        chi2_per_dof=chi2, spot_residuals_px=spot_residuals, model=model)
+        chi2_per_dof=chi2, spot_residuals_px=spot_residuals,
+        line_residuals_px=model.line_residuals(x) if line is not None else np.empty(0),
+        model=model)
