@@ -117,12 +117,11 @@ def process_one(source: Path, is_video: bool, rig_file: Path | None, out: Path,
         video_frames,
     )
 
-    if not is_video:
-        rig = recording_rig(source, rig_file)
-    elif rig_file is None:
-        raise CommandError("--video needs --rig (the rig the video was taken with)")
-    else:
+    if is_video:
+        assert rig_file is not None, "run() refuses a video without --rig"
         rig = load_rig(rig_file)
+    else:
+        rig = recording_rig(source, rig_file)
     writer = ResultsWriter(out, args.overwrite)
     frames = video_frames(source, rig, args.fps) if is_video else mcap_frames(source)
     tables = RunTables(writer, rig)
