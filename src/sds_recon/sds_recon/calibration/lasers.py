@@ -155,15 +155,22 @@ def fit_plane_robust(points_mm: np.ndarray, iterations: int = 20, near: np.ndarr
                           int(kept.sum()), int((~kept).sum()))
 
 
-def calibrate_line_plane(rig: Rig, pixels: ArrayLike, surfaces: list[KnownSurface],
-                         cone_deg: float = 90.0) -> PlaneFitResult:
-    """The line laser's plane from its pixels on known surfaces (one surface per pixel), its
-    normal within `cone_deg` of the rig file's."""
+def points_on_surfaces(rig: Rig, pixels: ArrayLike, surfaces: list[KnownSurface]
+                       ) -> np.ndarray:
+    """Camera rays through the pixels, each ended on its own known surface (N×3 mm)."""
     pixels = np.atleast_2d(np.asarray(pixels, dtype=float))
     points = np.full((len(pixels), 3), np.nan)
     for surface in set(surfaces):
         chosen = np.array([s == surface for s in surfaces])
         points[chosen] = surface_points(rig, pixels[chosen], surface)
+    return points
+
+
+def calibrate_line_plane(rig: Rig, pixels: ArrayLike, surfaces: list[KnownSurface],
+                         cone_deg: float = 90.0) -> PlaneFitResult:
+    """The line laser's plane from its pixels on known surfaces (one surface per pixel), its
+    normal within `cone_deg` of the rig file's."""
+    points = points_on_surfaces(rig, pixels, surfaces)
     near = None if rig.line_laser is None else rig.line_laser.normal
     result = fit_plane_robust(points, near=near, cone_deg=cone_deg)
     if rig.line_laser is not None and result.normal @ rig.line_laser.normal < 0:

@@ -30,7 +30,7 @@ from sds_recon.calibration.lasers import (
     KnownSurface,
     PlaneFitResult,
     calibrate_line_plane,
-    surface_points,
+    points_on_surfaces,
 )
 from sds_recon.calibration.rig_model import LineObservations
 from sds_recon.calibration.self_calibration import SelfCalibration, self_calibrate
@@ -136,13 +136,13 @@ def calibrate_rig(rig: Rig, surfaces: list[KnownSurface], blobs: list[np.ndarray
         # hardly tell apart (a line running along the tilt axis), and what the data cannot
         # determine must stay at the rig file's value.
         start = (rig.line_laser.normal, plane.point_mm)
-        for _ in range(LINE_FITS):
+        for attempt in range(LINE_FITS):
             fit = self_calibrate(rig, ids, surfaces, diode, frame, pixels, sigma,
                                  s.fit_emitters, s.fit_camera, used, start)
             normalised = fit.line_residuals_px / used.sigma_px
             rms = float(np.sqrt(np.mean(normalised**2)))
             keep = np.abs(normalised) <= s.outlier_sigma * rms
-            if keep.all() and 0.8 < rms < 1.25:
+            if (keep.all() and 0.8 < rms < 1.25) or attempt == LINE_FITS - 1:
                 break
             used = LineObservations(used.frame[keep], used.pixels[keep],
                                     used.sigma_px[keep] * rms)
@@ -151,21 +151,13 @@ def calibrate_rig(rig: Rig, surfaces: list[KnownSurface], blobs: list[np.ndarray
                           plane, used)
 
 
-def _line_points(rig: Rig, surfaces: list[KnownSurface], line: LineObservations) -> np.ndarray:
-    """The line pixels' rays ended on their known surfaces (N×3 mm)."""
-    points = np.full((len(line.frame), 3), np.nan)
-    for f in set(line.frame.tolist()):
-        mine = line.frame == f
-        points[mine] = surface_points(rig, line.pixels[mine], surfaces[f])
-    return points
-
-
 def _line_plane(rig: Rig, surfaces: list[KnownSurface], line: LineObservations,
                 cone_deg: float) -> tuple[PlaneFitResult, LineObservations]:
     """The robust plane through the line's points (its normal within `cone_deg` of the rig
     file's) and the line pixels within OUTLIER_MM of it."""
     plane = calibrate_line_plane(rig, line.pixels, [surfaces[f] for f in line.frame], cone_deg)
-    distance = (_line_points(rig, surfaces, line) - plane.point_mm) @ plane.normal
+    points = points_on_surfaces(rig, line.pixels, [surfaces[f] for f in line.frame])
+    distance = (points - plane.point_mm) @ plane.normal
     return plane, line.subset(np.abs(distance) <= OUTLIER_MM)
 
 
@@ -175,6 +167,7 @@ def _plane_result(fit: SelfCalibration, surfaces: list[KnownSurface], used: Line
     assert fit.rig.line_laser is not None
     normal = fit.rig.line_laser.normal
     point = fit.rig.line_laser.emitter_mm
-    distance = (_line_points(fit.rig, surfaces, used) - point) @ normal
+    points = points_on_surfaces(fit.rig, used.pixels, [surfaces[f] for f in used.frame])
+    distance = (points - point) @ normal
     return PlaneFitResult(normal, point, float(np.sqrt(np.nanmean(distance**2))), len(used.frame),
                           offered - len(used.frame))
