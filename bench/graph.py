@@ -10,9 +10,12 @@ Prints, measured in one run on the same file:
   frame acknowledged; sloshing estimates) and its ratio to decode-only, with each process's
   CPU time per frame, in the process layouts of `LAYOUTS`;
 - frame → PointCloud2 latency in real time (median, p95; the Hampel window's own delay of
-  hampel_window // 2 frames is part of it and given apart), each layout;
+  hampel_window // 2 frames is part of it and given apart), each layout; and frame → first
+  PointCloud2 of that frame (/recon/points_live, from the spots as measured), what a live
+  view receives, with the frames it never received;
 - peak memory per process, and resident memory over a `--minutes` real-time run
-  (frame source `repeat: 0`; the recorder leaves the images out there to spare the disk).
+  (frame source `repeat: 0`; the recorder leaves the images out there to spare the disk);
+- with `--busy`, each real-time run again beside a CPU-bound process (one core's worth).
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
+import subprocess
 import sys
 import threading
 import time
@@ -135,8 +139,9 @@ def cpu_s(pid: int) -> float:
 
 def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
               image_subscribers: int = 2, processes: dict[str, str] | None = None):
-    """The drop graph with a probe on /recon/points: receipt times and stamps, memory, and
-    each process's CPU time between the first and the last cloud."""
+    """The drop graph with a probe on /recon/points and /recon/points_live: receipt times and
+    stamps of each, memory, and each process's CPU time between the first and the last
+    cloud."""
     from dataclasses import replace
 
     from sds_bringup.graph import apply_overrides, load_graph
@@ -149,7 +154,7 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
-    from sds_ros.qos import stream_qos
+    from sds_ros.qos import live_qos, stream_qos
     from sensor_msgs.msg import PointCloud2
 
     from sds_msgs.msg import LaserSpotArray
@@ -159,6 +164,7 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
                                "tracker.wait_for_consumers=3", "recon.wait_for_consumers=1"])
     entries = [replace(e, process=(processes or {}).get(e.name, e.process)) for e in entries]
     receipts: list[tuple[float, float]] = []
+    live: list[tuple[float, float]] = []
     memory: dict[str, list[tuple[float, int]]] = {}
     cpu: dict[str, list[float]] = {}
 
@@ -180,6 +186,10 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
             PointCloud2, "/recon/points",
             lambda m: receipts.append((time.time(), m.header.stamp.sec
                                        + m.header.stamp.nanosec * 1e-9)), stream_qos(100))
+        node.create_subscription(
+            PointCloud2, "/recon/points_live",
+            lambda m: live.append((time.time(), m.header.stamp.sec
+                                   + m.header.stamp.nanosec * 1e-9)), live_qos())
         start, last_sample, count, last_change = time.monotonic(), 0.0, 0, 0.0
         while not launcher.stopping:
             executor.spin_once(timeout_sec=0.05)
@@ -218,7 +228,7 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
         launcher.run(on_started=threading.Thread(target=watch, daemon=True).start)
     per_frame = {name: 1e3 * (v[-1] - v[0]) / max(len(receipts) - 1, 1)
                  for name, v in cpu.items() if len(v) == 2}
-    return receipts, memory, per_frame
+    return receipts, live, memory, per_frame
 
 
 def main() -> None:
@@ -230,14 +240,19 @@ def main() -> None:
                         help="frames the flooding source may have unacknowledged")
     parser.add_argument("--layouts", nargs="+", choices=list(LAYOUTS), default=list(LAYOUTS),
                         help="which process layouts to measure")
+    parser.add_argument("--busy", action="store_true",
+                        help="also run each real-time measurement beside a CPU-bound process")
+    parser.add_argument("--no-flood", action="store_true",
+                        help="measure the real-time runs only")
     args = parser.parse_args()
     sys.stdout.reconfigure(line_buffering=True)   # each result shows as soon as measured
     args.out.mkdir(parents=True, exist_ok=True)
     scenario, video = simulate_once(args.out, args.seconds)
     rig, rig_file = scenario.rig, scenario.rig_file.resolve()
     region = list(rig.container_region_px(rig.camera))
+    # Each run records to the same scratch files in --out.
     base = [f"camera.source={video}", f"camera.roi={region}", f"tracker.rig={rig_file}",
-            f"recon.rig={rig_file}"]
+            f"recon.rig={rig_file}", "recorder.overwrite=true"]
     frames = scenario.frame_count
 
     decode, decode_cpu_ms = decode_only(video, rig)
@@ -246,9 +261,9 @@ def main() -> None:
     print(f"decode-only: {decode:.1f} fps, {decode_cpu_ms:.1f} ms CPU per frame "
           f"({decode * decode_cpu_ms / 1e3:.2f} cores busy)")
     print("stages [ms/frame, mean]: " + ", ".join(f"{k} {v:.2f}" for k, v in stages.items()))
-    for layout in args.layouts:
+    for layout in [] if args.no_flood else args.layouts:
         processes = LAYOUTS[layout]
-        receipts, memory, cpu = run_graph(
+        receipts, _, memory, cpu = run_graph(
             [*base, f"recorder.output={args.out / 'flood.mcap'}",
              f"camera.max_in_flight={args.in_flight}"], frames, None, processes=processes)
         graph = (len(receipts) - 1) / (receipts[-1][0] - receipts[0][0])
@@ -261,12 +276,22 @@ def main() -> None:
         print("  peak memory [MB]: " + ", ".join(f"{k} {v:.0f}" for k, v in peaks.items()))
 
     hampel_ms = HAMPEL_DELAY_FRAMES / scenario.fps * 1e3
-    for layout in args.layouts:
+    for layout, busy in [(layout, busy) for layout in args.layouts
+                         for busy in ([False, True] if args.busy else [False])]:
         processes = LAYOUTS[layout]
-        receipts, memory, cpu = run_graph(
-            [*base, "camera.pacing=realtime", "camera.repeat=0",
-             f"recorder.output={args.out / 'long.mcap'}", "recorder.exclude=[/camera/image]"],
-            None, args.minutes, image_subscribers=1, processes=processes)
+        # One core's worth of someone else's work: the graph then shares the other.
+        load = subprocess.Popen([sys.executable, "-c", "while True: pass"]) if busy else None
+        try:
+            receipts, live, memory, cpu = run_graph(
+                [*base, "camera.pacing=realtime", "camera.repeat=0",
+                 f"recorder.output={args.out / 'long.mcap'}",
+                 "recorder.exclude=[/camera/image,/tracker/spots_live,/recon/points_live]"],
+                None, args.minutes, image_subscribers=1, processes=processes)
+        finally:
+            if load is not None:
+                load.kill()
+                load.wait()
+        layout = f"{layout}{', beside a busy process' if busy else ''}"
         if len(receipts) < 60:
             print(f"{layout}, real time: only {len(receipts)} clouds arrived")
             continue
@@ -277,6 +302,14 @@ def main() -> None:
         print(f"  latency frame -> PointCloud2 [ms]: median {median:.1f}, p95 {p95:.1f} "
               f"(of which the Hampel window's {hampel_ms:.1f}); processing alone: "
               f"median {median - hampel_ms:.1f}, p95 {p95 - hampel_ms:.1f}")
+        if live:
+            stamps = {s for _, s in receipts[30:]}
+            first = [r - s for r, s in live if s in stamps]
+            live_ms = np.array(first) * 1e3
+            print(f"  latency frame -> first PointCloud2 (points_live) [ms]: median "
+                  f"{np.median(live_ms):.1f}, p95 {np.percentile(live_ms, 95):.1f}, max "
+                  f"{live_ms.max():.1f}; {len(stamps) - len(first)} of {len(stamps)} frames "
+                  "without a live cloud")
         print("  CPU per frame [ms]: " + ", ".join(f"{k} {v:.1f}" for k, v in cpu.items()))
         for name, samples in memory.items():
             if name.endswith(" peak") or len(samples) < 4:

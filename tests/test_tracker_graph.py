@@ -24,7 +24,7 @@ from sds_recon.results import load_results
 from sds_recon.rig import load_rig
 from sds_record.mcap_files import McapRecorder, read_messages
 from sds_record.recorded_series import recorded_rig
-from sds_ros.qos import stream_qos
+from sds_ros.qos import live_qos, stream_qos
 from sds_sim.scenario import load_scenario
 from sds_sim.simulate import SimulationOutput, simulate
 from sensor_msgs.msg import Image, PointCloud2
@@ -52,6 +52,9 @@ class DropRun:
     line_clouds: list
     fits: list
     sync: list
+    live_spots: list
+    live_clouds: list
+    arrivals: dict[tuple[str, int], float]     # (topic, frame or stamp ns) -> monotonic s
     log: str
     exit_code: int
 
@@ -66,7 +69,23 @@ def drop_run(repo, tmp_path_factory) -> DropRun:
     rig = load_rig(rig_file)
     region = list(rig.container_region_px(rig.camera))
     probe = Probe("drop_probe")
-    spots = probe.collect(LaserSpotArray, "/tracker/spots", EVERY_FRAME)
+    arrivals: dict[tuple[str, int], float] = {}
+
+    def arrival(topic: str, key):
+        return lambda msg: arrivals.setdefault((topic, key(msg)), time.monotonic())
+
+    def stamp_ns(msg) -> int:
+        return msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+
+    def frame_index(msg) -> int:
+        return int(msg.frame_index)
+
+    spots = probe.collect(LaserSpotArray, "/tracker/spots", EVERY_FRAME,
+                          arrival("/tracker/spots", frame_index))
+    live_spots = probe.collect(LaserSpotArray, "/tracker/spots_live", live_qos(),
+                               arrival("/tracker/spots_live", frame_index))
+    live_clouds = probe.collect(PointCloud2, "/recon/points_live", live_qos(),
+                                arrival("/recon/points_live", stamp_ns))
     lines = probe.collect(LaserLineProfile, "/tracker/line", EVERY_FRAME)
     clouds = probe.collect(PointCloud2, "/recon/points", EVERY_FRAME)
     line_clouds = probe.collect(PointCloud2, "/recon/line_points", EVERY_FRAME)
@@ -105,7 +124,7 @@ def drop_run(repo, tmp_path_factory) -> DropRun:
         graph.stop()
         probe.close()
     return DropRun(output, rig_file, recording, tmp_path, spots, lines, clouds, line_clouds, fits,
-                   sync, graph.output(), exit_code)
+                   sync, live_spots, live_clouds, arrivals, graph.output(), exit_code)
 
 
 def test_simulated_drop_is_tracked_and_reconstructed(drop_run: DropRun) -> None:
@@ -140,6 +159,37 @@ def topic_data(path) -> dict[str, list[bytes]]:
     for message in read_messages(path):
         messages.setdefault(message.topic, []).append(message.data)
     return messages
+
+
+def test_live_spots_and_points_come_at_once_and_are_not_recorded(drop_run: DropRun) -> None:
+    """Each frame's spots as measured, and their points, come before the Hampel window closes;
+    the recording keeps only the filtered ones."""
+    filtered = {m.frame_index: m for m in drop_run.spots}
+    live = {m.frame_index: m for m in drop_run.live_spots}
+    # Best-effort on one machine: a preview may miss a frame, but not many.
+    assert len(live) >= 25 and len(drop_run.live_clouds) >= 25, drop_run.log
+    stamps = {}
+    for frame, message in live.items():
+        assert all(s.flags & LaserSpot.FLAG_NOT_FILTERED for s in message.spots)
+        assert message.header.stamp == filtered[frame].header.stamp
+        raw = {s.laser_id: (s.x_raw_px, s.y_raw_px, s.flags) for s in filtered[frame].spots}
+        for spot in message.spots:
+            x_raw, y_raw, flags = raw[spot.laser_id]
+            np.testing.assert_equal([spot.x_px, spot.y_px, spot.x_raw_px, spot.y_raw_px],
+                                    [x_raw, y_raw, x_raw, y_raw])
+            assert spot.flags & ~LaserSpot.FLAG_NOT_FILTERED == \
+                flags & ~LaserSpot.FLAG_HAMPEL_REPLACED
+        stamps[message.header.stamp.sec * 10**9 + message.header.stamp.nanosec] = frame
+    arrivals = drop_run.arrivals
+    # The filtered spots of a frame wait for the next hampel_window // 2 frames.
+    early = [frame for frame in live if frame < 28
+             and arrivals[("/tracker/spots_live", frame)] < arrivals[("/tracker/spots", frame)]]
+    assert len(early) >= 0.9 * len([f for f in live if f < 28])
+    clouds = [stamps.get(c.header.stamp.sec * 10**9 + c.header.stamp.nanosec)
+              for c in drop_run.live_clouds]
+    assert None not in clouds and len(set(clouds)) == len(clouds)
+    assert not {"/tracker/spots_live", "/recon/points_live"} & set(topic_data(
+        drop_run.recording))
 
 
 def test_recording_reads_back_and_replays_identically(drop_run: DropRun) -> None:

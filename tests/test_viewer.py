@@ -82,15 +82,20 @@ def test_sds_view_turns_a_recording_into_rerun_entities(repo: Path, tmp_path: Pa
 
 
 @pytest.mark.ros
-def test_viewer_node_saves_what_the_graph_publishes(repo: Path, tmp_path: Path) -> None:
+@pytest.mark.parametrize("live", [False, True])
+def test_viewer_node_saves_what_the_graph_publishes(repo: Path, tmp_path: Path,
+                                                    live: bool) -> None:
     rig_file = repo / "config" / "rigs" / "stelium.yaml"
     rig = load_rig(rig_file)
     output = tmp_path / "live.rrd"
     graph = SdsGraphRun("view.yaml", "--set", f"viewer.output={output}",
-                        "--set", f"viewer.rig={rig_file}")
+                        "--set", f"viewer.rig={rig_file}", "--set", f"viewer.live={live}")
+    # With viewer.live the spots and points come from the live previews instead.
+    renamed = {"/tracker/spots": "/tracker/spots_live", "/recon/points": "/recon/points_live"}
     probe = Probe("viewer_probe")
     try:
-        publishers = {topic: probe.node.create_publisher(type(msg), topic, RELIABLE)
+        publishers = {topic: probe.node.create_publisher(
+                          type(msg), renamed.get(topic, topic) if live else topic, RELIABLE)
                       for topic, _, msg in frame_messages(rig, 0)}
         model_pub = probe.node.create_publisher(CameraModel, "/camera/camera_model", LATCHED)
         deadline = time.monotonic() + 30

@@ -1,4 +1,7 @@
-"""ROS 2 node: tracked spots and line profiles in, surface points (PointCloud2) and fits out."""
+"""ROS 2 node: tracked spots and line profiles in, surface points (PointCloud2) and fits out.
+
+The live spots (`spots_live`, as measured before the Hampel filter) become `points_live` at
+once, for a live view; `points` and `surface_fit` come from the filtered spots."""
 
 from __future__ import annotations
 
@@ -6,7 +9,7 @@ import numpy as np
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sds_ros.hosted_node import HostedNode
 from sds_ros.point_cloud import points_to_cloud
-from sds_ros.qos import start_when_consumed, stream_qos
+from sds_ros.qos import live_qos, start_when_consumed, stream_qos
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import String
 
@@ -70,6 +73,7 @@ class ReconstructionNode(HostedNode):
         self._default_sigma = float(self.get_parameter("default_sigma_px").value)
         self._frame_id = self.get_parameter("frame_id").value
         self._points_pub = self.create_publisher(PointCloud2, "points", stream_qos())
+        self._live_pub = self.create_publisher(PointCloud2, "points_live", live_qos())
         self._line_pub = self.create_publisher(PointCloud2, "line_points", stream_qos())
         self._fit_pub = self.create_publisher(SurfaceFit, "surface_fit", stream_qos())
         # The rig, camera inline, latched: a recording carries what it was measured with.
@@ -86,10 +90,12 @@ class ReconstructionNode(HostedNode):
                                f"{len(self._rig.diodes)} diodes")
 
     def _subscribe_inputs(self) -> None:
+        self.create_subscription(LaserSpotArray, "spots_live", self._on_live_spots, live_qos())
         self.create_subscription(LaserSpotArray, "spots", self._on_spots, stream_qos())
         self.create_subscription(LaserLineProfile, "line", self._on_line, stream_qos())
 
-    def _on_spots(self, msg: LaserSpotArray) -> None:
+    def _reconstruct(self, msg: LaserSpotArray) -> tuple[PointCloud2, SurfacePoints, SurfaceFits]:
+        """The frame's points (Eq. 9) and fits, and the points as a cloud."""
         spots = msg.spots
         result, fits = reconstruct_frame(
             self._rig, [s.laser_id for s in spots], [[s.x_px, s.y_px] for s in spots],
@@ -97,9 +103,16 @@ class ReconstructionNode(HostedNode):
             self._beam_weight, self._default_sigma)
         header = msg.header
         header.frame_id = self._frame_id
-        self._points_pub.publish(points_to_cloud(header, result.laser_ids, result.points_mm,
-                                                  result.height_sigma_mm,
-                                                  result.miss_distance_mm, fits.rejected))
+        cloud = points_to_cloud(header, result.laser_ids, result.points_mm,
+                                result.height_sigma_mm, result.miss_distance_mm, fits.rejected)
+        return cloud, result, fits
+
+    def _on_live_spots(self, msg: LaserSpotArray) -> None:
+        self._live_pub.publish(self._reconstruct(msg)[0])
+
+    def _on_spots(self, msg: LaserSpotArray) -> None:
+        cloud, result, fits = self._reconstruct(msg)
+        self._points_pub.publish(cloud)
         self._fit_pub.publish(surface_fit_msg(msg, result, fits))
 
     def _on_line(self, msg: LaserLineProfile) -> None:

@@ -45,3 +45,16 @@ def start_when_consumed(node: Node, outputs: Sequence[tuple[Publisher, int]],
             start()
 
     timer = node.create_timer(period_s, check)
+
+LIVE_DEPTH = 5
+"""Messages a live preview's writer and reader keep (the newest matters)."""
+
+
+def live_qos() -> QoSProfile:
+    """Best-effort, keep-last LIVE_DEPTH, volatile: the live previews (spots as measured,
+    their points), REP-2003's sensor-data profile. Nobody waits for them and nothing is
+    resent: a preview that misses a frame shows the next, and the recorded streams keep the
+    filtered values."""
+    return QoSProfile(depth=LIVE_DEPTH, history=HistoryPolicy.KEEP_LAST,
+                      reliability=ReliabilityPolicy.BEST_EFFORT,
+                      durability=DurabilityPolicy.VOLATILE)

@@ -9,7 +9,7 @@ import numpy as np
 
 from sds_tracker.kernels import spot_windows
 
-LOST, SATURATED, REFLECTION_SUSPECTED, OFF_PATH, HAMPEL_REPLACED = 1, 2, 4, 8, 16
+LOST, SATURATED, REFLECTION_SUSPECTED, OFF_PATH, HAMPEL_REPLACED, NOT_FILTERED = 1, 2, 4, 8, 16, 32
 """Flag bits, the same as sds_msgs/LaserSpot's."""
 LINE_SIGMA_PX = 0.5
 """Least uncertainty of a spot measured with the laser line's light subtracted (a saturated

@@ -13,7 +13,14 @@ from sds_recon.triangulation import beam_image_path, line_image_path
 from sds_tracker.hampel import BankOutput, HampelBank
 from sds_tracker.kernels import warm_up
 from sds_tracker.line import LineProfile, LineSettings, track_line
-from sds_tracker.spots import HAMPEL_REPLACED, LOST, SpotEstimate, SpotSettings, SpotTracker
+from sds_tracker.spots import (
+    HAMPEL_REPLACED,
+    LOST,
+    NOT_FILTERED,
+    SpotEstimate,
+    SpotSettings,
+    SpotTracker,
+)
 
 
 @dataclass(frozen=True)
@@ -128,6 +135,14 @@ class FrameTracker:
         out = self.hampel.push(frame, positions)
         ready = [] if out is None else [(out.frame, self._tracked(out))]
         return ready, line
+
+    def unfiltered(self, frame: int) -> list[TrackedSpot]:
+        """A frame's spots as measured, before its Hampel window closes (for a live view):
+        position = raw position, flagged NOT_FILTERED; empty once the frame has left the
+        window (its filtered spots were returned)."""
+        return [TrackedSpot(e.laser_id, e.x_px, e.y_px, e.x_px, e.y_px, e.sigma_px, e.peak,
+                            e.flags | NOT_FILTERED)
+                for e in self._pending.get(frame, {}).values()]
 
     def flush(self) -> list[tuple[int, list[TrackedSpot]]]:
         """The last frames' spots at the end of a stream."""

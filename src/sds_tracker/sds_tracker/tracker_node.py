@@ -1,4 +1,8 @@
-"""ROS 2 node: images in, laser spots (Hampel-filtered) and the line profile out."""
+"""ROS 2 node: images in, laser spots (Hampel-filtered) and the line profile out.
+
+Each frame's spots are also published at once on `spots_live`, as measured and flagged
+NOT_FILTERED, for a live view: the filtered ones on `spots` wait for the centred Hampel window
+to close (hampel_window // 2 frames later)."""
 
 from __future__ import annotations
 
@@ -8,13 +12,19 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sds_recon.rig import load_rig
 from sds_ros.hosted_node import HostedNode
 from sds_ros.image_msg import msg_to_image
-from sds_ros.qos import start_when_consumed, stream_qos
+from sds_ros.qos import live_qos, start_when_consumed, stream_qos
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 
 from sds_msgs.msg import CameraModel, LaserLineProfile, LaserSpot, LaserSpotArray
 from sds_tracker.spots import LOST
-from sds_tracker.tracker import TRACKING_PARAMETERS, FrameTracker, parse_seeds, tracker_config
+from sds_tracker.tracker import (
+    TRACKING_PARAMETERS,
+    FrameTracker,
+    TrackedSpot,
+    parse_seeds,
+    tracker_config,
+)
 
 EXIT_CONFIG_ERROR = 2
 IDLE_FLUSH_S = 1.0
@@ -22,6 +32,14 @@ IDLE_FLUSH_S = 1.0
 CHANNEL_INDEX = {"red": None, "bgr": 2}
 WAITING_FRAMES = 30
 """Frames kept while the camera_model (region offset) has not arrived yet."""
+
+
+def spots_msg(header: Header, frame: int, spots: list[TrackedSpot]) -> LaserSpotArray:
+    """One frame's spots as a LaserSpotArray."""
+    return LaserSpotArray(header=header, frame_index=frame, spots=[
+        LaserSpot(laser_id=spot.laser_id, x_px=spot.x_px, y_px=spot.y_px,
+                  sigma_px=float(spot.sigma_px), x_raw_px=spot.x_raw_px, y_raw_px=spot.y_raw_px,
+                  peak_intensity=float(spot.peak), flags=int(spot.flags)) for spot in spots])
 
 
 class TrackerNode(HostedNode):
@@ -46,6 +64,7 @@ class TrackerNode(HostedNode):
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self._spots_pub = self.create_publisher(LaserSpotArray, "spots", stream_qos())
+        self._live_pub = self.create_publisher(LaserSpotArray, "spots_live", live_qos())
         self._line_pub = self.create_publisher(LaserLineProfile, "line", stream_qos())
         self._ack_pub = self.create_publisher(Header, "frame_ack", reliable)
         self._offset: tuple[int, int] | None = None
@@ -111,6 +130,9 @@ class TrackerNode(HostedNode):
         self._frame += 1
         self._headers.append((frame, msg.header))
         ready, line = self._tracker.process(frame, red, self._offset)
+        live = self._tracker.unfiltered(frame)
+        if live:
+            self._live_pub.publish(spots_msg(msg.header, frame, live))
         self._publish_spots(ready)
         self._line_pub.publish(LaserLineProfile(
             header=msg.header, frame_index=frame, x_px=line.x_px.tolist(),
@@ -129,13 +151,7 @@ class TrackerNode(HostedNode):
         headers = dict(self._headers)
         for frame, spots in ready:
             self._report_lost(frame, spots)
-            message = LaserSpotArray(header=headers.get(frame, Header()), frame_index=frame)
-            for spot in spots:
-                message.spots.append(LaserSpot(
-                    laser_id=spot.laser_id, x_px=spot.x_px, y_px=spot.y_px,
-                    sigma_px=float(spot.sigma_px), x_raw_px=spot.x_raw_px, y_raw_px=spot.y_raw_px,
-                    peak_intensity=float(spot.peak), flags=int(spot.flags)))
-            self._spots_pub.publish(message)
+            self._spots_pub.publish(spots_msg(headers.get(frame, Header()), frame, spots))
 
     def _flush_if_idle(self) -> None:
         idle = (self.get_clock().now() - self._last_frame_time).nanoseconds * 1e-9

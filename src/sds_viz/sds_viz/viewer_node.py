@@ -31,6 +31,8 @@ SUBSCRIPTIONS = (("image", Image, "sensor_msgs/msg/Image"),
                  ("imu", Imu, "sensor_msgs/msg/Imu"),
                  ("tof", Range, "sensor_msgs/msg/Range"))
 """Relative topic, message class and type name of everything the viewer shows."""
+LIVE_TOPICS = {"spots": "spots_live", "points": "points_live"}
+"""With `live`, the spots and points as measured (before the Hampel filter, at once) instead."""
 
 
 class ViewerNode(HostedNode):
@@ -39,7 +41,7 @@ class ViewerNode(HostedNode):
     def __init__(self, node_name: str = "viewer", **node_kwargs) -> None:
         super().__init__(node_name, **node_kwargs)
         defaults = {"rig": "", "output": "", "connect": "", "spawn": False, "image_scale": 0.25,
-                    "image_every": 1}
+                    "image_every": 1, "live": False}
         for name, default in defaults.items():
             self.declare_parameter(name, default)
         p = {name: self.get_parameter(name).value for name in defaults}
@@ -68,6 +70,8 @@ class ViewerNode(HostedNode):
         self.create_subscription(CameraModel, "camera_model", self._logger_for(
             "sds_msgs/msg/CameraModel"), latched)
         for topic, msg_type, type_name in SUBSCRIPTIONS:
+            if p["live"]:
+                topic = LIVE_TOPICS.get(topic, topic)
             self.create_subscription(msg_type, topic, self._logger_for(type_name),
                                      qos_profile_sensor_data)
         where = p["output"] or p["connect"] or ("a spawned viewer" if p["spawn"] else "nowhere")
