@@ -121,3 +121,10 @@ def test_the_graph_environment_keeps_what_the_user_set_about_discovery() -> None
     assert 1 <= graph_domain_id(None, base={}) <= 101
     with pytest.raises(ValueError, match="--domain-id"):
         graph_domain_id(None, network=True, base={})
+
+
+def test_graph_processes_run_one_blas_thread_unless_the_user_says() -> None:
+    from sds_bringup.ros_env import graph_environment
+
+    assert graph_environment(5, base={})["OPENBLAS_NUM_THREADS"] == "1"
+    assert graph_environment(5, base={"OPENBLAS_NUM_THREADS": "4"})["OPENBLAS_NUM_THREADS"] == "4"
