@@ -29,7 +29,7 @@ from sds_recon.calibration.lasers import (
     OUTLIER_MM,
     KnownSurface,
     PlaneFitResult,
-    calibrate_line_plane,
+    fit_plane_robust,
     points_on_surfaces,
 )
 from sds_recon.calibration.rig_model import LineObservations
@@ -155,8 +155,9 @@ def _line_plane(rig: Rig, surfaces: list[KnownSurface], line: LineObservations,
                 cone_deg: float) -> tuple[PlaneFitResult, LineObservations]:
     """The robust plane through the line's points (its normal within `cone_deg` of the rig
     file's) and the line pixels within OUTLIER_MM of it."""
-    plane = calibrate_line_plane(rig, line.pixels, [surfaces[f] for f in line.frame], cone_deg)
+    assert rig.line_laser is not None   # calibrate_rig fits a plane only for a line laser
     points = points_on_surfaces(rig, line.pixels, [surfaces[f] for f in line.frame])
+    plane = fit_plane_robust(points, near=rig.line_laser.normal, cone_deg=cone_deg)
     distance = (points - plane.point_mm) @ plane.normal
     return plane, line.subset(np.abs(distance) <= OUTLIER_MM)
 

@@ -108,25 +108,20 @@ def rig_report(nominal: Rig, result: RigCalibration) -> dict[str, Any]:
         "outliers": [{"id": i, "frame": f, "sigma": float(f"{s:.3g}")}
                      for i, f, s in result.outliers],
         "not_determined": dict(fit.fixed),
-        "weakly_determined": _weak(fit.weak, sigma),
+        "weakly_determined": _weak(fit.weak, sigma,
+                                   dict(zip(fit.names, fit.model.scales, strict=True))),
     }
 
 
-def _weak(weak: dict[str, str], sigma: dict[str, float]) -> dict[str, dict[str, str]]:
+def _weak(weak: dict[str, str], sigma: dict[str, float], scale: dict[str, float]
+          ) -> dict[str, dict[str, str]]:
     """Weakly determined parameters and their σ, grouped by the data that would determine them
-    (the largest σ first)."""
+    (the largest σ in the parameter's unit step, 1 mm or 1°, first)."""
     groups: dict[str, dict[str, str]] = {}
-    for name in sorted(weak, key=lambda n: -sigma[n] / _scale(n)):
-        shown = f"{_mm(sigma[name])} mm" if _scale(name) == 1.0 else f"{_deg(sigma[name])} deg"
+    for name in sorted(weak, key=lambda n: -sigma[n] / scale[n]):
+        shown = f"{_mm(sigma[name])} mm" if scale[name] == 1.0 else f"{_deg(sigma[name])} deg"
         groups.setdefault(weak[name], {})[name] = shown
     return groups
-
-
-def _scale(name: str) -> float:
-    """A parameter's unit step: 1 mm for positions, 1° for angles."""
-    in_mm = name.startswith(("camera X", "camera Y", "camera Z", "emitter")) or \
-        name == LINE_PLANE[2]
-    return 1.0 if in_mm else float(np.radians(1.0))
 
 
 def report_text(report: dict[str, Any]) -> str:

@@ -11,6 +11,7 @@ value and the result says which extra data would fix them.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TypeVar
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -49,20 +50,16 @@ ADVICE = {
 }
 """What extra calibration data determines a parameter of each kind."""
 
+T = TypeVar("T")
 
-def _limit(name: str, limits: dict[str, float] = LIMITS) -> float:
-    for prefix in limits:
+
+def _by_prefix(name: str, table: dict[str, T]) -> T:
+    """The entry of `table` for parameter `name`: the first key that `name` starts with (the
+    tables list the longer keys first)."""
+    for prefix, entry in table.items():
         if name.startswith(prefix):
-            return limits[prefix]
+            return entry
     raise KeyError(name)
-
-
-def _advice(name: str) -> str:
-    if name in ADVICE:
-        return ADVICE[name]
-    if name.startswith("line plane"):
-        return ADVICE["line plane"]
-    return ADVICE[name.split(" ")[0]]
 
 
 @dataclass(frozen=True)
@@ -143,11 +140,11 @@ def self_calibrate(rig: Rig, laser_ids: list[int], surfaces: list[KnownSurface],
     def fix_worst(sigmas: np.ndarray) -> bool:
         """Fix the least determined free parameter if any is beyond its limit."""
         names = [n for n, f in zip(model.names, free, strict=True) if f]
-        ratios = np.array([s / _limit(n) for n, s in zip(names, sigmas, strict=True)])
+        ratios = np.array([s / _by_prefix(n, LIMITS) for n, s in zip(names, sigmas, strict=True)])
         if not (ratios > 1).any():
             return False
         worst = names[int(np.argmax(ratios))]
-        fixed[worst] = _advice(worst)
+        fixed[worst] = _by_prefix(worst, ADVICE)
         free[model.names.index(worst)] = False
         x[:] = 0.0
         return True
@@ -168,8 +165,9 @@ def self_calibrate(rig: Rig, laser_ids: list[int], surfaces: list[KnownSurface],
     all_sigmas = np.full(model.size, np.nan)
     all_sigmas[free] = sigmas
     spot_residuals = pixels - model.predict(x, diode, frame)
-    weak = {name: _advice(name) for name, sigma in zip(model.names, all_sigmas, strict=True)
-            if sigma > _limit(name, GOALS)}
+    weak = {name: _by_prefix(name, ADVICE)
+            for name, sigma in zip(model.names, all_sigmas, strict=True)
+            if sigma > _by_prefix(name, GOALS)}
     return SelfCalibration(
         rig=model.to_rig(x), names=model.names, values=x.copy(), sigmas=all_sigmas,
         fixed=fixed, weak=weak, condition_number=float(singular[0] / max(singular[-1], 1e-300)),
