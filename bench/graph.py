@@ -25,6 +25,7 @@ import os
 import statistics
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -250,9 +251,11 @@ def main() -> None:
     scenario, video = simulate_once(args.out, args.seconds)
     rig, rig_file = scenario.rig, scenario.rig_file.resolve()
     region = list(rig.container_region_px(rig.camera))
-    # Each run records to the same scratch files in --out.
     base = [f"camera.source={video}", f"camera.roi={region}", f"tracker.rig={rig_file}",
-            f"recon.rig={rig_file}", "recorder.overwrite=true"]
+            f"recon.rig={rig_file}"]
+    # Each run records into a folder of its own under --out (nothing there is replaced), and
+    # its recording is deleted once measured (a flood run's holds the 4K frames).
+    scratch = Path(tempfile.mkdtemp(prefix="recordings_", dir=args.out))
     frames = scenario.frame_count
 
     decode, decode_cpu_ms = decode_only(video, rig)
@@ -261,11 +264,13 @@ def main() -> None:
     print(f"decode-only: {decode:.1f} fps, {decode_cpu_ms:.1f} ms CPU per frame "
           f"({decode * decode_cpu_ms / 1e3:.2f} cores busy)")
     print("stages [ms/frame, mean]: " + ", ".join(f"{k} {v:.2f}" for k, v in stages.items()))
-    for layout in [] if args.no_flood else args.layouts:
+    for index, layout in enumerate([] if args.no_flood else args.layouts):
         processes = LAYOUTS[layout]
+        recording = scratch / f"flood_{index}.mcap"
         receipts, _, memory, cpu = run_graph(
-            [*base, f"recorder.output={args.out / 'flood.mcap'}",
+            [*base, f"recorder.output={recording}",
              f"camera.max_in_flight={args.in_flight}"], frames, None, processes=processes)
+        recording.unlink(missing_ok=True)
         graph = (len(receipts) - 1) / (receipts[-1][0] - receipts[0][0])
         print(f"{layout}, flood ({args.in_flight} in flight, images recorded): {graph:.1f} fps, "
               f"ratio {graph / decode:.2f}, {len(receipts)}/{frames} frames")
@@ -276,21 +281,24 @@ def main() -> None:
         print("  peak memory [MB]: " + ", ".join(f"{k} {v:.0f}" for k, v in peaks.items()))
 
     hampel_ms = HAMPEL_DELAY_FRAMES / scenario.fps * 1e3
-    for layout, busy in [(layout, busy) for layout in args.layouts
-                         for busy in ([False, True] if args.busy else [False])]:
+    for index, (layout, busy) in enumerate([(layout, busy) for layout in args.layouts
+                                            for busy in ([False, True] if args.busy
+                                                         else [False])]):
         processes = LAYOUTS[layout]
+        recording = scratch / f"real_time_{index}.mcap"
         # One core's worth of someone else's work: the graph then shares the other.
         load = subprocess.Popen([sys.executable, "-c", "while True: pass"]) if busy else None
         try:
             receipts, live, memory, cpu = run_graph(
                 [*base, "camera.pacing=realtime", "camera.repeat=0",
-                 f"recorder.output={args.out / 'long.mcap'}",
+                 f"recorder.output={recording}",
                  "recorder.exclude=[/camera/image,/tracker/spots_live,/recon/points_live]"],
                 None, args.minutes, image_subscribers=1, processes=processes)
         finally:
             if load is not None:
                 load.kill()
                 load.wait()
+            recording.unlink(missing_ok=True)
         layout = f"{layout}{', beside a busy process' if busy else ''}"
         if len(receipts) < 60:
             print(f"{layout}, real time: only {len(receipts)} clouds arrived")
@@ -319,6 +327,7 @@ def main() -> None:
             slope = np.polyfit(t[half:] / 60, rss[half:] / 1024, 1)[0]
             print(f"  memory {name}: {rss[0] / 1024:.0f} -> {rss[-1] / 1024:.0f} MB RSS, "
                   f"second-half slope {slope:+.2f} MB/min")
+    scratch.rmdir()
 
 
 if __name__ == "__main__":
