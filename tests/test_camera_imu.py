@@ -12,7 +12,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 from sds_arduino.clock import align_by_acceleration
-from sds_arduino.import_sd import import_sd
 from sds_arduino.protocol import format_record, unwrap_time_s
 from sds_bringup.camera_imu_mcap import write_imu_mcap
 from sds_camera.camera_imu import (
@@ -26,6 +25,7 @@ from sds_camera.camera_imu import (
 )
 from sds_camera.frame_source import VideoFileSource
 from sds_recon.sloshing.gravity import free_fall, gravity_regime
+from sds_record.import_sd import import_sd
 from sds_record.recorded_series import read_accelerations
 from sds_sim.arduino import CATAPULT_DURATION_S, STANDARD_GRAVITY, arduino_records
 from sds_sim.camera_imu import camera_imu

@@ -29,11 +29,11 @@ def camera_and_recorder(repo: Path, folder: Path) -> Path:
     """A graph file: a flooding, endlessly repeating camera whose frames the recorder acks."""
     params = repo / "config" / "params"
     graph = {"nodes": [
-        {"name": "camera", "plugin": "sds_camera.frame_source_node:FrameSourceNode",
+        {"name": "camera", "plugin": "sds_nodes.frame_source:FrameSourceNode",
          "params": str(params / "frame_source.yaml"), "required": True,
          "parameters": {"pacing": "flood", "ack_consumers": 1, "repeat": 0},
          "remap": {"image": "/camera/image", "frame_ack": "/camera/frame_ack"}},
-        {"name": "recorder", "plugin": "sds_record.recorder_node:RecorderNode",
+        {"name": "recorder", "plugin": "sds_nodes.recorder:RecorderNode",
          "params": str(params / "recorder.yaml"), "parameters": {"ack_for": ["/camera/image"]},
          "remap": {"frame_ack": "/camera/frame_ack"}},
     ]}

@@ -7,7 +7,13 @@ from pathlib import Path
 import pytest
 import rclpy
 from rclpy.node import Node
-from sds_bringup.graph import GraphFileError, apply_overrides, composed, load_graph
+from sds_bringup.graph import (
+    MOVED_PLUGINS,
+    GraphFileError,
+    apply_overrides,
+    composed,
+    load_graph,
+)
 from sds_bringup.launcher import group_processes
 from sds_ros.node_host import load_plugin
 
@@ -19,6 +25,11 @@ def test_shipped_graph_loads_with_existing_parameter_files_and_plugins(repo):
         for entry in entries:
             assert all(path.is_file() for path in entry.params_files)
             assert issubclass(load_plugin(entry.plugin), Node)
+
+
+def test_every_moved_plugin_names_a_node_that_loads():
+    for moved_to in MOVED_PLUGINS.values():
+        assert issubclass(load_plugin(moved_to), Node)
 
 
 def test_ros_args_reach_the_node_as_parameters_and_remaps(tmp_path: Path):
@@ -75,6 +86,8 @@ def test_compose_keeps_niced_nodes_in_their_own_processes(repo):
         ("nodes:\n  - {name: a, plugin: m:C, nice: 20}", "'nice'"),
         ("nodes:\n  - {name: a, plugin: m:C, nice: -5}", "'nice'"),
         ("nodes:\n  - {name: a, plugin: m:C, nice: high}", "'nice'"),
+        ("nodes:\n  - {name: t, plugin: 'sds_tracker.tracker_node:TrackerNode'}",
+         "is now sds_nodes.tracker:TrackerNode"),
     ],
 )
 def test_bad_graph_files_are_named_in_the_error(tmp_path, text, message):

@@ -68,13 +68,13 @@ def graphs(folder: Path) -> tuple[Path, Path, Path]:
     clip = write_lossless_clip(folder / "clip.mp4", random_frames(20, 120, 160, seed=5), NTSC)
     summary = folder / "summary.json"
     camera = graph_file(folder, {
-        "name": "camera", "plugin": "sds_camera.frame_source_node:FrameSourceNode",
+        "name": "camera", "plugin": "sds_nodes.frame_source:FrameSourceNode",
         "params": str(PARAMS / "frame_source.yaml"), "required": True,
         "parameters": {"source": str(clip), "pacing": "flood", "ack_consumers": 1,
                        "linger_s": 0.5},
         "remap": {"image": "/camera/image", "frame_ack": "/camera/frame_ack"}})
     monitor = graph_file(folder, {
-        "name": "monitor", "plugin": "sds_camera.frame_monitor_node:FrameMonitorNode",
+        "name": "monitor", "plugin": "sds_nodes.frame_monitor:FrameMonitorNode",
         "params": str(PARAMS / "frame_monitor.yaml"),
         "parameters": {"summary_path": str(summary), "report_period_s": 0.5},
         "remap": {"image": "/camera/image", "frame_ack": "/camera/frame_ack"}})

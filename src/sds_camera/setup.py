@@ -16,10 +16,4 @@ setup(
     maintainer_email="sds@example.org",
     description="Frame sources (video file, live camera, image folder) publishing images.",
     license="MIT",
-    entry_points={
-        "console_scripts": [
-            "frame_source = sds_camera.frame_source_node:main",
-            "frame_monitor = sds_camera.frame_monitor_node:main",
-        ],
-    },
 )

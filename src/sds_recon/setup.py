@@ -16,6 +16,4 @@ setup(
     maintainer_email="sds@example.org",
     description="Camera models, calibration, triangulation, surface fitting and sloshing analysis.",
     license="MIT",
-    entry_points={"console_scripts": ["recon = sds_recon.recon_node:main",
-                                      "sloshing = sds_recon.sloshing_node:main"]},
 )

@@ -16,5 +16,4 @@ setup(
     maintainer_email="sds@example.org",
     description="Laser spot and line tracking.",
     license="MIT",
-    entry_points={"console_scripts": ["tracker = sds_tracker.tracker_node:main"]},
 )

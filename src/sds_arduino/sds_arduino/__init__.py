@@ -2,6 +2,7 @@
 
 `protocol` states the line protocol (version 1) and reads logs; `stream` turns bytes into
 records; `clock` puts the device clock on the camera's (sync LED, or the acceleration both
-feel); `messages` turns records into ROS messages; `replay` paces a log in device time;
-`import_sd` writes an SD-card log as an MCAP; `bridge_node` is the serial bridge of the graph.
+feel); `replay` paces a log in device time. Pure Python: the records become ROS messages in
+`sds_ros.arduino_msg`, the graph's serial bridge is `sds_nodes.arduino_bridge` and `sds import-sd`
+is `sds_record.import_sd`.
 """

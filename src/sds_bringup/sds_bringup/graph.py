@@ -63,6 +63,20 @@ def load_graph(path: str | Path) -> list[NodeEntry]:
     return entries
 
 
+MOVED_PLUGINS = {
+    "sds_camera.frame_source_node:FrameSourceNode": "sds_nodes.frame_source:FrameSourceNode",
+    "sds_camera.frame_monitor_node:FrameMonitorNode": "sds_nodes.frame_monitor:FrameMonitorNode",
+    "sds_tracker.tracker_node:TrackerNode": "sds_nodes.tracker:TrackerNode",
+    "sds_recon.recon_node:ReconstructionNode": "sds_nodes.reconstruction:ReconstructionNode",
+    "sds_recon.sloshing_node:SloshingNode": "sds_nodes.sloshing:SloshingNode",
+    "sds_record.recorder_node:RecorderNode": "sds_nodes.recorder:RecorderNode",
+    "sds_record.player_node:PlayerNode": "sds_nodes.player:PlayerNode",
+    "sds_arduino.bridge_node:ArduinoBridgeNode": "sds_nodes.arduino_bridge:ArduinoBridgeNode",
+    "sds_viz.viewer_node:ViewerNode": "sds_nodes.viewer:ViewerNode",
+}
+"""Plugins of graph files written before the nodes moved into `sds_nodes` (2026-12)."""
+
+
 def _node_entry(path: Path, index: int, item: Any) -> NodeEntry:
     where = f"{path}: nodes[{index}]"
     if not isinstance(item, dict):
@@ -75,6 +89,9 @@ def _node_entry(path: Path, index: int, item: Any) -> NodeEntry:
     for key in ("name", "plugin"):
         if not isinstance(item.get(key), str) or not item[key]:
             raise GraphFileError(f"{where}: '{key}' must be a non-empty string")
+    moved_to = MOVED_PLUGINS.get(item["plugin"])
+    if moved_to:
+        raise GraphFileError(f"{where}: plugin {item['plugin']} is now {moved_to}")
     params = item.get("params", [])
     params = [params] if isinstance(params, str) else params
     files = tuple((path.parent / p).resolve() for p in params)

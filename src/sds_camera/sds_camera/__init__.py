@@ -2,7 +2,6 @@
 
 `frame_source` (pure: OpenCV, numpy) opens a source, selects the container's region and the
 laser's colour channel, and reads ahead; `camera_imu` reads the camera's own IMU (GoPro GPMF or a
-sidecar CSV); `led` finds the sync LED's switches; `frame_source_node` publishes frames and IMU
-samples (codecs in `sds_ros`), `frame_monitor_node` watches them; `video_writer` writes videos
-(simulator, tests).
+sidecar CSV); `led` finds the sync LED's switches; `video_writer` writes videos (simulator,
+tests). No ROS: the graph's frame source and frame monitor are in `sds_nodes`.
 """

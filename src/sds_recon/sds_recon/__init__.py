@@ -5,6 +5,6 @@
 `triangulation` (seed Eqs. 1, 9–11), `reconstruction` (one frame's points and fits),
 `surface_fit` (Eq. 12, modes, outliers, meniscus), `calibration/` (camera, beams, the rig's
 self-calibration), `sloshing/` (mode theory, estimators, analysis, report), `results` (the
-result files), `resolution` (Fig. 7). `recon_node` and `sloshing_node` are the graph's nodes
-on top of them.
+result files), `resolution` (Fig. 7). The graph's reconstruction and sloshing nodes are in
+`sds_nodes`.
 """

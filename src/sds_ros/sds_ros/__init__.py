@@ -5,6 +5,7 @@ or more nodes in a process until a required one finishes or a signal arrives (`n
 is the program the launcher starts); `qos` holds the measuring chain's
 QoS and the start-up wait for consumers; the message codecs: `point_cloud` (the surface cloud
 on `/recon/points` and `/recon/line_points`, metres, REP-103, and its reader), `image_msg`
-(numpy ↔ sensor_msgs/Image), `imu_msg` (IMU samples → sensor_msgs/Imu). Algorithm packages
+(numpy ↔ sensor_msgs/Image), `imu_msg` (IMU samples → sensor_msgs/Imu), `arduino_msg`
+(Arduino records → Imu, Range, SyncEvent). Algorithm packages
 import nothing from here; nodes and tools do.
 """

@@ -25,7 +25,7 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Import and count records, rejected lines and gaps."""
-    from sds_arduino.import_sd import import_sd
+    from sds_record.import_sd import import_sd
 
     output = args.out or args.log.with_suffix(".mcap")
     result = import_sd(args.log, output, start_s=args.start_s, overwrite=args.overwrite)

@@ -9,13 +9,13 @@ import numpy as np
 import serial
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
+from sds_arduino.clock import DeviceClock, camera_offset_s
+from sds_arduino.protocol import Record
+from sds_arduino.stream import RecordStream
+from sds_ros.arduino_msg import TOPICS, SensorSpec, record_message
 from sds_ros.hosted_node import HostedNode
 from sensor_msgs.msg import Imu, Range
 
-from sds_arduino.clock import DeviceClock, camera_offset_s
-from sds_arduino.messages import TOPICS, SensorSpec, record_message
-from sds_arduino.protocol import Record
-from sds_arduino.stream import RecordStream
 from sds_msgs.msg import SyncEvent
 
 

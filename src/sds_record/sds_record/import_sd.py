@@ -8,10 +8,10 @@ from pathlib import Path
 
 from builtin_interfaces.msg import Time
 from rclpy.serialization import serialize_message
-from sds_record.mcap_files import McapRecorder
-
-from sds_arduino.messages import TOPICS, SensorSpec, record_message
 from sds_arduino.protocol import WRAP, read_log, unwrap_time_s
+from sds_ros.arduino_msg import TOPICS, SensorSpec, record_message
+
+from sds_record.mcap_files import McapRecorder
 
 TYPE_NAMES = {"imu": "sensor_msgs/msg/Imu", "tof": "sensor_msgs/msg/Range",
               "events": "sds_msgs/msg/SyncEvent"}

@@ -13,14 +13,6 @@ from rclpy.duration import Duration
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.subscription import RCLError
 from rclpy.time import Time
-from sds_recon.camera import CameraModel as CameraModelBase
-from sds_recon.camera import load_camera
-from sds_ros.hosted_node import HostedNode
-from sds_ros.image_msg import image_to_msg
-from sds_ros.imu_msg import imu_message
-from sensor_msgs.msg import Image, Imu
-from std_msgs.msg import Header
-
 from sds_camera.camera_imu import CameraImuError, imu_samples, read_camera_imu
 from sds_camera.frame_source import (
     CHANNELS,
@@ -31,6 +23,14 @@ from sds_camera.frame_source import (
     select,
 )
 from sds_camera.led import LedDetector
+from sds_recon.camera import CameraModel as CameraModelBase
+from sds_recon.camera import load_camera
+from sds_ros.hosted_node import HostedNode
+from sds_ros.image_msg import image_to_msg
+from sds_ros.imu_msg import imu_message
+from sensor_msgs.msg import Image, Imu
+from std_msgs.msg import Header
+
 from sds_msgs.msg import CameraModel, SyncEvent
 
 PACINGS = ("realtime", "flood")

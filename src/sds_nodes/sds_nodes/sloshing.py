@@ -7,13 +7,13 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
+from sds_recon.sloshing.modal import ModalSeries
+from sds_recon.sloshing.running import RunningAnalysis
 from sds_ros.hosted_node import HostedNode
 from sds_ros.point_cloud import stamp_s
 from sds_ros.qos import start_when_consumed, stream_qos
 
 from sds_msgs.msg import SloshingEstimate, SurfaceFit
-from sds_recon.sloshing.modal import ModalSeries
-from sds_recon.sloshing.running import RunningAnalysis
 
 FIT_QUEUE_DEPTH = 1000
 """Fits kept for the node (33 s at 30 fps): an estimate holds the interpreter for up to 0.4 s,

@@ -6,9 +6,9 @@ import math
 from dataclasses import dataclass
 
 from builtin_interfaces.msg import Time
+from sds_arduino.protocol import Record
 from sensor_msgs.msg import Imu, Range
 
-from sds_arduino.protocol import Record
 from sds_msgs.msg import SyncEvent
 
 STANDARD_GRAVITY = 9.80665

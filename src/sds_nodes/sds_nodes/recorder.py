@@ -10,13 +10,12 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.serialization import deserialize_message
 from rclpy.time import Time
 from sds_recon.rig import rig_from_document
-from sds_ros.hosted_node import HostedNode
-from std_msgs.msg import Header, String
-
 from sds_record.mcap_files import McapRecorder, header_stamp_ns
 from sds_record.recorded_series import RIG_TOPIC
 from sds_record.schemas import SchemaError
 from sds_record.static_transforms import TF_MESSAGE_TYPE, TF_STATIC_TOPIC, camera_transform_cdr
+from sds_ros.hosted_node import HostedNode
+from std_msgs.msg import Header, String
 
 EXIT_CONFIG_ERROR = 2
 SKIPPED_TOPICS = ("/rosout", "/parameter_events")

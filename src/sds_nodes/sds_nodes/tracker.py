@@ -13,10 +13,6 @@ from sds_recon.rig import load_rig
 from sds_ros.hosted_node import HostedNode
 from sds_ros.image_msg import msg_to_image
 from sds_ros.qos import live_qos, start_when_consumed, stream_qos
-from sensor_msgs.msg import Image
-from std_msgs.msg import Header
-
-from sds_msgs.msg import CameraModel, LaserLineProfile, LaserSpot, LaserSpotArray
 from sds_tracker.spots import LOST
 from sds_tracker.tracker import (
     TRACKING_PARAMETERS,
@@ -25,6 +21,10 @@ from sds_tracker.tracker import (
     parse_seeds,
     tracker_config,
 )
+from sensor_msgs.msg import Image
+from std_msgs.msg import Header
+
+from sds_msgs.msg import CameraModel, LaserLineProfile, LaserSpot, LaserSpotArray
 
 EXIT_CONFIG_ERROR = 2
 IDLE_FLUSH_S = 1.0

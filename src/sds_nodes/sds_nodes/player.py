@@ -11,12 +11,12 @@ from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
 from rosgraph_msgs.msg import Clock
+from sds_record.mcap_files import header_stamp_ns, read_messages, recorded_topics
 from sds_ros.hosted_node import HostedNode
 from sds_ros.qos import stream_qos
 from std_msgs.msg import Header
 
-from sds_record.mcap_files import header_stamp_ns, read_messages, recorded_topics
-from sds_record.recorder_node import message_class
+from sds_nodes.recorder import message_class
 
 EXIT_INPUT_ERROR = 2
 PACINGS = ("recorded", "flood")

@@ -8,6 +8,8 @@ import rerun as rr
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sds_recon.rig import RigError, load_rig
 from sds_ros.hosted_node import HostedNode
+from sds_viz.messages import log_message
+from sds_viz.scene import RerunScene
 from sensor_msgs.msg import Image, Imu, PointCloud2, Range
 
 from sds_msgs.msg import (
@@ -17,8 +19,6 @@ from sds_msgs.msg import (
     SloshingEstimate,
     SurfaceFit,
 )
-from sds_viz.messages import log_message
-from sds_viz.scene import RerunScene
 
 EXIT_CONFIG_ERROR = 2
 SUBSCRIPTIONS = (("image", Image, "sensor_msgs/msg/Image"),
