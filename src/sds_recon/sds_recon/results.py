@@ -13,6 +13,7 @@ import csv
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pyarrow as pa
@@ -177,12 +178,13 @@ class ResultsWriter:
         self._table(table, list(COLUMNS[table])).append(
             [np.broadcast_to(a, (length,)) for a in arrays])
 
-    def add(self, table: str, rows: list[tuple]) -> None:
+    def add(self, table: str, rows: list[tuple[Any, ...]]) -> None:
         """Rows of a table (values in the order of COLUMNS[table]; None or NaN: empty)."""
         if rows:
             self.add_columns(table, [np.array(c, dtype=float) for c in zip(*rows, strict=True)])
 
-    def add_fit(self, row: tuple, modal_names: tuple[str, ...], amplitudes: list[float]) -> None:
+    def add_fit(self, row: tuple[Any, ...], modal_names: tuple[str, ...],
+                amplitudes: list[float]) -> None:
         """One frame's fit; the modal columns are fixed by the first frame that has them."""
         if self._modal_names is None and modal_names:
             self._modal_names = modal_names
@@ -193,7 +195,7 @@ class ResultsWriter:
         table = self._table("fits", header)
         table.append([np.array([c], dtype=float) for c in cells[:len(table.header)]])
 
-    def close(self, analysis: dict | None = None) -> list[Path]:
+    def close(self, analysis: dict[str, Any] | None = None) -> list[Path]:
         """Close the tables, write columns.json (and analysis.json); the files written."""
         for table in self._tables.values():
             table.close()
@@ -219,8 +221,8 @@ class Results:
     imu: np.ndarray | None = None
     tof: np.ndarray | None = None
     camera_imu: np.ndarray | None = None
-    analysis: dict | None = None
-    columns: dict = field(default_factory=dict)
+    analysis: dict[str, Any] | None = None
+    columns: dict[str, Any] = field(default_factory=dict)
 
 
 def _read_table(path: Path) -> np.ndarray | None:

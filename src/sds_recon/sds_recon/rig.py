@@ -141,7 +141,7 @@ class Rig:
         raise KeyError(f"no laser diode with id {laser_id}")
 
 
-def _vector(content: dict, key: str, where: str, unit: bool = False) -> np.ndarray:
+def _vector(content: dict[str, Any], key: str, where: str, unit: bool = False) -> np.ndarray:
     try:
         vector = np.asarray(content[key], dtype=float).reshape(3)
     except KeyError as error:
@@ -158,7 +158,7 @@ def _vector(content: dict, key: str, where: str, unit: bool = False) -> np.ndarr
     return vector
 
 
-def _number(content: dict, key: str, where: str, positive: bool = True) -> float:
+def _number(content: dict[str, Any], key: str, where: str, positive: bool = True) -> float:
     try:
         value = float(content[key])
     except KeyError as error:
@@ -170,7 +170,7 @@ def _number(content: dict, key: str, where: str, positive: bool = True) -> float
     return value
 
 
-def _section(content: dict, key: str) -> dict:
+def _section(content: dict[str, Any], key: str) -> dict[str, Any]:
     section = content.get(key)
     if not isinstance(section, dict):
         raise RigError(f"{key} is missing or not a mapping")
@@ -244,7 +244,7 @@ def rig_from_dict(content: Any, base: Path) -> Rig:
     )
 
 
-def _calibration(content: dict) -> dict[str, Any] | None:
+def _calibration(content: dict[str, Any]) -> dict[str, Any] | None:
     calibration = content.get("calibration")
     if calibration is not None and not isinstance(calibration, dict):
         raise RigError("calibration must be a mapping")

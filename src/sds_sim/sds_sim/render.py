@@ -10,12 +10,18 @@ from sds_recon.geometry import RigidTransform
 
 from sds_sim.optics import line_laser_rays, ray_surface_points, wall_reflections
 from sds_sim.scenario import Disturbances, Scenario
+from sds_sim.surface import Surface
 
 PSF_SIGMA_PX = 0.5
 """Lens and sensor blur added to every spot and line width [px at full resolution]."""
 NOISE_BANK_MARGIN_PX = 64
 SATURATION_BLEED = 0.6
 """Share of the red excess above 255 spilling into green and blue (saturated spots look white)."""
+
+
+Bounds = tuple[int, int, int, int]
+"""A window's rows and columns: y0, y1, x0, x1 (ends excluded)."""
+Window = tuple[Bounds, np.ndarray]
 
 
 @dataclass(frozen=True)
@@ -116,7 +122,8 @@ class FrameRenderer:
                 hidden[start: start + self.rng.integers(shortest, longest + 1), diode] = True
         return hidden
 
-    def _spots(self, surface, pose: RigidTransform, time_s: float):
+    def _spots(self, surface: Surface, pose: RigidTransform, time_s: float
+               ) -> tuple[np.ndarray, np.ndarray]:
         points = ray_surface_points(surface, self.emitters, self.directions, time_s)
         return points, self.camera.project(pose.apply(points))
 
@@ -176,14 +183,15 @@ class FrameRenderer:
                            line_rows, line_x, line_mm, led, vibration)
         return frame, truth
 
-    def _line_points(self, surface, time_s: float) -> np.ndarray:
+    def _line_points(self, surface: Surface, time_s: float) -> np.ndarray:
         line = self.scenario.rig.line_laser
         if line is None:   # a rig without a line laser: no line points
             return np.zeros((0, 3))
         origins = np.repeat(line.emitter_mm[None, :], len(self.line_directions), axis=0)
         return ray_surface_points(surface, origins, self.line_directions, time_s)
 
-    def _line(self, points: np.ndarray, pose: RigidTransform):
+    def _line(self, points: np.ndarray, pose: RigidTransform
+              ) -> tuple[np.ndarray, np.ndarray, float]:
         """Rows the line's world points cross, its centre per row [px], its Gaussian σ [px]."""
         pixels = self.camera.project(pose.apply(points))
         pixels = pixels[np.isfinite(pixels).all(axis=1)]
@@ -241,9 +249,9 @@ class _Layer:
 
     def __init__(self, height: int, width: int) -> None:
         self.height, self.width = height, width
-        self._windows: list[tuple[tuple[int, int, int, int], np.ndarray]] = []
+        self._windows: list[Window] = []
 
-    def _window(self, x0: float, x1: float, y0: float, y1: float):
+    def _window(self, x0: float, x1: float, y0: float, y1: float) -> Bounds | None:
         bounds = (max(0, int(np.floor(y0))), min(self.height, int(np.ceil(y1)) + 1),
                   max(0, int(np.floor(x0))), min(self.width, int(np.ceil(x1)) + 1))
         return bounds if bounds[0] < bounds[1] and bounds[2] < bounds[3] else None
@@ -286,9 +294,9 @@ class _Layer:
             grain = blurred / max(float(blurred.std()), 1e-6)
             self._windows[index] = (bounds, values * np.clip(1 + strength * grain, 0, None))
 
-    def windows(self):
+    def windows(self) -> list[Window]:
         """Each window's bounds (y0, y1, x0, x1) and values, overlapping windows merged."""
-        merged: dict[tuple[int, int, int, int], np.ndarray] = {}
+        merged: dict[Bounds, np.ndarray] = {}
         for bounds, values in self._windows:
             merged[bounds] = merged[bounds] + values if bounds in merged else values
         boxes = list(merged.items())
@@ -307,10 +315,10 @@ class _Layer:
         return _disjoint(boxes)
 
 
-def _disjoint(boxes):
+def _disjoint(boxes: list[Window]) -> list[Window]:
     """Merge overlapping windows so each pixel is written once."""
     boxes = sorted(boxes, key=lambda item: item[0][0])
-    result = []
+    result: list[Window] = []
     while boxes:
         (y0, y1, x0, x1), values = boxes.pop(0)
         merged = True

@@ -21,6 +21,7 @@ import csv
 import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -156,7 +157,7 @@ def _write_line(renderer: FrameRenderer, truths: list[FrameTruth], path: Path) -
 
 
 def _run_description(scenario: Scenario, renderer: FrameRenderer,
-                     output: SimulationOutput) -> dict:
+                     output: SimulationOutput) -> dict[str, Any]:
     modes = [{"order": m.shape.order, "index": m.shape.index, "xi": m.shape.xi,
               "frequency_hz": m.frequency_hz, "damped_frequency_hz": m.damped_frequency_hz,
               "damping_ratio": m.damping_ratio, "amplitude_mm": m.amplitude_mm,

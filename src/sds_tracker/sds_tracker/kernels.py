@@ -13,7 +13,8 @@ from numba import njit
 @njit(cache=True, fastmath=True)
 def spot_windows(image: np.ndarray, corners: np.ndarray, half: int, prior: np.ndarray,
                  threshold: float, min_competitor: float, aperture_factor: float,
-                 clip_fraction: float, read_noise: float):
+                 clip_fraction: float, read_noise: float
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per window (top-left `corners`, size 2·half + 1): the spot-core centroid in window pixels,
     its σ [px], the raw peak, and whether one clear blob settled it.
 
@@ -95,7 +96,8 @@ def spot_windows(image: np.ndarray, corners: np.ndarray, half: int, prior: np.nd
 
 @njit(cache=True, fastmath=True)
 def line_rows(image: np.ndarray, rows: np.ndarray, starts: np.ndarray, width: int, core: int,
-              edges: int, clip_fraction: float, threshold: float, read_noise: float):
+              edges: int, clip_fraction: float, threshold: float, read_noise: float
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per row: the line's centre (NaN if none), its σ [px], the peak and the raw maximum.
 
     The band `starts[k]`…+`width` of row `rows[k]`; background = mean of its `edges` outer

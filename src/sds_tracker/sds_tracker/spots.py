@@ -212,7 +212,8 @@ class SpotTracker:
 
     @staticmethod
     def _aperture(image: np.ndarray, origin: np.ndarray, centre: np.ndarray, radius: float,
-                  background: float):
+                  background: float
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
         """Full-frame pixel coordinates, background-subtracted weights and raw values of the
         pixels within `radius` of `centre`; None if the aperture leaves the image."""
         half = int(np.ceil(radius)) + 1

@@ -74,7 +74,7 @@ def identify_spots(rig: Rig, surfaces: list[KnownSurface], blobs: list[np.ndarra
     needed: dict[int, int] = {}
     unidentified: dict[int, str] = {}
     for diode in rig.diodes:
-        hypotheses: dict[tuple, _Hypothesis] = {}
+        hypotheses: dict[tuple[tuple[int, int], ...], _Hypothesis] = {}
         for frame_points in points:
             offsets = frame_points - diode.emitter_mm
             norms = np.linalg.norm(offsets, axis=1)

@@ -72,7 +72,8 @@ class RigCalibration:
 
 
 def _observations(identification: Identification, blobs: list[np.ndarray],
-                  sigmas: list[np.ndarray]):
+                  sigmas: list[np.ndarray]
+                  ) -> tuple[list[int], np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     ids = sorted(identification.assigned)
     diode, frame, blob, pixels, sigma = [], [], [], [], []
     for index, laser_id in enumerate(ids):

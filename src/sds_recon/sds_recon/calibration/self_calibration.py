@@ -10,6 +10,7 @@ value and the result says which extra data would fix them.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TypeVar
 
@@ -84,7 +85,8 @@ class SelfCalibration:
         return float(self.sigmas[self.names.index(name)])
 
 
-def _jacobian(residuals, values: np.ndarray, scales: np.ndarray) -> np.ndarray:
+def _jacobian(residuals: Callable[[np.ndarray], np.ndarray], values: np.ndarray,
+              scales: np.ndarray) -> np.ndarray:
     """Forward-difference Jacobian of the residuals, steps of 1e-6 of each parameter's scale."""
     base = residuals(values)
     columns = []

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -72,7 +73,7 @@ class ModeResult:
     notes: tuple[str, ...] = ()
     azimuth_deg: float = float("nan")
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
         """JSON-ready summary (no samples)."""
         return {"mode": self.name, "unit": self.unit, "azimuth_deg": self.azimuth_deg,
                 "estimates": [e.as_dict() for e in self.estimates], "notes": list(self.notes)}
@@ -110,7 +111,7 @@ class SloshingAnalysis:
     meniscus: tuple[np.ndarray, np.ndarray, np.ndarray]   # radius [mm], height [mm], count
     meniscus_source: str
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
         """JSON-ready results."""
         radius, height, count = self.meniscus
         return {

@@ -7,6 +7,7 @@ import html
 import json
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -29,7 +30,7 @@ class ReportFiles:
     json: Path
     html: Path
     figures: tuple[Path, ...]
-    results: dict
+    results: dict[str, Any]
 
 
 def truth_from_run(path: str | Path) -> Truth:
@@ -43,7 +44,8 @@ def truth_from_run(path: str | Path) -> Truth:
         raise ValueError(f"{path}: not a simulation's run.json ({error})") from None
 
 
-def _errors_pct(estimate: dict, truth: tuple[float, float] | None) -> dict:
+def _errors_pct(estimate: dict[str, Any], truth: tuple[float, float] | None
+               ) -> dict[str, Any]:
     if truth is None:
         return {}
     frequency, damping = truth
@@ -52,7 +54,7 @@ def _errors_pct(estimate: dict, truth: tuple[float, float] | None) -> dict:
             if damping else float("nan")}
 
 
-def results_dict(analysis: SloshingAnalysis, truth: Truth | None = None) -> dict:
+def results_dict(analysis: SloshingAnalysis, truth: Truth | None = None) -> dict[str, Any]:
     """The analysis as JSON, each estimate with its error against the truth when given."""
     result = analysis.as_dict()
     truth = truth or {}
@@ -66,7 +68,7 @@ def results_dict(analysis: SloshingAnalysis, truth: Truth | None = None) -> dict
     return result
 
 
-def _json_safe(value):
+def _json_safe(value: Any) -> Any:
     """NaN and infinity become null (strict JSON)."""
     if isinstance(value, float) and not np.isfinite(value):
         return None
@@ -189,7 +191,7 @@ def _sigma(value: float) -> str:
     return "—" if value is None or not np.isfinite(value) else f"{value:.2g}"
 
 
-def _estimate_rows(result: dict) -> list[str]:
+def _estimate_rows(result: dict[str, Any]) -> list[str]:
     rows = []
     for group in ("modes", "tof"):
         for mode in result[group]:
@@ -271,7 +273,7 @@ def write_report(analysis: SloshingAnalysis, directory: str | Path,
     return ReportFiles(json_path, html_path, tuple(figures), result)
 
 
-def summary_lines(result: dict) -> list[str]:
+def summary_lines(result: dict[str, Any]) -> list[str]:
     """One line per estimate, for the terminal."""
     lines = []
     for group in ("modes", "tof"):
