@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import importlib
 from pathlib import Path
 
 import pytest
 import rclpy
+import yaml
 from rclpy.node import Node
 from sds_bringup.graph import (
     MOVED_PLUGINS,
@@ -25,6 +27,21 @@ def test_shipped_graph_loads_with_existing_parameter_files_and_plugins(repo):
         for entry in entries:
             assert all(path.is_file() for path in entry.params_files)
             assert issubclass(load_plugin(entry.plugin), Node)
+
+
+@pytest.mark.parametrize("module, params_file", [
+    ("frame_source", "frame_source"), ("frame_monitor", "frame_monitor"),
+    ("tracker", "tracker"), ("reconstruction", "recon"), ("sloshing", "sloshing"),
+    ("recorder", "recorder"), ("player", "player"), ("arduino_bridge", "arduino"),
+    ("viewer", "viewer")])
+def test_each_node_declares_what_its_parameter_file_documents(repo, module, params_file):
+    """A node's PARAMETERS table is the one list of its parameters; its config/params file
+    documents each of them and nothing else."""
+    declared = importlib.import_module(f"sds_nodes.{module}").PARAMETERS
+    document = yaml.safe_load((repo / "config" / "params" / f"{params_file}.yaml").read_text())
+    documented = {name for section in document.values()
+                  for name in (section or {}).get("ros__parameters", {})}
+    assert documented == set(declared)
 
 
 def test_every_moved_plugin_names_a_node_that_loads():

@@ -18,6 +18,12 @@ from sensor_msgs.msg import Imu, Range
 
 from sds_msgs.msg import SyncEvent
 
+PARAMETERS = {"port": "/dev/ttyACM0", "baud": 115200,
+              **{f.name: f.default for f in fields(SensorSpec)},
+              "reconnect_period_s": 0.2, "stats_period_s": 5.0, "align_to_camera": True}
+"""The node's parameters and defaults, the sensors' from `SensorSpec`
+(config/params/arduino.yaml documents each)."""
+
 
 class ArduinoBridgeNode(HostedNode):
     """Read the protocol-v1 line (pyserial), survive what a real port does, publish records.
@@ -32,13 +38,8 @@ class ArduinoBridgeNode(HostedNode):
 
     def __init__(self, node_name: str = "arduino", **node_kwargs) -> None:
         super().__init__(node_name, **node_kwargs)
-        sensor = {f.name: f.default for f in fields(SensorSpec)}
-        defaults = {"port": "/dev/ttyACM0", "baud": 115200, **sensor,
-                    "reconnect_period_s": 0.2, "stats_period_s": 5.0, "align_to_camera": True}
-        for name, default in defaults.items():
-            self.declare_parameter(name, default)
-        self._p = {name: self.get_parameter(name).value for name in defaults}
-        self._spec = SensorSpec(**{name: self._p[name] for name in sensor})
+        self._p = self.declare_parameter_table(PARAMETERS)
+        self._spec = SensorSpec(**{f.name: self._p[f.name] for f in fields(SensorSpec)})
         reliable = QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE)
         self._publishers_by_topic = {
             "imu": self.create_publisher(Imu, "imu", reliable),

@@ -14,26 +14,27 @@ from sds_ros.image_msg import msg_to_image
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 
+PARAMETERS = {"ack": True, "summary_path": "", "report_period_s": 2.0}
+"""The node's parameters and defaults (config/params/frame_monitor.yaml documents each)."""
+
 
 class FrameMonitorNode(HostedNode):
     """Count received frames, ack each one on frame_ack, and write a JSON summary at the end."""
 
     def __init__(self, node_name: str = "frame_monitor", **node_kwargs) -> None:
         super().__init__(node_name, **node_kwargs)
-        self.declare_parameter("ack", True)
-        self.declare_parameter("summary_path", "")
-        self.declare_parameter("report_period_s", 2.0)
+        p = self.declare_parameter_table(PARAMETERS)
         reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
-        self._ack = self.get_parameter("ack").value
+        self._ack = p["ack"]
         self._ack_pub = self.create_publisher(Header, "frame_ack", reliable)
         self.create_subscription(Image, "image", self._on_image, reliable)
-        self._summary_path = self.get_parameter("summary_path").value
+        self._summary_path = p["summary_path"]
         self._stamps_ns: list[int] = []
         self._latencies_ms: list[float] = []
         self._arrivals_s: list[float] = []
         self._shape: tuple[int, ...] = ()
         self._encoding = ""
-        self.create_timer(self.get_parameter("report_period_s").value, self._report)
+        self.create_timer(p["report_period_s"], self._report)
 
     def _on_image(self, msg: Image) -> None:
         now_ns = self.get_clock().now().nanoseconds

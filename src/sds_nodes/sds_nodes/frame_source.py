@@ -7,6 +7,7 @@ import threading
 import time
 from collections import deque
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from rclpy.duration import Duration
@@ -25,6 +26,7 @@ from sds_camera.frame_source import (
 from sds_camera.led import LedDetector
 from sds_recon.camera import CameraModel as CameraModelBase
 from sds_recon.camera import load_camera
+from sds_ros.ack_credit import AckCredit
 from sds_ros.hosted_node import HostedNode
 from sds_ros.image_msg import image_to_msg
 from sds_ros.imu_msg import imu_message
@@ -38,6 +40,11 @@ IMU_HISTORY = 2000
 """Camera IMU messages kept for late subscribers (about 3 s of a GoPro's 600 per second)."""
 STAMPS = ("clock", "media")
 EXIT_SOURCE_ERROR = 2
+PARAMETERS = {"source": "", "fps": 0.0, "roi": [0, 0, 0, 0], "channel": "bgr",
+              "pacing": "realtime", "rate": 1.0, "stamp": "clock", "frame_id": "camera_optical",
+              "camera_model": "", "wait_for_subscribers": 1, "ack_consumers": 1,
+              "max_in_flight": 2, "led_roi": [0, 0, 0, 0], "repeat": 1, "linger_s": 3.0}
+"""The node's parameters and defaults (config/params/frame_source.yaml documents each)."""
 
 
 class _EndOfStream:
@@ -53,13 +60,11 @@ class FrameSourceNode(HostedNode):
     def __init__(self, node_name: str = "frame_source", **node_kwargs) -> None:
         super().__init__(node_name, **node_kwargs)
         self.published = 0
-        self._declare_parameters()
+        values = self.declare_parameter_table(PARAMETERS)
         self._stop = threading.Event()
         self._queue: queue.Queue[Frame | _EndOfStream] = queue.Queue(maxsize=3)
-        self._acks: dict[int, int] = {}
-        self._ack_condition = threading.Condition()
         try:
-            p = self._read_parameters()
+            p = self._checked(values)
             self._source = open_source(p["source"], fps=p["fps"])
             self._region = self._region_from(p["roi"])
             self._camera = self._camera_from(p["camera_model"])
@@ -79,7 +84,7 @@ class FrameSourceNode(HostedNode):
         self._sync_pub = self.create_publisher(SyncEvent, "sync", QoSProfile(
             depth=10, reliability=ReliabilityPolicy.RELIABLE,
             durability=DurabilityPolicy.TRANSIENT_LOCAL))
-        roi = [int(v) for v in self.get_parameter("led_roi").value]
+        roi = [int(v) for v in p["led_roi"]]
         self._led = LedDetector((roi[0], roi[1], roi[2], roi[3])) \
             if len(roi) == 4 and roi[2] > 0 else None
         self._led_switches: dict[int, bool] = {}
@@ -89,8 +94,9 @@ class FrameSourceNode(HostedNode):
             depth=IMU_HISTORY, reliability=ReliabilityPolicy.RELIABLE,
             durability=DurabilityPolicy.TRANSIENT_LOCAL))
         self._imu_samples = self._camera_imu_samples(p["source"])
-        self._ack_topic = self.create_subscription(
-            Header, "frame_ack", self._on_ack, reliable).topic_name
+        self._credit = AckCredit(p["ack_consumers"], self.resolve_topic_name("frame_ack"),
+                                 self.get_logger().warning)
+        self.create_subscription(Header, "frame_ack", self._credit.on_ack, reliable)
         self._publish_camera_model(p)
         self._decode_thread = threading.Thread(target=self._read_frames, name="decode", daemon=True)
         self._publish_thread = threading.Thread(
@@ -125,28 +131,8 @@ class FrameSourceNode(HostedNode):
                 _, msg = imu_message(sample_s, sensor, value, origin_ns, self._p["frame_id"])
                 self._imu_pub.publish(msg)
 
-    def _declare_parameters(self) -> None:
-        self.declare_parameter("source", "")
-        self.declare_parameter("fps", 0.0)
-        self.declare_parameter("roi", [0, 0, 0, 0])
-        self.declare_parameter("channel", "bgr")
-        self.declare_parameter("pacing", "realtime")
-        self.declare_parameter("rate", 1.0)
-        self.declare_parameter("stamp", "clock")
-        self.declare_parameter("frame_id", "camera_optical")
-        self.declare_parameter("camera_model", "")
-        self.declare_parameter("wait_for_subscribers", 1)
-        self.declare_parameter("ack_consumers", 1)
-        self.declare_parameter("max_in_flight", 2)
-        self.declare_parameter("led_roi", [0, 0, 0, 0])
-        self.declare_parameter("repeat", 1)
-        self.declare_parameter("linger_s", 3.0)
-
-    def _read_parameters(self) -> dict:
-        names = ["source", "fps", "roi", "channel", "pacing", "rate", "stamp", "frame_id",
-                 "camera_model", "wait_for_subscribers", "ack_consumers", "max_in_flight",
-                 "repeat", "linger_s"]
-        p = {name: self.get_parameter(name).value for name in names}
+    def _checked(self, p: dict[str, Any]) -> dict[str, Any]:
+        """The parameters, once their values are known to be usable."""
         for name, allowed in (("channel", CHANNELS), ("pacing", PACINGS), ("stamp", STAMPS)):
             if p[name] not in allowed:
                 raise ValueError(f"parameter {name}={p[name]!r} is not one of {allowed}")
@@ -257,26 +243,6 @@ class FrameSourceNode(HostedNode):
                                       "5 s; publishing frames anyway")
         return not self._stop.is_set()
 
-    def _on_ack(self, msg: Header) -> None:
-        stamp_ns = Time.from_msg(msg.stamp).nanoseconds
-        with self._ack_condition:
-            if stamp_ns in self._acks:
-                self._acks[stamp_ns] += 1
-                if self._acks[stamp_ns] >= self._p["ack_consumers"]:
-                    del self._acks[stamp_ns]
-                self._ack_condition.notify_all()
-
-    def _wait_for_credit(self, limit: int) -> None:
-        """Block until at most `limit` published frames await their consumers' acks."""
-        with self._ack_condition:
-            while not self._ack_condition.wait_for(
-                lambda: len(self._acks) <= limit or self._stop.is_set(), timeout=5.0
-            ):
-                self.get_logger().warning(
-                    f"flood pacing: {len(self._acks)} frame(s) still await acknowledgement by "
-                    f"{self._p['ack_consumers']} consumer(s) on {self._ack_topic}"
-                )
-
     def _publish_frames(self) -> None:
         """Publish thread: pace, stamp and publish frames until the stream ends."""
         p = self._p
@@ -299,9 +265,8 @@ class FrameSourceNode(HostedNode):
                     time.sleep(delay)
             stamp_ns = origin_ns + item.time_ns
             if flow_control:
-                self._wait_for_credit(p["max_in_flight"] - 1)
-                with self._ack_condition:
-                    self._acks[stamp_ns] = 0
+                self._credit.wait(p["max_in_flight"] - 1)
+                self._credit.register(stamp_ns)
             stamp = Time(nanoseconds=stamp_ns).to_msg()
             if not self._publish(image_to_msg(item.image, stamp, p["frame_id"])):
                 return
@@ -327,7 +292,7 @@ class FrameSourceNode(HostedNode):
 
     def _finish(self, error: FrameSourceError | None, flow_control: bool) -> None:
         if flow_control:
-            self._wait_for_credit(0)
+            self._credit.wait(0)
         if self._stop.is_set():
             return
         self._image_pub.wait_for_all_acked(Duration(seconds=5))
@@ -344,8 +309,8 @@ class FrameSourceNode(HostedNode):
     def close(self) -> None:
         """Stop the decode and publish threads and wait for them."""
         self._stop.set()
-        with self._ack_condition:
-            self._ack_condition.notify_all()
+        if hasattr(self, "_credit"):
+            self._credit.release()
         for name in ("_decode_thread", "_publish_thread"):
             thread = getattr(self, name, None)
             if thread is not None:

@@ -12,6 +12,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
 from rosgraph_msgs.msg import Clock
 from sds_record.mcap_files import header_stamp_ns, read_messages, recorded_topics
+from sds_ros.ack_credit import AckCredit
 from sds_ros.hosted_node import HostedNode
 from sds_ros.qos import stream_qos
 from std_msgs.msg import Header
@@ -36,6 +37,12 @@ def parse_remaps(items: list[str]) -> dict[str, str]:
     return remaps
 
 
+PARAMETERS = {"input": "", "topics": [""], "remap": [""], "rate": 1.0, "pacing": "recorded",
+              "start_s": 0.0, "stop_s": 0.0, "clock": True, "wait_for_subscribers": 1,
+              "ack_topic_for": "", "ack_consumers": 1, "max_in_flight": 2, "linger_s": 2.0}
+"""The node's parameters and defaults (config/params/player.yaml documents each)."""
+
+
 class PlayerNode(HostedNode):
     """Publish a recording's messages as they were (serialized), in log-time order.
 
@@ -47,16 +54,10 @@ class PlayerNode(HostedNode):
     def __init__(self, node_name: str = "player", **node_kwargs) -> None:
         super().__init__(node_name, **node_kwargs)
         self.published = 0
-        defaults = {"input": "", "topics": [""], "remap": [""], "rate": 1.0,
-                    "pacing": "recorded", "start_s": 0.0, "stop_s": 0.0, "clock": True,
-                    "wait_for_subscribers": 1, "ack_topic_for": "", "ack_consumers": 1,
-                    "max_in_flight": 2, "linger_s": 2.0}
-        for name, default in defaults.items():
-            self.declare_parameter(name, default)
-        self._p = {name: self.get_parameter(name).value for name in defaults}
+        self._p = self.declare_parameter_table(PARAMETERS)
         self._stop = threading.Event()
-        self._pending: dict[int, int] = {}   # stamp [ns] -> acks still awaited
-        self._acks = threading.Condition()
+        self._credit = AckCredit(self._p["ack_consumers"], self.resolve_topic_name("frame_ack"),
+                                 self.get_logger().warning)
         self._outputs: dict[str, Publisher] = {}
         try:
             self._remaps = parse_remaps(self._p["remap"])
@@ -67,7 +68,7 @@ class PlayerNode(HostedNode):
             return
         self._clock_pub = self.create_publisher(Clock, "/clock", 10)
         reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
-        self.create_subscription(Header, "frame_ack", self._on_ack, reliable)
+        self.create_subscription(Header, "frame_ack", self._credit.on_ack, reliable)
         self._thread = threading.Thread(target=self._play, name="play", daemon=True)
         self._thread.start()
 
@@ -109,26 +110,6 @@ class PlayerNode(HostedNode):
             time.sleep(0.02)
         return not self._stop.is_set()
 
-    def _on_ack(self, msg: Header) -> None:
-        stamp_ns = Time.from_msg(msg.stamp).nanoseconds
-        with self._acks:
-            if stamp_ns in self._pending:
-                self._pending[stamp_ns] -= 1
-                if self._pending[stamp_ns] <= 0:
-                    del self._pending[stamp_ns]
-                self._acks.notify_all()
-
-    def _wait_for_credit(self) -> None:
-        with self._acks:
-            while not self._acks.wait_for(
-                    lambda: len(self._pending) < self._p["max_in_flight"] or self._stop.is_set(),
-                    timeout=5.0):
-                oldest = min(self._pending)
-                self.get_logger().warning(
-                    f"{len(self._pending)} message(s) still await acks; the oldest (stamp "
-                    f"{oldest} ns) awaits {self._pending[oldest]} of "
-                    f"{self._p['ack_consumers']} consumer(s)")
-
     def _play(self) -> None:
         """Publish thread: every selected message between the start and stop offsets."""
         p = self._p
@@ -157,9 +138,8 @@ class PlayerNode(HostedNode):
                     if delay > 0:
                         time.sleep(delay)
                 if message.topic == flow_topic:
-                    self._wait_for_credit()
-                    with self._acks:
-                        self._pending[header_stamp_ns(message.data)] = p["ack_consumers"]
+                    self._credit.wait(p["max_in_flight"] - 1)
+                    self._credit.register(header_stamp_ns(message.data))
                 if p["clock"]:
                     self._clock_pub.publish(Clock(clock=Time(
                         nanoseconds=message.log_time_ns).to_msg()))
@@ -169,9 +149,7 @@ class PlayerNode(HostedNode):
             self._fail(f"cannot play {p['input']}: {error}")
             return
         if flow_topic:
-            with self._acks:
-                self._acks.wait_for(lambda: not self._pending or self._stop.is_set(),
-                                    timeout=10.0)
+            self._credit.drain(timeout_s=10.0)
         for publisher in self._outputs.values():
             publisher.wait_for_all_acked(Duration(seconds=5))
         self.get_logger().info(f"played {self.published} messages from {p['input']}")
@@ -181,8 +159,7 @@ class PlayerNode(HostedNode):
     def close(self) -> None:
         """Stop publishing (the graph is shutting down)."""
         self._stop.set()
-        with self._acks:
-            self._acks.notify_all()
+        self._credit.release()
 
 
 def main(args: list[str] | None = None) -> None:

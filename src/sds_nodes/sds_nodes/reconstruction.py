@@ -51,27 +51,27 @@ def surface_fit_msg(msg: LaserSpotArray, points: SurfacePoints, fits: SurfaceFit
     return fit
 
 
+PARAMETERS = {"rig": "", "beam_weight": 0.5, "default_sigma_px": 0.1, "frame_id": "world",
+              "wait_for_consumers": 0, "wait_for_fit_consumers": 0}
+"""The node's parameters and defaults (config/params/recon.yaml documents each)."""
+
+
 class ReconstructionNode(HostedNode):
     """Triangulate every valid spot (Eq. 9) and line sample (Eqs. 10–11); fit the surface."""
 
     def __init__(self, node_name: str = "recon", **node_kwargs) -> None:
         super().__init__(node_name, **node_kwargs)
-        self.declare_parameter("rig", "")
-        self.declare_parameter("beam_weight", 0.5)
-        self.declare_parameter("default_sigma_px", 0.1)
-        self.declare_parameter("frame_id", "world")
-        self.declare_parameter("wait_for_consumers", 0)
-        self.declare_parameter("wait_for_fit_consumers", 0)
+        p = self.declare_parameter_table(PARAMETERS)
         try:
-            self._rig: Rig = load_rig(self.get_parameter("rig").value)
+            self._rig: Rig = load_rig(p["rig"])
         except (RigError, OSError) as error:
             self.get_logger().error(f"cannot load the rig: {error}")
             self.exit_code = EXIT_CONFIG_ERROR
             self.finished.set()
             return
-        self._beam_weight = float(self.get_parameter("beam_weight").value)
-        self._default_sigma = float(self.get_parameter("default_sigma_px").value)
-        self._frame_id = self.get_parameter("frame_id").value
+        self._beam_weight = float(p["beam_weight"])
+        self._default_sigma = float(p["default_sigma_px"])
+        self._frame_id = p["frame_id"]
         self._points_pub = self.create_publisher(PointCloud2, "points", stream_qos())
         self._live_pub = self.create_publisher(PointCloud2, "points_live", live_qos())
         self._line_pub = self.create_publisher(PointCloud2, "line_points", stream_qos())
@@ -81,12 +81,12 @@ class ReconstructionNode(HostedNode):
             depth=1, reliability=ReliabilityPolicy.RELIABLE,
             durability=DurabilityPolicy.TRANSIENT_LOCAL))
         self._rig_pub.publish(String(data=rig_document(self._rig)))
-        consumers = int(self.get_parameter("wait_for_consumers").value)
-        fit_consumers = int(self.get_parameter("wait_for_fit_consumers").value) or consumers
+        consumers = int(p["wait_for_consumers"])
+        fit_consumers = int(p["wait_for_fit_consumers"]) or consumers
         # No input is taken before every output has its consumers (e.g. the recorder).
         start_when_consumed(self, [(self._points_pub, consumers), (self._line_pub, consumers),
                                    (self._fit_pub, fit_consumers)], self._subscribe_inputs)
-        self.get_logger().info(f"rig {self.get_parameter('rig').value}: "
+        self.get_logger().info(f"rig {p['rig']}: "
                                f"{len(self._rig.diodes)} diodes")
 
     def _subscribe_inputs(self) -> None:

@@ -30,6 +30,12 @@ def message_class(type_name: str) -> type:
     return getattr(importlib.import_module(f"{package}.{kind}"), name)
 
 
+PARAMETERS = {"output": "", "topics": [""], "exclude": [""], "compression": "zstd",
+              "flush_period_s": 0.5, "discovery_period_s": 0.5, "queue_depth": 100,
+              "ack_for": [""], "overwrite": False}
+"""The node's parameters and defaults (config/params/recorder.yaml documents each)."""
+
+
 class RecorderNode(HostedNode):
     """Subscribe (reliably, serialized) to every topic it discovers, or to `topics`; write MCAP.
 
@@ -43,25 +49,16 @@ class RecorderNode(HostedNode):
 
     def __init__(self, node_name: str = "recorder", **node_kwargs) -> None:
         super().__init__(node_name, **node_kwargs)
-        self.declare_parameter("output", "")
-        self.declare_parameter("topics", [""])
-        self.declare_parameter("exclude", [""])
-        self.declare_parameter("compression", "zstd")
-        self.declare_parameter("flush_period_s", 0.5)
-        self.declare_parameter("discovery_period_s", 0.5)
-        self.declare_parameter("queue_depth", 100)
-        self.declare_parameter("ack_for", [""])
-        self.declare_parameter("overwrite", False)
-        output = self.get_parameter("output").value or \
-            f"recordings/sds_{datetime.now():%Y%m%d_%H%M%S}.mcap"
-        self._wanted = {t for t in self.get_parameter("topics").value if t}
-        self._excluded = {t for t in self.get_parameter("exclude").value if t}
-        self._depth = int(self.get_parameter("queue_depth").value)
-        self._ack_for = {t for t in self.get_parameter("ack_for").value if t}
+        p = self.declare_parameter_table(PARAMETERS)
+        output = p["output"] or f"recordings/sds_{datetime.now():%Y%m%d_%H%M%S}.mcap"
+        self._wanted = {t for t in p["topics"] if t}
+        self._excluded = {t for t in p["exclude"] if t}
+        self._depth = int(p["queue_depth"])
+        self._ack_for = {t for t in p["ack_for"] if t}
         try:
-            self._recorder = McapRecorder(output, self.get_parameter("compression").value,
-                                          flush_period_s=self.get_parameter("flush_period_s").value,
-                                          overwrite=bool(self.get_parameter("overwrite").value))
+            self._recorder = McapRecorder(output, p["compression"],
+                                          flush_period_s=p["flush_period_s"],
+                                          overwrite=bool(p["overwrite"]))
         except (ValueError, OSError) as error:
             self.get_logger().error(f"cannot record to {output}: {error}")
             self.exit_code = EXIT_CONFIG_ERROR
@@ -74,7 +71,7 @@ class RecorderNode(HostedNode):
         self.output = Path(output)
         self.get_logger().info(f"recording to {self.output}")
         self._discover()
-        self.create_timer(float(self.get_parameter("discovery_period_s").value), self._discover)
+        self.create_timer(float(p["discovery_period_s"]), self._discover)
         self.create_timer(0.1, self._recorder.flush_if_due)
 
     def _discover(self) -> None:

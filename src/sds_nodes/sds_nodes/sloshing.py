@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import threading
 from concurrent.futures import Future, ThreadPoolExecutor
-from typing import Any
 
 import numpy as np
 from sds_recon.sloshing.modal import ModalSeries
@@ -33,8 +32,7 @@ class SloshingNode(HostedNode):
 
     def __init__(self, node_name: str = "sloshing", **node_kwargs) -> None:
         super().__init__(node_name, **node_kwargs)
-        values: dict[str, Any] = {name: self.declare_parameter(name, default).value
-                  for name, default in PARAMETERS.items()}
+        values = self.declare_parameter_table(PARAMETERS)
         self._running = RunningAnalysis(float(values["estimate_period_s"]),
                                         window_s=float(values["estimate_window_s"]))
         self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="estimate")

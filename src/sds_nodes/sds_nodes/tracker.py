@@ -42,24 +42,28 @@ def spots_msg(header: Header, frame: int, spots: list[TrackedSpot]) -> LaserSpot
                   peak_intensity=float(spot.peak), flags=int(spot.flags)) for spot in spots])
 
 
+PARAMETERS = {"rig": "", "ack": True, **TRACKING_PARAMETERS, "lost_report_frames": 15,
+              "wait_for_consumers": 0}
+"""The node's parameters and defaults: the tracking ones from `sds_tracker.tracker` (shared with
+`sds process`), and the node's own (config/params/tracker.yaml documents each)."""
+
+
 class TrackerNode(HostedNode):
     """Track the rig's spots and line in every frame; frames must be the red channel or BGR."""
 
     def __init__(self, node_name: str = "tracker", **node_kwargs) -> None:
         super().__init__(node_name, **node_kwargs)
-        for name, value in (("rig", ""), ("ack", True), *TRACKING_PARAMETERS.items(),
-                            ("lost_report_frames", 15), ("wait_for_consumers", 0)):
-            self.declare_parameter(name, value)
+        self._p = self.declare_parameter_table(PARAMETERS)
         try:
-            rig = load_rig(self.get_parameter("rig").value)
-            values = {name: self._value(name) for name in TRACKING_PARAMETERS}
+            rig = load_rig(self._p["rig"])
+            values = {name: self._p[name] for name in TRACKING_PARAMETERS}
             self._tracker = FrameTracker(rig, tracker_config(values), parse_seeds(values["seeds"]))
         except (OSError, ValueError) as error:  # RigError is a ValueError
             self.get_logger().error(f"cannot start the tracker: {error}")
             self.exit_code = EXIT_CONFIG_ERROR
             self.finished.set()
             return
-        self._ack = bool(self._value("ack"))
+        self._ack = bool(self._p["ack"])
         reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -76,19 +80,16 @@ class TrackerNode(HostedNode):
         self._lost_streak: dict[int, int] = {}
         self.create_timer(0.25, self._flush_if_idle)
         # No frame is taken before the spots have their consumers: none is lost to them.
-        start_when_consumed(self, [(self._spots_pub, int(self._value("wait_for_consumers")))],
+        start_when_consumed(self, [(self._spots_pub, int(self._p["wait_for_consumers"]))],
                             lambda: self._subscribe_inputs(latched, reliable))
 
     def _subscribe_inputs(self, latched: QoSProfile, reliable: QoSProfile) -> None:
         self.create_subscription(CameraModel, "camera_model", self._on_model, latched)
         self.create_subscription(Image, "image", self._on_image, reliable)
 
-    def _value(self, name: str):
-        return self.get_parameter(name).value
-
     def _report_lost(self, frame: int, spots) -> None:
         """Say which lasers are not found: at the first frame, and after a long loss."""
-        limit = int(self._value("lost_report_frames"))
+        limit = int(self._p["lost_report_frames"])
         for spot in spots:
             streak = self._lost_streak.get(spot.laser_id, 0) + 1 if spot.flags & LOST else 0
             self._lost_streak[spot.laser_id] = streak

@@ -35,16 +35,17 @@ LIVE_TOPICS = {"spots": "spots_live", "points": "points_live"}
 """With `live`, the spots and points as measured (before the Hampel filter, at once) instead."""
 
 
+PARAMETERS = {"rig": "", "output": "", "connect": "", "spawn": False, "image_scale": 0.25,
+              "image_every": 1, "live": False}
+"""The node's parameters and defaults (config/params/viewer.yaml documents each)."""
+
+
 class ViewerNode(HostedNode):
     """Subscribe best-effort (never slowing the graph) and log every message to Rerun."""
 
     def __init__(self, node_name: str = "viewer", **node_kwargs) -> None:
         super().__init__(node_name, **node_kwargs)
-        defaults = {"rig": "", "output": "", "connect": "", "spawn": False, "image_scale": 0.25,
-                    "image_every": 1, "live": False}
-        for name, default in defaults.items():
-            self.declare_parameter(name, default)
-        p = {name: self.get_parameter(name).value for name in defaults}
+        p = self.declare_parameter_table(PARAMETERS)
         try:
             rig = load_rig(p["rig"]) if p["rig"] else None
         except (RigError, OSError) as error:

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import threading
+from collections.abc import Mapping
+from typing import Any
 
 from rclpy.node import Node
 
@@ -17,6 +19,12 @@ class HostedNode(Node):
         super().__init__(node_name, **node_kwargs)
         self.finished = threading.Event()
         self.exit_code = 0
+
+    def declare_parameter_table(self, table: Mapping[str, Any]) -> dict[str, Any]:
+        """Declare every parameter of `table` (name → default: the one place where a node's
+        parameters and defaults are written) and return their values."""
+        return {name: self.declare_parameter(name, default).value
+                for name, default in table.items()}
 
     def close(self) -> None:
         """Stop what the node runs beside its callbacks; nothing by default."""
