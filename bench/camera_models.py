@@ -15,7 +15,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from sds_recon.camera import PinholeCamera, load_camera
+from sds_model.camera import PinholeCamera, load_camera
 
 REPO = Path(__file__).resolve().parents[1]
 

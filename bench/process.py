@@ -26,7 +26,7 @@ SDS = str(Path(sys.executable).with_name("sds"))
 DECODE = """
 import sys
 from sds_camera.frame_source import Region, VideoFileSource, select
-from sds_recon.rig import load_rig
+from sds_model.rig import load_rig
 rig = load_rig(sys.argv[2])
 region = Region(*rig.container_region_px(rig.camera))
 count = sum(1 for f in VideoFileSource(sys.argv[1]).frames() if select(f.image, region, "red")

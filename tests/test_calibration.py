@@ -10,17 +10,17 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from sds_recon.calibration.board import BoardView, Checkerboard, detect_corners
-from sds_recon.calibration.camera_calibration import calibrate_camera
-from sds_recon.calibration.intrinsics import calibrate_scaramuzza, reprojection_errors
-from sds_recon.calibration.lasers import calibrate_line_plane_on_boards
-from sds_recon.camera import CameraModel, PinholeCamera, ScaramuzzaCamera, load_camera
-from sds_recon.camera.importers import (
+from sds_model.camera import CameraModel, PinholeCamera, ScaramuzzaCamera, load_camera
+from sds_model.camera.importers import (
     ocamcalib_camera,
     ocamcalib_extrinsics,
     read_ocamcalib_results,
 )
-from sds_recon.geometry import RigidTransform
+from sds_model.geometry import RigidTransform
+from sds_recon.calibration.board import BoardView, Checkerboard, detect_corners
+from sds_recon.calibration.camera_calibration import calibrate_camera
+from sds_recon.calibration.intrinsics import calibrate_scaramuzza, reprojection_errors
+from sds_recon.calibration.lasers import calibrate_line_plane_on_boards
 from sds_tracker.line import find_line
 
 BOARD = Checkerboard(8, 6, 15.0)

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from sds_recon.camera import PinholeCamera, load_camera, save_camera
-from sds_recon.camera.importers import ocamcalib_camera, read_camera_info
+from sds_model.camera import PinholeCamera, load_camera, save_camera
+from sds_model.camera.importers import ocamcalib_camera, read_camera_info
 from sds_recon.resolution import vertical_resolution
 
 SDS = str(Path(sys.executable).with_name("sds"))

@@ -21,7 +21,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
 from ros_helpers import LATCHED, Probe, SdsGraphRun, pid_alive, wait_until
 from sds_camera.camera_imu import CameraImu, sidecar_path, write_sidecar
-from sds_recon.camera import PinholeCamera, camera_from_dict, save_camera
+from sds_model.camera import PinholeCamera, camera_from_dict, save_camera
 from sds_ros.image_msg import msg_to_image
 from sensor_msgs.msg import Image, Imu
 from std_msgs.msg import Header

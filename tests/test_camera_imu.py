@@ -24,12 +24,12 @@ from sds_camera.camera_imu import (
     write_sidecar,
 )
 from sds_camera.frame_source import VideoFileSource
-from sds_recon.sloshing.gravity import free_fall, gravity_regime
 from sds_record.import_sd import import_sd
 from sds_record.recorded_series import read_accelerations
 from sds_sim.arduino import CATAPULT_DURATION_S, STANDARD_GRAVITY, arduino_records
 from sds_sim.camera_imu import camera_imu
 from sds_sim.scenario import Scenario, load_scenario
+from sds_sloshing.gravity import free_fall, gravity_regime
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "config" / "scenarios"
 

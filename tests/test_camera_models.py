@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 import pytest
 import yaml
-from sds_recon.camera import (
+from sds_model.camera import (
     CameraModelError,
     PinholeCamera,
     ScaramuzzaCamera,
@@ -17,7 +17,7 @@ from sds_recon.camera import (
     load_camera,
     save_camera,
 )
-from sds_recon.camera.importers import (
+from sds_model.camera.importers import (
     camera_info_to_pinhole,
     matlab_fisheye_camera,
     ocamcalib_camera,
@@ -25,7 +25,7 @@ from sds_recon.camera.importers import (
     read_camera_info,
     write_camera_info,
 )
-from sds_recon.geometry import RigidTransform
+from sds_model.geometry import RigidTransform
 
 TABLE_2 = {"mapping": [1722.6932, -1.2637e-4, 5.9090e-9, -1.0064e-11], "size": [2160, 3840],
            "centre": [1926.6676, 1081.6723], "stretch": [[0.9986, 0.0012], [-4.4337e-4, 1.0]]}

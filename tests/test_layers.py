@@ -6,13 +6,15 @@ Every `import` in every module counts, also those inside functions (lazy imports
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
 
 SRC = Path(__file__).resolve().parents[1] / "src"
 LAYERS = {
-    "sds_arduino": 0, "sds_camera": 0, "sds_recon": 0, "sds_sim": 0, "sds_tracker": 0,
+    "sds_arduino": 0, "sds_camera": 0, "sds_model": 0, "sds_recon": 0, "sds_sim": 0,
+    "sds_sloshing": 0, "sds_tracker": 0,
     "sds_ros": 1, "sds_record": 1, "sds_viz": 1,
     "sds_nodes": 2,
     "sds_bringup": 3,
@@ -50,3 +52,13 @@ def test_no_import_runs_up_and_no_algorithm_package_imports_ros(package: str) ->
             if layer == 0 and name in ROS_MODULES:
                 wrong.append(f"{module.relative_to(SRC)} imports {name}")
     assert not wrong, "\n".join(wrong)
+
+
+@pytest.mark.parametrize("package", sorted(LAYERS))
+def test_package_xml_declares_every_sds_package_imported(package: str) -> None:
+    """colcon builds `src/` in a ROS 2 workspace from these declarations."""
+    declared = set(re.findall(r"<exec_depend>(sds_\w+)</exec_depend>",
+                              (SRC / package / "package.xml").read_text()))
+    imported = {name for module in (SRC / package / package).rglob("*.py")
+                for name in imported_modules(module) if name.startswith("sds_")}
+    assert imported - {package} <= declared

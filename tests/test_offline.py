@@ -12,8 +12,8 @@ import pytest
 import yaml
 from rclpy.serialization import serialize_message
 from sds_camera.camera_imu import read_camera_imu
+from sds_model.rig import LaserDiode, Rig, load_rig, save_rig
 from sds_recon.results import COLUMNS, ResultsWriter, load_results
-from sds_recon.rig import LaserDiode, Rig, load_rig, save_rig
 from sds_record.mcap_files import McapRecorder
 from sds_sim.scenario import load_scenario
 from sds_sim.simulate import simulate

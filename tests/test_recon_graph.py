@@ -8,15 +8,15 @@ import numpy as np
 import psutil
 import pytest
 from ros_helpers import Probe, SdsGraphRun, wait_until
+from sds_model.mode_theory import ModeShape
+from sds_model.rig import load_rig
 from sds_nodes.sloshing import SloshingNode
 from sds_recon.reconstruction import LINE_LASER_ID
-from sds_recon.rig import load_rig
-from sds_recon.sloshing.running import RunningAnalysis
-from sds_recon.sloshing.theory import ModeShape
 from sds_ros.point_cloud import cloud_dtype
 from sds_ros.qos import stream_qos
 from sds_sim.optics import line_laser_rays, ray_surface_points
 from sds_sim.surface import ModeMotion, Surface
+from sds_sloshing.running import RunningAnalysis
 from sensor_msgs.msg import PointCloud2
 
 from sds_msgs.msg import (

@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from sds_model.mode_theory import ModeShape
+from sds_model.rig import LaserDiode, Rig, load_rig
 from sds_recon.calibration.lasers import (
     KnownSurface,
     calibrate_beams,
@@ -17,8 +19,6 @@ from sds_recon.calibration.lasers import (
     fit_plane_robust,
 )
 from sds_recon.reconstruction import SurfacePoints, fit_surface
-from sds_recon.rig import LaserDiode, Rig, load_rig
-from sds_recon.sloshing.theory import ModeShape
 from sds_recon.surface_fit import fit_modes, fit_plane, radial_profile
 from sds_recon.triangulation import (
     beam_height_sigma,

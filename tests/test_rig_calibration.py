@@ -12,11 +12,11 @@ import cv2
 import numpy as np
 import pytest
 from sds_bringup.calibration_trial import ANGLES, trial
+from sds_model.rig import load_rig, save_rig
 from sds_recon.calibration.identification import identify_spots
 from sds_recon.calibration.lasers import KnownSurface
 from sds_recon.calibration.rig_model import RigModel
 from sds_recon.calibration.self_calibration import self_calibrate
-from sds_recon.rig import load_rig, save_rig
 from sds_sim.tilt_series import render_tilt_series
 from sds_sim.true_rig import RigErrors, random_layout, true_rig
 from sds_tracker.plateaus import find_plateaus

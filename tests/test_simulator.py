@@ -15,8 +15,8 @@ import pytest
 from scipy.special import jnp_zeros, jv
 from sds_arduino.protocol import ProtocolError, Record, format_record, parse_line
 from sds_camera.frame_source import VideoFileSource
-from sds_recon.rig import load_rig
-from sds_recon.sloshing.theory import ModeShape
+from sds_model.mode_theory import ModeShape
+from sds_model.rig import load_rig
 from sds_sim.optics import ray_surface_points
 from sds_sim.render import FrameRenderer
 from sds_sim.scenario import ScenarioError, load_scenario

@@ -15,13 +15,19 @@ from mcap_ros2.writer import Writer as McapWriter
 from rosbags.typesys import Stores, get_typestore
 from scipy.io import loadmat
 from sds_arduino.protocol import format_record, read_log, unwrap_time_s
-from sds_recon.sloshing.analysis import (
+from sds_model.mode_theory import theoretical_modes
+from sds_recon.triangulation import triangulate_beams
+from sds_record.recorded_series import read_surface_recording
+from sds_sim.arduino import arduino_records
+from sds_sim.optics import line_laser_rays, ray_surface_points
+from sds_sim.scenario import Scenario, load_scenario
+from sds_sloshing.analysis import (
     AnalysisOptions,
     analyze,
     analyze_series,
     analyze_table,
 )
-from sds_recon.sloshing.estimators import (
+from sds_sloshing.estimators import (
     DecayError,
     excitation_onset,
     fft_peaks,
@@ -29,15 +35,9 @@ from sds_recon.sloshing.estimators import (
     half_power,
     log_decrement,
 )
-from sds_recon.sloshing.recording import SurfaceRecording, recording_from_rows
-from sds_recon.sloshing.report import spectrum_limit_hz
-from sds_recon.sloshing.running import RunningAnalysis
-from sds_recon.sloshing.theory import theoretical_modes
-from sds_recon.triangulation import triangulate_beams
-from sds_record.recorded_series import read_surface_recording
-from sds_sim.arduino import arduino_records
-from sds_sim.optics import line_laser_rays, ray_surface_points
-from sds_sim.scenario import Scenario, load_scenario
+from sds_sloshing.report import spectrum_limit_hz
+from sds_sloshing.running import RunningAnalysis
+from sds_sloshing.surface_series import SurfaceSeries, surface_series_from_rows
 
 TRACKER_NOISE_PX = 0.05
 """One-sigma spot noise: the tracker's measured 0.040 px (issue 6) rounded up."""
@@ -154,7 +154,7 @@ def test_a_flat_record_is_refused_not_fitted() -> None:
         fit_damped_sinusoids(t[::-1], noise)
 
 
-def observe(scenario: Scenario, seed: int = 0) -> SurfaceRecording:
+def observe(scenario: Scenario, seed: int = 0) -> SurfaceSeries:
     """The scenario's spots as the tracker would give them (noise, dropouts), triangulated."""
     rig = scenario.rig
     emitters = np.array([d.emitter_mm for d in rig.diodes])
@@ -170,7 +170,7 @@ def observe(scenario: Scenario, seed: int = 0) -> SurfaceRecording:
         result = triangulate_beams(rig, pixels, ids, 0.5)
         times.append(np.full(len(ids), time_s))
         points.append(result.points_mm)
-    return recording_from_rows(np.concatenate(times), np.tile(ids, scenario.frame_count),
+    return surface_series_from_rows(np.concatenate(times), np.tile(ids, scenario.frame_count),
                                np.concatenate(points), scenario.name)
 
 
@@ -280,13 +280,13 @@ def test_real_sloshing_tails_give_3_02_hz_and_the_1g_theory(shared_data: Path) -
     assert np.mean(np.abs(frequencies / 3.02 - 1) < 0.02) >= 0.9
 
 
-def points_rows(recording: SurfaceRecording) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def points_rows(recording: SurfaceSeries) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     frames = len(recording.time_s)
     return (np.repeat(recording.time_s, len(recording.laser_ids)),
             np.tile(recording.laser_ids, frames), recording.points_mm.reshape(-1, 3))
 
 
-def write_points_mcap(recording: SurfaceRecording, path: Path) -> None:
+def write_points_mcap(recording: SurfaceSeries, path: Path) -> None:
     """The recording as PointCloud2 messages on /points, in metres as the reconstruction node
     sends them (written with rosbags' message definition and the mcap writer, not ours)."""
     typestore = get_typestore(Stores.ROS2_KILTED)
@@ -372,11 +372,11 @@ def test_sds_analyze_bad_input_is_one_line_and_exit_2(tmp_path: Path, content: s
 
 
 def test_points_rows_round_trip(repo: Path) -> None:
-    """recording_from_rows regroups long rows into the frame × laser table."""
+    """surface_series_from_rows regroups long rows into the frame × laser table."""
     scenario = load_scenario(repo / "config" / "scenarios" / "drop_4p7s.yaml",
                              {"duration_s": 0.5})
     recording = observe(scenario)
-    again = recording_from_rows(*points_rows(recording))
+    again = surface_series_from_rows(*points_rows(recording))
     np.testing.assert_array_equal(again.points_mm, recording.points_mm)
 
 
@@ -441,7 +441,7 @@ def test_mcap_times_are_seconds_from_the_first_frame_and_a_window_must_be_one(
     scenario = load_scenario(repo / "config" / "scenarios" / "drop_4p7s.yaml")
     recording = observe(scenario)
     epoch = 1.8e9
-    shifted = SurfaceRecording(recording.time_s + epoch, recording.laser_ids,
+    shifted = SurfaceSeries(recording.time_s + epoch, recording.laser_ids,
                                recording.points_mm)
     write_points_mcap(shifted, tmp_path / "drop.mcap")
     back = read_surface_recording(tmp_path / "drop.mcap")

@@ -20,8 +20,8 @@ from rosbags.highlevel import AnyReader
 from rrd_helpers import rrd_entities
 from scipy.spatial.transform import Rotation
 from sds_camera.camera_imu import read_camera_imu
+from sds_model.rig import load_rig
 from sds_recon.results import load_results
-from sds_recon.rig import load_rig
 from sds_record.mcap_files import McapRecorder, read_messages
 from sds_record.recorded_series import recorded_rig
 from sds_ros.qos import live_qos, stream_qos

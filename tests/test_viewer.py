@@ -14,8 +14,8 @@ from builtin_interfaces.msg import Time
 from rclpy.serialization import serialize_message
 from ros_helpers import LATCHED, RELIABLE, Probe, SdsGraphRun
 from rrd_helpers import rrd_entities
+from sds_model.rig import load_rig, rig_document
 from sds_recon.reconstruction import SurfacePoints
-from sds_recon.rig import load_rig, rig_document
 from sds_record.mcap_files import McapRecorder
 from sds_ros.image_msg import image_to_msg
 from sds_ros.point_cloud import points_to_cloud

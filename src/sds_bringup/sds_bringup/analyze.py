@@ -7,20 +7,20 @@ from pathlib import Path
 
 import numpy as np
 from sds_arduino.protocol import read_log, unwrap_time_s
-from sds_recon.rig import load_rig
-from sds_recon.sloshing.analysis import (
-    AnalysisOptions,
-    SloshingAnalysis,
-    analyze,
-    analyze_table,
-)
-from sds_recon.sloshing.gravity import gravity_regime
-from sds_recon.sloshing.recording import RecordingError, read_points_csv, read_series_csv
+from sds_model.rig import load_rig
 from sds_record.recorded_series import (
     read_accelerations,
     read_surface_recording,
     recording_rig,
 )
+from sds_sloshing.analysis import (
+    AnalysisOptions,
+    SloshingAnalysis,
+    analyze,
+    analyze_table,
+)
+from sds_sloshing.gravity import gravity_regime
+from sds_sloshing.surface_series import RecordingError, read_points_csv, read_series_csv
 
 from sds_bringup.paths import CONFIG
 

@@ -15,12 +15,12 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 from sds_camera.frame_source import Region, select
+from sds_model.rig import Rig, load_rig
 from sds_recon.calibration.lasers import calibrate_beams
 from sds_recon.calibration.rig_calibration import RigCalibration
 from sds_recon.calibration.rig_model import LINE_PLANE
 from sds_recon.calibration.rig_report import calibrated_rig
 from sds_recon.reconstruction import fit_surface, reconstruct_spots
-from sds_recon.rig import Rig, load_rig
 from sds_sim.render import FrameRenderer
 from sds_sim.scenario import load_scenario
 from sds_sim.tilt_series import TiltSeries, render_tilt_series

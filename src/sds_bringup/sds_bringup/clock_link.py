@@ -22,7 +22,7 @@ from sds_arduino.protocol import read_log, unwrap_time_s
 from sds_camera.camera_imu import read_camera_imu
 from sds_camera.frame_source import VideoFileSource
 from sds_camera.led import LedDetector
-from sds_recon.rig import Rig
+from sds_model.rig import Rig
 
 STANDARD_GRAVITY = 9.80665
 """The Arduino logs accelerations in mg (sds_arduino.protocol)."""

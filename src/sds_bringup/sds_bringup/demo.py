@@ -21,13 +21,13 @@ from pathlib import Path
 
 import numpy as np
 from sds_arduino.replay import paced
+from sds_model.rig import Rig, load_rig
 from sds_recon.results import ResultsWriter, load_results
-from sds_recon.rig import Rig, load_rig
-from sds_recon.sloshing.analysis import AnalysisOptions, analyze
-from sds_recon.sloshing.report import summary_lines, truth_from_run, write_report
 from sds_record.recorded_series import read_surface_recording
 from sds_sim.scenario import load_scenario
 from sds_sim.simulate import simulate
+from sds_sloshing.analysis import AnalysisOptions, analyze
+from sds_sloshing.report import summary_lines, truth_from_run, write_report
 from sds_viz.from_mcap import mcap_to_rrd
 from tqdm import tqdm
 

@@ -22,6 +22,7 @@ from sds_camera.frame_source import (
     read_ahead,
     select,
 )
+from sds_model.rig import Rig
 from sds_recon.reconstruction import (
     SurfaceFits,
     SurfacePoints,
@@ -29,14 +30,13 @@ from sds_recon.reconstruction import (
     reconstruct_line,
 )
 from sds_recon.results import ResultsWriter
-from sds_recon.rig import Rig
-from sds_recon.sloshing.analysis import AnalysisOptions, analyze
-from sds_recon.sloshing.estimators import DecayError
-from sds_recon.sloshing.recording import RecordingError, recording_from_rows
-from sds_recon.sloshing.report import write_report
 from sds_record.mcap_files import decoded_messages, recorded_topics
 from sds_ros.image_msg import msg_to_image
 from sds_ros.point_cloud import read_cloud, stamp_s
+from sds_sloshing.analysis import AnalysisOptions, analyze
+from sds_sloshing.estimators import DecayError
+from sds_sloshing.report import write_report
+from sds_sloshing.surface_series import RecordingError, surface_series_from_rows
 from sds_tracker.spots import LOST
 from sds_tracker.tracker import FrameTracker, TrackedSpot, parse_seeds, tracker_config
 from tqdm import tqdm
@@ -198,7 +198,7 @@ class RunTables:
         if not any(len(ids) for _, ids, _ in self._kept):
             raise RecordingError(f"{source}: no surface point was reconstructed")
         time_s, ids, xyz = (np.concatenate(parts) for parts in zip(*self._kept, strict=True))
-        return recording_from_rows(time_s, ids.astype(int), xyz, source)
+        return surface_series_from_rows(time_s, ids.astype(int), xyz, source)
 
 
 def process_frames(frames: Iterator[RedFrame], rig: Rig, tables: RunTables,

@@ -16,6 +16,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 from sds_camera.frame_source import Region, VideoFileSource, open_source, select
+from sds_model.rig import Rig, save_rig
 from sds_recon.calibration.laser_files import read_surfaces
 from sds_recon.calibration.lasers import KnownSurface
 from sds_recon.calibration.rig_calibration import (
@@ -25,7 +26,6 @@ from sds_recon.calibration.rig_calibration import (
 )
 from sds_recon.calibration.rig_model import LineObservations
 from sds_recon.calibration.rig_report import calibrated_rig, report_text, rig_report
-from sds_recon.rig import Rig, save_rig
 from sds_recon.triangulation import beam_image_path
 from sds_tracker.discovery import SpotCandidates, find_spots
 from sds_tracker.line import LineSettings, track_line

@@ -24,8 +24,8 @@ from sds_camera.frame_source import (
     select,
 )
 from sds_camera.led import LedDetector
-from sds_recon.camera import CameraModel as CameraModelBase
-from sds_recon.camera import load_camera
+from sds_model.camera import CameraModel as CameraModelBase
+from sds_model.camera import load_camera
 from sds_ros.ack_credit import AckCredit
 from sds_ros.hosted_node import HostedNode
 from sds_ros.image_msg import image_to_msg

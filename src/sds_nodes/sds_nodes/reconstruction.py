@@ -7,13 +7,13 @@ from __future__ import annotations
 
 import numpy as np
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sds_model.rig import Rig, RigError, load_rig, rig_document
 from sds_recon.reconstruction import (
     SurfaceFits,
     SurfacePoints,
     reconstruct_frame,
     reconstruct_line,
 )
-from sds_recon.rig import Rig, RigError, load_rig, rig_document
 from sds_ros.hosted_node import HostedNode
 from sds_ros.point_cloud import points_to_cloud
 from sds_ros.qos import live_qos, start_when_consumed, stream_qos

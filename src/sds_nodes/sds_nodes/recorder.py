@@ -9,7 +9,7 @@ from pathlib import Path
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from rclpy.time import Time
-from sds_recon.rig import rig_from_document
+from sds_model.rig import rig_from_document
 from sds_record.mcap_files import McapRecorder, header_stamp_ns
 from sds_record.recorded_series import RIG_TOPIC
 from sds_record.schemas import SchemaError

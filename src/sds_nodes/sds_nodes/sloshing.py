@@ -6,11 +6,11 @@ import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
-from sds_recon.sloshing.modal import ModalSeries
-from sds_recon.sloshing.running import RunningAnalysis
 from sds_ros.hosted_node import HostedNode
 from sds_ros.point_cloud import stamp_s
 from sds_ros.qos import start_when_consumed, stream_qos
+from sds_sloshing.modal import ModalSeries
+from sds_sloshing.running import RunningAnalysis
 
 from sds_msgs.msg import SloshingEstimate, SurfaceFit
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 from collections import deque
 
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from sds_recon.rig import load_rig
+from sds_model.rig import load_rig
 from sds_ros.hosted_node import HostedNode
 from sds_ros.image_msg import msg_to_image
 from sds_ros.qos import live_qos, start_when_consumed, stream_qos

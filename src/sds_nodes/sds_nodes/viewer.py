@@ -6,7 +6,7 @@ import threading
 
 import rerun as rr
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
-from sds_recon.rig import RigError, load_rig
+from sds_model.rig import RigError, load_rig
 from sds_ros.hosted_node import HostedNode
 from sds_viz.messages import log_message
 from sds_viz.scene import RerunScene

@@ -10,8 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
+from sds_model.rig import Rig
 
-from sds_recon.rig import Rig
 from sds_recon.surface_fit import (
     HEIGHT_SIGMA_FLOOR_MM,
     ModalFit,

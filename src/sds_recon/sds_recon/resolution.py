@@ -7,8 +7,7 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike
-
-from sds_recon.camera.model import CameraModel
+from sds_model.camera.model import CameraModel
 
 HEIGHT_STEP_MM = 0.01
 """Surface displacement of the central difference that gives d(pixel)/dZ."""

@@ -6,8 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
-
-from sds_recon.sloshing.theory import ModeShape, mode_name
+from sds_model.mode_theory import ModeShape, mode_name
 
 DEFAULT_MODES = ((1, 1), (1, 2), (0, 1))
 """Lateral modes ξ = 1.8412, 5.3314 and the first axisymmetric mode ξ = 3.8317."""

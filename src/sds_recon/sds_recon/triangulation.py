@@ -7,8 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
-
-from sds_recon.rig import Rig
+from sds_model.rig import Rig
 
 MIN_ANGLE_RAD = np.radians(0.5)
 """Camera rays closer than this to parallel with their beam or plane are flagged, not solved."""

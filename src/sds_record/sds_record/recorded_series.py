@@ -13,10 +13,10 @@ from pathlib import Path
 
 import numpy as np
 from mcap.exceptions import McapError
+from sds_model.rig import Rig, load_rig, rig_from_document
 from sds_recon.reconstruction import LINE_LASER_ID
-from sds_recon.rig import Rig, load_rig, rig_from_document
-from sds_recon.sloshing.recording import RecordingError, SurfaceRecording, recording_from_rows
 from sds_ros.point_cloud import read_cloud, stamp_s
+from sds_sloshing.surface_series import RecordingError, SurfaceSeries, surface_series_from_rows
 
 from sds_record.mcap_files import decoded_messages
 
@@ -26,7 +26,7 @@ RANGE_TYPE = "sensor_msgs/msg/Range"
 IMU_TYPE = "sensor_msgs/msg/Imu"
 
 
-def read_surface_recording(path: str | Path) -> SurfaceRecording:
+def read_surface_recording(path: str | Path) -> SurfaceSeries:
     """Every surface cloud (PointCloud2 with laser_id; rejected points left out) and ToF
     range (sensor_msgs/Range [m] → mm)."""
     path = Path(path)
@@ -51,7 +51,7 @@ def read_surface_recording(path: str | Path) -> SurfaceRecording:
     times, ids = np.concatenate(rows["time"]), np.concatenate(rows["id"])
     spots = ids != LINE_LASER_ID
     origin = float(times[spots].min()) if spots.any() else float(times.min())
-    return recording_from_rows(times - origin, ids, np.concatenate(rows["xyz"]), str(path),
+    return surface_series_from_rows(times - origin, ids, np.concatenate(rows["xyz"]), str(path),
                                (np.array(tof_time) - origin, np.array(tof_range)))
 
 

@@ -10,7 +10,7 @@ Kilted definition of tf2_msgs/msg/TFMessage.
 from __future__ import annotations
 
 from scipy.spatial.transform import Rotation
-from sds_recon.rig import Rig
+from sds_model.rig import Rig
 
 from sds_record.schemas import standard_typestore
 

@@ -22,7 +22,7 @@ RATE_STEP_S = 1e-4
 
 def _rotation(scenario: Scenario, time_s: float) -> np.ndarray:
     """World → optical rotation at a time: the rig's camera pose turned by the vibration."""
-    from sds_recon.geometry import RigidTransform
+    from sds_model.geometry import RigidTransform
 
     angles = vibration_rad(scenario.disturbances, time_s)
     shake = RigidTransform.from_rotation_vector([angles[0], angles[1], 0.0], np.zeros(3))

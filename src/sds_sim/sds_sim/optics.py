@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-from sds_recon.rig import LineLaser
+from sds_model.rig import LineLaser
 
 from sds_sim.surface import Surface
 

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from sds_recon.geometry import RigidTransform
+from sds_model.geometry import RigidTransform
 
 from sds_sim.optics import line_laser_rays, ray_surface_points, wall_reflections
 from sds_sim.scenario import Disturbances, Scenario

@@ -8,8 +8,8 @@ from typing import Any
 
 import numpy as np
 import yaml
-from sds_recon.rig import Rig, load_rig
-from sds_recon.sloshing.theory import ModeShape, mode_root, natural_frequency_hz
+from sds_model.mode_theory import ModeShape, mode_root, natural_frequency_hz
+from sds_model.rig import Rig, load_rig
 
 from sds_sim.surface import ModeMotion, Surface
 

@@ -7,7 +7,7 @@ from functools import cache
 
 import numpy as np
 from numpy.typing import ArrayLike
-from sds_recon.sloshing.theory import ModeShape
+from sds_model.mode_theory import ModeShape
 
 GRADIENT_STEP_MM = 1e-4
 

@@ -6,8 +6,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
+from sds_model.rig import Rig
 from sds_recon.calibration.lasers import KnownSurface
-from sds_recon.rig import Rig
 
 from sds_sim.render import FrameRenderer, FrameTruth
 from sds_sim.scenario import load_scenario

@@ -13,8 +13,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
-from sds_recon.geometry import RigidTransform
-from sds_recon.rig import LaserDiode, LineLaser, Rig
+from sds_model.geometry import RigidTransform
+from sds_model.rig import LaserDiode, LineLaser, Rig
 
 
 @dataclass(frozen=True)

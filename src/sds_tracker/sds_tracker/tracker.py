@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from sds_recon.rig import Rig
+from sds_model.rig import Rig
 from sds_recon.triangulation import beam_image_path, line_image_path
 
 from sds_tracker.hampel import BankOutput, HampelBank

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import rerun as rr
 from mcap.exceptions import McapError
-from sds_recon.rig import Rig
+from sds_model.rig import Rig
 from sds_record.mcap_files import decoded_messages
 
 from sds_viz.messages import log_message

@@ -15,7 +15,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import rerun as rr
-from sds_recon.rig import Rig
+from sds_model.rig import Rig
 from sds_recon.triangulation import beam_image_path
 
 TIMELINE = "time"

@@ -52,8 +52,8 @@ def expected_frequencies(items: list[str]) -> dict[str, float]:
 
 def run(args: argparse.Namespace) -> int:
     """Analyse, write the report, print the summary."""
-    from sds_recon.sloshing.analysis import AnalysisOptions
-    from sds_recon.sloshing.report import summary_lines, truth_from_run, write_report
+    from sds_sloshing.analysis import AnalysisOptions
+    from sds_sloshing.report import summary_lines, truth_from_run, write_report
 
     from sds_bringup.analyze import analyse_recording
 

@@ -117,9 +117,9 @@ def run_line_plane(args: argparse.Namespace) -> int:
 
 def run_rig(args: argparse.Namespace) -> int:
     """The self-calibrated rig file, its report and overlays."""
+    from sds_model.rig import load_rig
     from sds_recon.calibration.rig_calibration import CalibrationSettings
     from sds_recon.calibration.rig_report import report_text, rig_report
-    from sds_recon.rig import load_rig
 
     from sds_bringup.rig_calibration import (
         calibrate_images,
@@ -146,8 +146,8 @@ def run_lasers(args: argparse.Namespace) -> int:
     """Beams (and line plane) fitted to spots on known surfaces: rig file and report."""
     import json
 
+    from sds_model.rig import load_rig, save_rig
     from sds_recon.calibration.laser_files import calibrate_lasers, report_text
-    from sds_recon.rig import load_rig, save_rig
 
     refuse_existing(args.out, args.overwrite)
     rig = load_rig(args.rig)
@@ -165,10 +165,10 @@ def run_lasers(args: argparse.Namespace) -> int:
 
 def run_camera(args: argparse.Namespace) -> int:
     """Intrinsic calibration: camera file and report."""
+    from sds_model.camera import save_camera
     from sds_recon.calibration.board import Checkerboard
     from sds_recon.calibration.camera_calibration import calibrate_camera
     from sds_recon.calibration.report import report_content, report_text, write_report
-    from sds_recon.camera import save_camera
 
     refuse_existing(args.out, args.overwrite)
     board = Checkerboard.parse(args.board, args.square)

@@ -9,7 +9,7 @@ from sds_bringup.commands import CommandError, add_overwrite, refuse_existing
 
 IMPORTERS = {"ocamcalib": "read_ocamcalib_results", "matlab": "read_matlab_fisheye",
              "camera-info": "read_camera_info"}
-"""Format name → reader in sds_recon.camera.importers."""
+"""Format name → reader in sds_model.camera.importers."""
 
 
 def add_parser(commands: argparse._SubParsersAction) -> None:
@@ -36,7 +36,7 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
 
 def run_import(args: argparse.Namespace) -> int:
     """Another tool's calibration as an SDS camera file."""
-    from sds_recon.camera import importers, save_camera
+    from sds_model.camera import importers, save_camera
 
     refuse_existing(args.out, args.overwrite)
     camera = getattr(importers, IMPORTERS[args.format])(args.source)
@@ -47,8 +47,8 @@ def run_import(args: argparse.Namespace) -> int:
 
 def run_camera_info(args: argparse.Namespace) -> int:
     """A pinhole SDS camera file as a ROS camera_info YAML."""
-    from sds_recon.camera import PinholeCamera, load_camera
-    from sds_recon.camera.importers import write_camera_info
+    from sds_model.camera import PinholeCamera, load_camera
+    from sds_model.camera.importers import write_camera_info
 
     refuse_existing(args.out, args.overwrite)
     camera = load_camera(args.camera)

@@ -29,7 +29,7 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Link the clocks and print both links, their disagreement and the import's --start-s."""
-    from sds_recon.rig import load_rig
+    from sds_model.rig import load_rig
 
     from sds_bringup.clock_link import link_clocks, read_arduino_log
 

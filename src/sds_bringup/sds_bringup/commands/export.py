@@ -27,8 +27,8 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Result files and the analysis report of one recording."""
     from sds_recon.results import ResultsWriter
-    from sds_recon.sloshing.analysis import AnalysisOptions
     from sds_record.recorded_series import recording_rig
+    from sds_sloshing.analysis import AnalysisOptions
 
     from sds_bringup.offline import RunTables, export_recording, finish_analysis
 

@@ -70,8 +70,8 @@ def expand_inputs(paths: list[Path], suffixes: tuple[str, ...]) -> list[Path]:
 
 def run(args: argparse.Namespace) -> int:
     """Result files and the analysis report of each video or recording."""
+    from sds_model.rig import load_rig
     from sds_recon.results import refuse_results
-    from sds_recon.rig import load_rig
     from sds_record.recorded_series import recording_rig
 
     from sds_bringup.offline import calibrate_from_images
@@ -103,11 +103,11 @@ def process_one(source: Path, is_video: bool, rig_file: Path | None, out: Path,
                 args: argparse.Namespace, progress: bool) -> str:
     """One input's result files and report; its summary line."""
     from sds_camera.camera_imu import read_camera_imu
+    from sds_model.rig import load_rig
     from sds_recon.results import ResultsWriter
-    from sds_recon.rig import load_rig
-    from sds_recon.sloshing.analysis import AnalysisOptions
-    from sds_recon.sloshing.gravity import gravity_regime
     from sds_record.recorded_series import read_accelerations, recording_rig
+    from sds_sloshing.analysis import AnalysisOptions
+    from sds_sloshing.gravity import gravity_regime
 
     from sds_bringup.offline import (
         RunTables,

@@ -35,7 +35,7 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """The table (CSV, printed) and its plot."""
     import numpy as np
-    from sds_recon.camera import load_camera
+    from sds_model.camera import load_camera
     from sds_recon.resolution import plot_resolution, table_text, vertical_resolution
 
     refuse_existing(args.out / "resolution.csv", args.overwrite)

@@ -28,7 +28,7 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Convert and say how many messages the scene shows."""
-    from sds_recon.rig import load_rig
+    from sds_model.rig import load_rig
     from sds_record.recorded_series import recorded_rig
     from sds_viz.from_mcap import mcap_to_rrd
 

@@ -15,9 +15,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from sds_model.rig import Rig
 
 from sds_recon.calibration.lasers import KnownSurface, surface_points
-from sds_recon.rig import Rig
 
 
 @dataclass(frozen=True)

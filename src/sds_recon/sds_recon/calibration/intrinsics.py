@@ -8,12 +8,12 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 from scipy.sparse import lil_matrix
+from sds_model.camera.model import CameraModel
+from sds_model.camera.pinhole import PinholeCamera
+from sds_model.camera.scaramuzza import ScaramuzzaCamera
+from sds_model.geometry import RigidTransform
 
 from sds_recon.calibration.board import BoardView
-from sds_recon.camera.model import CameraModel
-from sds_recon.camera.pinhole import PinholeCamera
-from sds_recon.camera.scaramuzza import ScaramuzzaCamera
-from sds_recon.geometry import RigidTransform
 
 FAILED_PROJECTION_PX = 1e3
 """Residual given to a corner the model cannot project during the fit (outside its field)."""

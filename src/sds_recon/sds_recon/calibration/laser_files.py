@@ -8,9 +8,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from sds_model.rig import LaserDiode, LineLaser, Rig
 
 from sds_recon.calibration.lasers import KnownSurface, calibrate_beams, calibrate_line_plane
-from sds_recon.rig import LaserDiode, LineLaser, Rig
 
 
 def read_surfaces(path: Path) -> dict[int, KnownSurface]:

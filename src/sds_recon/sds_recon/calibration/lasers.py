@@ -6,10 +6,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike
-
-from sds_recon.camera.model import CameraModel
-from sds_recon.geometry import RigidTransform, ray_plane_points
-from sds_recon.rig import Rig
+from sds_model.camera.model import CameraModel
+from sds_model.geometry import RigidTransform, ray_plane_points
+from sds_model.rig import Rig
 
 HUBER_MM = 0.2
 """Residual beyond which the plane fit down-weights a line point (robust to stray pixels)."""

@@ -19,6 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from sds_model.rig import Rig
 
 from sds_recon.calibration.identification import (
     Identification,
@@ -34,7 +35,6 @@ from sds_recon.calibration.lasers import (
 )
 from sds_recon.calibration.rig_model import LineObservations
 from sds_recon.calibration.self_calibration import SelfCalibration, self_calibrate
-from sds_recon.rig import Rig
 
 LINE_FITS = 4
 """Most joint fits spent scaling the line pixels' σ and leaving out their outliers."""

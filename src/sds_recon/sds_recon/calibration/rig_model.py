@@ -16,10 +16,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
+from sds_model.geometry import RigidTransform
+from sds_model.rig import LineLaser, Rig
 
 from sds_recon.calibration.lasers import KnownSurface
-from sds_recon.geometry import RigidTransform
-from sds_recon.rig import LineLaser, Rig
 
 CAMERA_ROTATION = ("camera rotation about X", "camera rotation about Y",
                    "camera rotation about Z")

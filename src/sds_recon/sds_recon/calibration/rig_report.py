@@ -7,10 +7,10 @@ from typing import Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation
+from sds_model.rig import Rig
 
 from sds_recon.calibration.rig_calibration import RigCalibration
 from sds_recon.calibration.rig_model import CAMERA_ROTATION, CAMERA_SHIFT, LINE_PLANE
-from sds_recon.rig import Rig
 
 
 def _deg(value: float) -> float:

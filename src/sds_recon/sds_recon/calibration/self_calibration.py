@@ -16,10 +16,10 @@ from typing import TypeVar
 
 import numpy as np
 from scipy.optimize import least_squares
+from sds_model.rig import Rig
 
 from sds_recon.calibration.lasers import KnownSurface
 from sds_recon.calibration.rig_model import LineObservations, RigModel
-from sds_recon.rig import Rig
 
 LIMITS = {"camera rotation": np.radians(0.2), "camera": 1.0, "beam": np.radians(0.2),
           "emitter": 1.0, "line plane offset": 1.0, "line plane": np.radians(0.2)}

@@ -5,7 +5,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
 from sds_recon.surface_fit import DEFAULT_MODES, fit_modes
 
 

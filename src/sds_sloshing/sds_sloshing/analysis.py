@@ -6,9 +6,11 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
+from sds_model.mode_theory import TheoreticalMode, theoretical_modes
+from sds_model.rig import Rig
+from sds_recon.surface_fit import fit_plane, radial_profile
 
-from sds_recon.rig import Rig
-from sds_recon.sloshing.estimators import (
+from sds_sloshing.estimators import (
     DampedSinusoid,
     DampedSinusoidFit,
     DecayError,
@@ -20,10 +22,8 @@ from sds_recon.sloshing.estimators import (
     half_power,
     log_decrement,
 )
-from sds_recon.sloshing.modal import ModeCoordinate, modal_series, mode_coordinates
-from sds_recon.sloshing.recording import SurfaceRecording
-from sds_recon.sloshing.theory import TheoreticalMode, theoretical_modes
-from sds_recon.surface_fit import fit_plane, radial_profile
+from sds_sloshing.modal import ModeCoordinate, modal_series, mode_coordinates
+from sds_sloshing.surface_series import SurfaceSeries
 
 MATCH_TOLERANCE = 0.15
 """A component matches an expected frequency within ±15 %."""
@@ -237,7 +237,7 @@ def tof_quick_estimate(time_s: np.ndarray, range_mm: np.ndarray, options: Analys
                           expected_hz, pencil_method="tof")
 
 
-def tilt_steps(recording: SurfaceRecording) -> list[TiltStep]:
+def tilt_steps(recording: SurfaceSeries) -> list[TiltStep]:
     """Still plateaus of the per-frame plane tilt; two or more apart make a tilt series."""
     tilts = np.full((len(recording.time_s), 2), np.nan)
     for frame, points in enumerate(recording.points_mm):
@@ -270,7 +270,7 @@ def tilt_steps(recording: SurfaceRecording) -> list[TiltStep]:
     return steps if spread > 2 * TILT_STEP_DEG else []
 
 
-def meniscus_profile(recording: SurfaceRecording, radius_mm: float, before_s: float
+def meniscus_profile(recording: SurfaceSeries, radius_mm: float, before_s: float
                      ) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], str]:
     """Radial profile of the line laser's points before `before_s` (the excitation) if there are
     enough, else over the whole record (the oscillation then averages out only partly)."""
@@ -292,7 +292,7 @@ def rig_theory(rig: Rig, options: AnalysisOptions) -> tuple[float, list[Theoreti
                                       rig.fluid.density_kg_m3)
 
 
-def analyze(recording: SurfaceRecording, rig: Rig, options: AnalysisOptions | None = None
+def analyze(recording: SurfaceSeries, rig: Rig, options: AnalysisOptions | None = None
             ) -> SloshingAnalysis:
     """Separate the modes, estimate each one's frequency and damping, tilt table, meniscus."""
     options = options or AnalysisOptions()

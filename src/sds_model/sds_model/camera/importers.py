@@ -9,10 +9,11 @@ import numpy as np
 import yaml
 from numpy.typing import ArrayLike
 
-from sds_recon.camera.model import CameraModelError, read_yaml
-from sds_recon.camera.pinhole import PinholeCamera
-from sds_recon.camera.scaramuzza import ScaramuzzaCamera
-from sds_recon.geometry import RigidTransform
+from sds_model.camera.files import read_yaml
+from sds_model.camera.model import CameraModelError
+from sds_model.camera.pinhole import PinholeCamera
+from sds_model.camera.scaramuzza import ScaramuzzaCamera
+from sds_model.geometry import RigidTransform
 
 OCAMCALIB_TO_SDS = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 """OCamCalib's camera frame (x along rows, y along columns, z against the view) → SDS's."""

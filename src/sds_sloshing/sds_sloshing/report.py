@@ -14,10 +14,10 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+from sds_model.mode_theory import mode_name
 
-from sds_recon.sloshing.analysis import ModeResult, SloshingAnalysis
-from sds_recon.sloshing.estimators import amplitude_spectrum, finite_window
-from sds_recon.sloshing.theory import mode_name
+from sds_sloshing.analysis import ModeResult, SloshingAnalysis
+from sds_sloshing.estimators import amplitude_spectrum, finite_window
 
 Truth = dict[str, tuple[float, float]]
 """Mode name → (natural frequency [Hz], damping ratio), e.g. from a simulation's run.json."""

@@ -13,14 +13,9 @@ import yaml
 from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
-from sds_recon.camera.model import (
-    CameraModel,
-    CameraModelError,
-    camera_from_dict,
-    load_camera,
-    read_yaml,
-)
-from sds_recon.geometry import RigidTransform
+from sds_model.camera.files import camera_from_dict, load_camera, read_yaml
+from sds_model.camera.model import CameraModel, CameraModelError
+from sds_model.geometry import RigidTransform
 
 WORLD_FRAME = ("origin on the container axis at the flat liquid surface (fill level), Z up "
                "against gravity, mm")
@@ -339,7 +334,7 @@ def save_rig(rig: Rig, path: str | Path, comment: str = "") -> Path:
     """Write a rig file that load_rig reads back to the same rig."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    header = f"# SDS rig file (load with sds_recon.rig.load_rig).\n# World frame: {WORLD_FRAME}.\n"
+    header = f"# SDS rig file (load with sds_model.rig.load_rig).\n# World frame: {WORLD_FRAME}.\n"
     header += "".join(f"# {line}\n" for line in comment.splitlines())
     body = yaml.safe_dump(rig_to_dict(rig, path.parent), sort_keys=False,
                           default_flow_style=None, width=100)

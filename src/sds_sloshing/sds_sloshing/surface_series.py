@@ -12,7 +12,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-
 from sds_recon.reconstruction import LINE_LASER_ID
 
 POINTS_COLUMNS = ("frame", "t_s", "laser_id", "X_mm", "Y_mm", "Z_mm")
@@ -23,7 +22,7 @@ class RecordingError(ValueError):
 
 
 @dataclass(frozen=True)
-class SurfaceRecording:
+class SurfaceSeries:
     """Surface points per frame and diode [mm] (NaN = not measured), line points, ToF ranges."""
 
     time_s: np.ndarray              # (F,) frame times
@@ -36,9 +35,9 @@ class SurfaceRecording:
     source: str = ""
 
 
-def recording_from_rows(time_s: np.ndarray, laser_ids: np.ndarray, points_mm: np.ndarray,
+def surface_series_from_rows(time_s: np.ndarray, laser_ids: np.ndarray, points_mm: np.ndarray,
                         source: str = "", tof: tuple[np.ndarray, np.ndarray] | None = None,
-                        ) -> SurfaceRecording:
+                        ) -> SurfaceSeries:
     """Group rows of (time [s], laser id, X Y Z [mm]) into frames; the line's rows stay a list."""
     time_s, laser_ids = np.asarray(time_s, dtype=float), np.asarray(laser_ids, dtype=int)
     points_mm = np.asarray(points_mm, dtype=float).reshape(-1, 3)
@@ -50,12 +49,12 @@ def recording_from_rows(time_s: np.ndarray, laser_ids: np.ndarray, points_mm: np
     table = np.full((len(spot_times), len(ids), 3), np.nan)
     table[frame_of, laser_of] = points_mm[~line]
     tof_time, tof_range = tof if tof is not None else (np.empty(0), np.empty(0))
-    return SurfaceRecording(spot_times, ids, table, time_s[line], points_mm[line],
+    return SurfaceSeries(spot_times, ids, table, time_s[line], points_mm[line],
                             np.asarray(tof_time, dtype=float), np.asarray(tof_range, dtype=float),
                             source)
 
 
-def read_points_csv(path: str | Path) -> SurfaceRecording:
+def read_points_csv(path: str | Path) -> SurfaceSeries:
     """A points CSV (`sds export` layout; lines starting with # are comments), without the
     points marked rejected."""
     path = Path(path)
@@ -72,7 +71,7 @@ def read_points_csv(path: str | Path) -> SurfaceRecording:
         points = np.array([[float(r["X_mm"]), float(r["Y_mm"]), float(r["Z_mm"])] for r in rows])
     except ValueError as error:
         raise RecordingError(f"{path}: {error}") from None
-    return recording_from_rows(times, ids, points, str(path))
+    return surface_series_from_rows(times, ids, points, str(path))
 
 
 def read_series_csv(path: str | Path) -> tuple[np.ndarray, dict[str, np.ndarray]]:

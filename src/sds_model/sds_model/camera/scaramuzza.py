@@ -9,7 +9,7 @@ import numpy as np
 from numpy.polynomial import polynomial
 from numpy.typing import ArrayLike
 
-from sds_recon.camera.model import (
+from sds_model.camera.model import (
     CameraModel,
     CameraModelError,
     as_points,

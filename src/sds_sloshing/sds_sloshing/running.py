@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from sds_recon.sloshing.analysis import AnalysisOptions, ModeResult, analyze_series, decay_start
-from sds_recon.sloshing.estimators import DecayError
-from sds_recon.sloshing.modal import ModalSeries, mode_coordinates
+from sds_sloshing.analysis import AnalysisOptions, ModeResult, analyze_series, decay_start
+from sds_sloshing.estimators import DecayError
+from sds_sloshing.modal import ModalSeries, mode_coordinates
 
 
 class RunningAnalysis:
