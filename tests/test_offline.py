@@ -10,14 +10,22 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from builtin_interfaces.msg import Time
 from rclpy.serialization import serialize_message
+from sds_arduino.protocol import unwrap_time_s
 from sds_camera.camera_imu import read_camera_imu
 from sds_model.rig import LaserDiode, Rig, load_rig, save_rig
 from sds_recon.results import COLUMNS, ResultsWriter, load_results
 from sds_record.mcap_files import McapRecorder
+from sds_ros.arduino_msg import SensorSpec, record_message
+from sds_ros.point_cloud import points_to_cloud
+from sds_sim.arduino import arduino_records
+from sds_sim.optics import ray_surface_points
 from sds_sim.scenario import load_scenario
 from sds_sim.simulate import simulate
 from std_msgs.msg import Header
+
+from sds_msgs.msg import LaserSpot, LaserSpotArray
 
 SDS = str(Path(sys.executable).with_name("sds"))
 
@@ -130,3 +138,57 @@ def test_process_calibrates_the_beams_from_images_first(repo: Path, tmp_path: Pa
     assert len(results.camera_imu) == len(imu.accel_time_s) + len(imu.gyro_time_s)
     accel = results.camera_imu[np.isfinite(results.camera_imu["ax_m_s2"])]
     np.testing.assert_allclose(accel["az_m_s2"], imu.accel_m_s2[:, 2], atol=1e-6)
+
+
+def test_export_finds_the_free_fall_keeps_the_tof_and_times_early_readings_negative(
+        repo: Path, tmp_path: Path) -> None:
+    """A recording of a drop with the Arduino's streams starting 0.5 s before the first frame:
+    `sds export` analyses it as microgravity (the IMU's free fall), with the ToF's estimate,
+    and the IMU and ToF rows recorded before the first frame have negative times."""
+    scenario = load_scenario(repo / "config" / "scenarios" / "drop_4p7s.yaml", {"duration_s": 3.0})
+    rig = scenario.rig
+    emitters = np.array([d.emitter_mm for d in rig.diodes])
+    directions = np.array([d.direction for d in rig.diodes])
+    ids = np.array([d.laser_id for d in rig.diodes])
+    first_frame_ns = 10**9 + 5 * 10**8          # the Arduino's device clock starts at 1 s
+    path = tmp_path / "drop.mcap"
+    recorder = McapRecorder(path)
+    for topic, type_name in (("/tracker/spots", "sds_msgs/msg/LaserSpotArray"),
+                             ("/recon/points", "sensor_msgs/msg/PointCloud2"),
+                             ("/arduino/imu", "sensor_msgs/msg/Imu"),
+                             ("/arduino/tof", "sensor_msgs/msg/Range")):
+        recorder.add_topic(topic, type_name)
+    messages: list[tuple[int, str, object]] = []
+    for frame in range(scenario.frame_count):
+        time_s = frame / scenario.fps
+        stamp_ns = first_frame_ns + round(time_s * 1e9)
+        header = Header(stamp=Time(sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9))
+        hits = ray_surface_points(scenario.surface_at(time_s), emitters, directions, time_s)
+        spots = [LaserSpot(laser_id=int(i), x_px=1.0, y_px=1.0, sigma_px=0.1) for i in ids]
+        messages.append((stamp_ns, "/tracker/spots",
+                         LaserSpotArray(header=header, frame_index=frame, spots=spots)))
+        messages.append((stamp_ns, "/recon/points", points_to_cloud(
+            header, ids, hits, np.full(len(ids), 0.01), np.zeros(len(ids)))))
+    records = arduino_records(scenario)
+    device_s = unwrap_time_s([r.t_us for r in records])
+    for record, t_s in zip(records, device_s - device_s[0], strict=True):
+        if record.kind in ("IMU", "TOF"):
+            stamp_ns = 10**9 + round(t_s * 1e9)
+            stamp = Time(sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9)
+            messages.append((stamp_ns, f"/arduino/{record.kind.lower()}",
+                             record_message(record, stamp, round(t_s * 1e6), SensorSpec())))
+    for stamp_ns, topic, msg in sorted(messages, key=lambda item: item[0]):
+        recorder.write(topic, serialize_message(msg), stamp_ns, stamp_ns)
+    recorder.close()
+    done = sds("export", str(path), "--rig", str(scenario.rig_file), "--out",
+               str(tmp_path / "out"))
+    assert done.returncode == 0, done.stderr
+    assert "free fall" in done.stdout and "microgravity" in done.stdout, done.stdout
+    results = load_results(tmp_path / "out")
+    assert results.imu is not None and results.tof is not None
+    for table in (results.imu, results.tof):
+        early = table["t_s"] < 0
+        assert early.any() and table["t_s"][early].min() >= -0.5 - 1e-6
+        assert np.all(np.diff(table["t_s"]) > 0)      # in time order, none squeezed onto 0
+    analysis = yaml.safe_load((tmp_path / "out" / "analysis.json").read_text())
+    assert analysis["tof"] and analysis["tof"][0]["estimates"], analysis["tof"]

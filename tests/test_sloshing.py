@@ -17,7 +17,7 @@ from scipy.io import loadmat
 from sds_arduino.protocol import format_record, read_log, unwrap_time_s
 from sds_model.mode_theory import theoretical_modes
 from sds_recon.triangulation import triangulate_beams
-from sds_record.recorded_series import read_surface_recording
+from sds_record.recorded_series import read_surface_series
 from sds_sim.arduino import arduino_records
 from sds_sim.optics import line_laser_rays, ray_surface_points
 from sds_sim.scenario import Scenario, load_scenario
@@ -319,7 +319,7 @@ def test_mcap_reads_back_the_points_it_was_given(repo: Path, tmp_path: Path) -> 
                              {"duration_s": 1.0})
     recording = observe(scenario)
     write_points_mcap(recording, tmp_path / "run.mcap")
-    back = read_surface_recording(tmp_path / "run.mcap")
+    back = read_surface_series(tmp_path / "run.mcap")
     np.testing.assert_array_equal(back.laser_ids, recording.laser_ids)
     np.testing.assert_allclose(back.time_s, recording.time_s, atol=1e-9)
     # float32 metres on the topic: 24 bits of mantissa
@@ -444,7 +444,7 @@ def test_mcap_times_are_seconds_from_the_first_frame_and_a_window_must_be_one(
     shifted = SurfaceSeries(recording.time_s + epoch, recording.laser_ids,
                                recording.points_mm)
     write_points_mcap(shifted, tmp_path / "drop.mcap")
-    back = read_surface_recording(tmp_path / "drop.mcap")
+    back = read_surface_series(tmp_path / "drop.mcap")
     np.testing.assert_allclose(back.time_s, recording.time_s - recording.time_s[0], atol=1e-6)
     rig = str(scenario.rig_file)   # written by hand: the file carries no rig
     done = run_sds("analyze", str(tmp_path / "drop.mcap"), "--start-s", "1.5", "--end-s", "1.0",

@@ -10,7 +10,7 @@ from sds_arduino.protocol import read_log, unwrap_time_s
 from sds_model.rig import load_rig
 from sds_record.recorded_series import (
     read_accelerations,
-    read_surface_recording,
+    read_surface_series,
     recording_rig,
 )
 from sds_sloshing.analysis import (
@@ -37,7 +37,7 @@ def analyse_recording(path: Path, rig_file: Path | None, options: AnalysisOption
         raise RecordingError(f"{path}: no such file")
     suffix = path.suffix.lower()
     if suffix == ".mcap":
-        return analyze(read_surface_recording(path), recording_rig(path, rig_file),
+        return analyze(read_surface_series(path), recording_rig(path, rig_file),
                        with_gravity_regime(path, options))
     rig = load_rig(rig_file or DEFAULT_RIG)
     if suffix in ARDUINO_LOG_SUFFIXES:

@@ -18,23 +18,23 @@ import time
 import tty
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from sds_arduino.replay import paced
 from sds_model.rig import Rig, load_rig
 from sds_recon.results import ResultsWriter, load_results
-from sds_record.recorded_series import read_surface_recording
 from sds_sim.scenario import load_scenario
 from sds_sim.simulate import simulate
-from sds_sloshing.analysis import AnalysisOptions, analyze
-from sds_sloshing.report import summary_lines, truth_from_run, write_report
+from sds_sloshing.analysis import AnalysisOptions
+from sds_sloshing.report import summary_lines, truth_from_run
+from sds_sloshing.surface_series import RecordingError
 from sds_viz.from_mcap import mcap_to_rrd
 from tqdm import tqdm
 
-from sds_bringup.analyze import with_gravity_regime
 from sds_bringup.graph import apply_overrides, load_graph
 from sds_bringup.launcher import Launcher
-from sds_bringup.offline import RunTables, export_recording
+from sds_bringup.offline import RunTables, export_recording, finish_analysis
 from sds_bringup.paths import CONFIG
 from sds_bringup.ros_env import graph_domain_id, graph_environment
 
@@ -198,18 +198,20 @@ def height_errors(truth_spots: Path, points: np.ndarray) -> np.ndarray:
 
 
 def analyse_run(recording: Path, rig: Rig, out: Path, options: AnalysisOptions,
-                truth_run: Path | None = None, overwrite: bool = True) -> dict:
-    """Result files, the Rerun file (from the recording: every frame), the analysis report;
-    the results as a dictionary. The run's own folder: an earlier run's results are replaced
-    (the caller checked `overwrite`)."""
+                truth_run: Path | None = None, overwrite: bool = True) -> dict[str, Any]:
+    """Result files, the Rerun file (from the recording: every frame), the analysis report
+    (`sds export`'s, in two reads of the recording); the results as a dictionary. The run's
+    own folder: an earlier run's results are replaced (the caller checked `overwrite`)."""
     mcap_to_rrd(recording, recording.with_suffix(".rrd"), rig)
     tables = RunTables(ResultsWriter(out / "results", overwrite), rig)
     export_recording(recording, rig, tables)
-    tables.writer.close()
-    analysis = analyze(read_surface_recording(recording), rig,
-                       with_gravity_regime(recording, options))
     truth = truth_from_run(truth_run) if truth_run else None
-    return write_report(analysis, out / "analysis", truth).results
+    analysis = finish_analysis(tables, str(recording), out / "analysis", options, truth)
+    if analysis.results is None:
+        raise RecordingError(analysis.note)
+    if analysis.note:
+        print(f"sds: {analysis.note}")
+    return analysis.results
 
 
 def run_demo(out: Path, seconds: float | None) -> int:

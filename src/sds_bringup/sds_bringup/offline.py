@@ -8,9 +8,11 @@ the same files from a recording of the graph.
 
 from __future__ import annotations
 
+from collections import defaultdict
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from sds_camera.camera_imu import CameraImu, imu_samples
@@ -35,8 +37,13 @@ from sds_ros.image_msg import msg_to_image
 from sds_ros.point_cloud import read_cloud, stamp_s
 from sds_sloshing.analysis import AnalysisOptions, analyze
 from sds_sloshing.estimators import DecayError
-from sds_sloshing.report import write_report
-from sds_sloshing.surface_series import RecordingError, surface_series_from_rows
+from sds_sloshing.gravity import gravity_regime
+from sds_sloshing.report import Truth, write_report
+from sds_sloshing.surface_series import (
+    RecordingError,
+    SurfaceSeries,
+    surface_series_from_rows,
+)
 from sds_tracker.spots import LOST
 from sds_tracker.tracker import FrameTracker, TrackedSpot, parse_seeds, tracker_config
 from tqdm import tqdm
@@ -51,8 +58,8 @@ from sds_bringup.rig_calibration import (
 )
 
 GRAPH = CONFIG / "graphs" / "drop.yaml"
-CAMERA_IMU_TOPIC = "/camera/imu"
 """The graph whose tracker and reconstruction parameters the offline pipeline uses."""
+CAMERA_IMU_TOPIC = "/camera/imu"
 
 
 @dataclass(frozen=True)
@@ -137,12 +144,15 @@ def _camera_imu_row(time_s: float, accel, gyro) -> tuple:
 
 
 class RunTables:
-    """The rows of one run, written as they come, kept for the analysis."""
+    """The rows of one run, written as they come; what the analysis needs is kept: the points
+    the fits kept, the ToF ranges and every accelerometer."""
 
     def __init__(self, writer: ResultsWriter, rig: Rig) -> None:
         self.writer = writer
         self.rig = rig
         self._kept: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # time, id, X Y Z
+        self._tof: list[tuple[float, float]] = []                         # time [s], [mm]
+        self._accelerations: dict[str, list[np.ndarray]] = defaultdict(list)  # t, ax, ay, az
 
     def add_spots(self, frame: int, time_s: float, rows: list[tuple]) -> None:
         """Spot rows (laser_id, x, y, x_raw, y_raw, sigma, intensity, flags) of a frame."""
@@ -178,6 +188,17 @@ class RunTables:
         self.writer.add_fit((frame, time_s, *values, used, fits.rejected_count), names,
                             amplitudes)
 
+    def add_imu(self, name: str, time_s: float, accel_m_s2: tuple[float, float, float]) -> None:
+        """One sample of the Arduino's accelerometer (specific force [m/s²]), stream `name`."""
+        self.writer.add("imu", [(time_s, *accel_m_s2)])
+        self._accelerations[name].append(np.array([time_s, *accel_m_s2]))
+
+    def add_tof(self, time_s: float, range_mm: float) -> None:
+        """One time-of-flight range [mm] (NaN: the sensor flagged the reading)."""
+        self.writer.add("tof", [(time_s, range_mm)])
+        if np.isfinite(range_mm):
+            self._tof.append((time_s, range_mm))
+
     def add_camera_imu(self, imu: CameraImu) -> None:
         """The camera's own IMU samples in time order, one row each (the other sensor's cells
         empty)."""
@@ -185,20 +206,35 @@ class RunTables:
             _camera_imu_row(t, value if sensor == "accel" else None,
                             value if sensor == "gyro" else None)
             for t, sensor, value in imu_samples(imu)])
+        self.add_accelerations("camera IMU", imu.accel_time_s, imu.accel_m_s2)
 
     def add_camera_imu_message(self, msg, time_s: float) -> None:
         """A recorded /camera/imu message (one sensor each, the other's covariance[0] −1)."""
         a, g = msg.linear_acceleration, msg.angular_velocity
+        accel = None if msg.linear_acceleration_covariance[0] == -1 else (a.x, a.y, a.z)
         self.writer.add("camera_imu", [_camera_imu_row(
-            time_s, None if msg.linear_acceleration_covariance[0] == -1 else (a.x, a.y, a.z),
-            None if msg.angular_velocity_covariance[0] == -1 else (g.x, g.y, g.z))])
+            time_s, accel, None if msg.angular_velocity_covariance[0] == -1 else (g.x, g.y, g.z))])
+        if accel is not None:
+            self._accelerations[CAMERA_IMU_TOPIC].append(np.array([time_s, *accel]))
 
-    def recording(self, source: str):
-        """The points as the analysis reads them."""
+    def add_accelerations(self, name: str, time_s: np.ndarray, accel_m_s2: np.ndarray) -> None:
+        """A whole accelerometer stream (times [s], N×3 m/s²) for the gravity regime, not for
+        the tables (e.g. a recording's, when `sds process` tracks its images again)."""
+        self._accelerations[name] += list(np.column_stack([time_s, accel_m_s2]))
+
+    def accelerations(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """Every accelerometer stream kept: times [s] and specific force (N×3 m/s²)."""
+        return {name: (np.array(rows)[:, 0], np.array(rows)[:, 1:])
+                for name, rows in self._accelerations.items() if rows}
+
+    def surface_series(self, source: str) -> SurfaceSeries:
+        """The points the fits kept and the ToF ranges, as the analysis reads them."""
         if not any(len(ids) for _, ids, _ in self._kept):
             raise RecordingError(f"{source}: no surface point was reconstructed")
         time_s, ids, xyz = (np.concatenate(parts) for parts in zip(*self._kept, strict=True))
-        return surface_series_from_rows(time_s, ids.astype(int), xyz, source)
+        tof = np.array(self._tof).reshape(-1, 2)
+        return surface_series_from_rows(time_s, ids.astype(int), xyz, source,
+                                        (tof[:, 0], tof[:, 1]))
 
 
 def process_frames(frames: Iterator[RedFrame], rig: Rig, tables: RunTables,
@@ -245,6 +281,7 @@ def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:
     frame_of: dict[float, int] = {}   # header stamp [s] -> frame index (clouds carry none)
     clouds: list[tuple[float, float, SurfacePoints, np.ndarray]] = []
     camera_imu: list[tuple[float, object]] = []
+    sensors: list[tuple[float, str, Any]] = []   # the Arduino's IMU and ToF: stamp, topic
     for recorded, msg in decoded_messages(path):
         name = recorded.type_name
         if not hasattr(msg, "header"):
@@ -274,11 +311,8 @@ def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:
             _add_fit_message(tables, msg, time_s)
         elif name == "sensor_msgs/msg/Imu" and recorded.topic == CAMERA_IMU_TOPIC:
             camera_imu.append((stamp, msg))   # may come before the first frame: kept for later
-        elif name == "sensor_msgs/msg/Imu":
-            a = msg.linear_acceleration
-            tables.writer.add("imu", [(time_s, a.x, a.y, a.z)])
-        elif name == "sensor_msgs/msg/Range":
-            tables.writer.add("tof", [(time_s, msg.range * 1e3)])
+        elif name in ("sensor_msgs/msg/Imu", "sensor_msgs/msg/Range"):
+            sensors.append((stamp, recorded.topic, msg))   # the same
     if frames == 0:
         raise RecordingError(f"{path}: no laser spots (sds_msgs/LaserSpotArray) recorded")
     for stamp, time_s, points, rejected in clouds:
@@ -286,6 +320,12 @@ def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:
     origin = first if first is not None else 0.0
     for stamp, msg in sorted(camera_imu, key=lambda item: item[0]):
         tables.add_camera_imu_message(msg, stamp - origin)
+    for stamp, topic, msg in sensors:
+        if hasattr(msg, "range"):
+            tables.add_tof(stamp - origin, msg.range * 1e3)
+        else:
+            a = msg.linear_acceleration
+            tables.add_imu(topic, stamp - origin, (a.x, a.y, a.z))
     return frames
 
 
@@ -298,13 +338,29 @@ def _add_fit_message(tables: RunTables, msg, time_s: float) -> None:
                           tuple(msg.mode_names), list(msg.modal_amplitudes_mm))
 
 
-def finish_analysis(tables: RunTables, source: str, out: Path, options: AnalysisOptions) -> str:
-    """The analysis of the run's points (report, analysis.json), the tables closed."""
-    note = ""
+@dataclass(frozen=True)
+class RunAnalysis:
+    """A run's analysis: the report's results (None when there was nothing to analyse) and
+    what the console should say about it (the gravity regime, why there is no analysis)."""
+
+    results: dict[str, Any] | None
+    note: str
+
+
+def finish_analysis(tables: RunTables, source: str, out: Path, options: AnalysisOptions,
+                    truth: Truth | None = None) -> RunAnalysis:
+    """The analysis of the run's points and ToF ranges (report, analysis.json), the tables
+    closed. Without a gravity in `options`, a free fall in any accelerometer the run holds
+    means microgravity (`sds process`, `sds export`, `sds run` and the demo alike)."""
+    regime = ""
+    if options.gravity_m_s2 is None:
+        gravity, regime = gravity_regime(tables.accelerations())
+        options = replace(options, gravity_m_s2=gravity)
+    results, note = None, ""
     try:
-        analysis = analyze(tables.recording(source), tables.rig, options)
-        write_report(analysis, out)
+        analysis = analyze(tables.surface_series(source), tables.rig, options)
+        results = write_report(analysis, out, truth).results
     except (RecordingError, DecayError, ValueError) as error:
         note = f"no analysis: {error}"
     tables.writer.close()
-    return note
+    return RunAnalysis(results, "; ".join(n for n in (regime, note) if n))

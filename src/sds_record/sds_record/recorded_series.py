@@ -26,7 +26,7 @@ RANGE_TYPE = "sensor_msgs/msg/Range"
 IMU_TYPE = "sensor_msgs/msg/Imu"
 
 
-def read_surface_recording(path: str | Path) -> SurfaceSeries:
+def read_surface_series(path: str | Path) -> SurfaceSeries:
     """Every surface cloud (PointCloud2 with laser_id; rejected points left out) and ToF
     range (sensor_msgs/Range [m] → mm)."""
     path = Path(path)

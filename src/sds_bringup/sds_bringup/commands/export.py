@@ -38,7 +38,7 @@ def run(args: argparse.Namespace) -> int:
     tables = RunTables(ResultsWriter(args.out, args.overwrite), rig)
     frames = export_recording(args.recording, rig, tables)
     note = finish_analysis(tables, str(args.recording), args.out,
-                           AnalysisOptions(gravity_m_s2=args.gravity))
+                           AnalysisOptions(gravity_m_s2=args.gravity)).note
     print(f"sds export: {frames} frames of {args.recording} -> {args.out}" + (
         f" ({note})" if note else ""))
     return 0

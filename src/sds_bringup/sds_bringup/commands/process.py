@@ -107,7 +107,6 @@ def process_one(source: Path, is_video: bool, rig_file: Path | None, out: Path,
     from sds_recon.results import ResultsWriter
     from sds_record.recorded_series import read_accelerations, recording_rig
     from sds_sloshing.analysis import AnalysisOptions
-    from sds_sloshing.gravity import gravity_regime
 
     from sds_bringup.offline import (
         RunTables,
@@ -126,18 +125,16 @@ def process_one(source: Path, is_video: bool, rig_file: Path | None, out: Path,
     frames = video_frames(source, rig, args.fps) if is_video else mcap_frames(source)
     tables = RunTables(writer, rig)
     count = process_frames(frames, rig, tables, progress=progress)
-    imu = read_camera_imu(source) if is_video else None
-    accelerometers = {} if is_video else read_accelerations(source)
-    if imu is not None:
-        tables.add_camera_imu(imu)
-        accelerometers["camera IMU"] = (imu.accel_time_s, imu.accel_m_s2)
-    gravity, regime = args.gravity, ""
-    if gravity is None:
-        gravity, regime = gravity_regime(accelerometers)
-    note = finish_analysis(tables, str(source), out, AnalysisOptions(gravity_m_s2=gravity))
-    notes = "; ".join(n for n in (regime, note) if n)
-    return f"sds process: {count} frames of {source} -> {out}" + (f" ({notes})" if notes
-                                                                   else "")
+    if is_video:
+        imu = read_camera_imu(source)
+        if imu is not None:
+            tables.add_camera_imu(imu)
+    else:
+        for topic, (time_s, accel_m_s2) in read_accelerations(source).items():
+            tables.add_accelerations(topic, time_s, accel_m_s2)
+    note = finish_analysis(tables, str(source), out,
+                           AnalysisOptions(gravity_m_s2=args.gravity)).note
+    return f"sds process: {count} frames of {source} -> {out}" + (f" ({note})" if note else "")
 
 
 def _process_in_worker(source: Path, is_video: bool, rig_file: Path | None, out: Path,
