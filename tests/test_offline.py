@@ -51,6 +51,19 @@ def test_results_round_trip_with_missing_values(tmp_path: Path) -> None:
     assert list(results.columns["spots"]) == list(COLUMNS["spots"])
 
 
+def test_a_frame_without_line_samples_adds_no_row(tmp_path: Path) -> None:
+    """A rig without a line laser: each frame's line is empty (`sds process` failed on it)."""
+    writer = ResultsWriter(tmp_path)
+    empty = np.zeros(0)
+    writer.add_columns("line", [0, 0.0, empty, empty, empty, empty, empty.astype(np.uint8)])
+    writer.add_columns("line", [1, 0.033, [5.0, 6.0], [7.0, 8.0], 0.1, 200.0, [0, 1]])
+    with pytest.raises(ValueError, match="different lengths"):
+        writer.add_columns("line", [2, 0.067, [5.0, 6.0], [7.0, 8.0, 9.0], 0.1, 200.0, 0])
+    writer.close()
+    line = load_results(tmp_path).line
+    assert list(line["frame"]) == [1, 1] and list(line["flags"]) == [0, 1]
+
+
 def one_line_error(done: subprocess.CompletedProcess, text: str) -> None:
     assert done.returncode == 2, done.stdout + done.stderr
     assert text in done.stderr and len(done.stderr.strip().splitlines()) == 1, done.stderr

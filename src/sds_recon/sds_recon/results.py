@@ -172,11 +172,17 @@ class ResultsWriter:
         return self._tables[table]
 
     def add_columns(self, table: str, columns: list[ArrayLike]) -> None:
-        """Rows of a table as columns of equal length, in the order of COLUMNS[table]."""
+        """Rows of a table as columns, in the order of COLUMNS[table]: arrays of one length
+        (none, e.g. a frame without line samples, adds no row) and single values that every
+        row repeats (the frame, its time)."""
         arrays = [np.atleast_1d(np.asarray(c)) for c in columns]
-        length = max(len(a) for a in arrays)
-        self._table(table, list(COLUMNS[table])).append(
-            [np.broadcast_to(a, (length,)) for a in arrays])
+        lengths = {len(a) for a in arrays if len(a) != 1}
+        if len(lengths) > 1:
+            raise ValueError(f"{table}: columns of different lengths {sorted(lengths)}")
+        length = lengths.pop() if lengths else 1
+        file = self._table(table, list(COLUMNS[table]))
+        if length:
+            file.append([np.broadcast_to(a, (length,)) for a in arrays])
 
     def add(self, table: str, rows: list[tuple[Any, ...]]) -> None:
         """Rows of a table (values in the order of COLUMNS[table]; None or NaN: empty)."""
