@@ -26,6 +26,7 @@ from sds_camera.frame_source import (
 )
 from sds_model.rig import Rig
 from sds_recon.reconstruction import (
+    LINE_LASER_ID,
     SurfaceFits,
     SurfacePoints,
     reconstruct_frame,
@@ -60,6 +61,11 @@ from sds_bringup.rig_calibration import (
 GRAPH = CONFIG / "graphs" / "drop.yaml"
 """The graph whose tracker and reconstruction parameters the offline pipeline uses."""
 CAMERA_IMU_TOPIC = "/camera/imu"
+LINE_FRAMES_IN_FULL = 1800
+LINE_FRAME_STEP = 10
+"""The analysis keeps the line's points of the first LINE_FRAMES_IN_FULL frames (a minute at
+30 fps), then of every LINE_FRAME_STEP-th: they serve only the meniscus, a mean radial profile,
+and all of a 10-minute 4K run's would hold 0.8 GB (the result files keep every one)."""
 
 
 @dataclass(frozen=True)
@@ -153,6 +159,7 @@ class RunTables:
         self._kept: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # time, id, X Y Z
         self._tof: list[tuple[float, float]] = []                         # time [s], [mm]
         self._accelerations: dict[str, list[np.ndarray]] = defaultdict(list)  # t, ax, ay, az
+        self._line_frames = 0
 
     def add_spots(self, frame: int, time_s: float, rows: list[tuple]) -> None:
         """Spot rows (laser_id, x, y, x_raw, y_raw, sigma, intensity, flags) of a frame."""
@@ -169,6 +176,11 @@ class RunTables:
                                            xyz[:, 1], xyz[:, 2], points.height_sigma_mm,
                                            points.miss_distance_mm, flags])
         kept = flags == 0
+        if count and np.all(np.asarray(points.laser_ids) == LINE_LASER_ID):
+            self._line_frames += 1
+            if (self._line_frames > LINE_FRAMES_IN_FULL
+                    and self._line_frames % LINE_FRAME_STEP):
+                return
         self._kept.append((np.full(int(kept.sum()), time_s),
                            np.asarray(points.laser_ids)[kept], xyz[kept]))
 

@@ -332,16 +332,29 @@ def log_decrement(time_s: ArrayLike, values: ArrayLike, frequency_hz: float,
                         float(t[0]), float(t[-1]))
 
 
-def matrix_pencil_poles(values: np.ndarray, step_s: float, order: int,
-                        pencil_fraction: float = 1.0 / 3.0) -> np.ndarray:
-    """Continuous-time poles s = −α ± iω_d of `order` exponentials (Hua & Sarkar's pencil)."""
+MAX_PENCIL = 256
+"""Largest pencil parameter L. Hua & Sarkar's N/3 is kept up to 768 samples (a 25 s window at
+30 fps); beyond, the SVD's cost, O(N·L²), would grow as N³ (a 10-minute record: an hour) for
+start poles that the least-squares fit refines anyway."""
+
+
+def pencil_vectors(values: np.ndarray, order: int, pencil_fraction: float = 1.0 / 3.0
+                   ) -> np.ndarray:
+    """Right singular vectors (rows of Vᴴ, strongest first) of the record's Hankel data matrix,
+    pencil parameter L = N·`pencil_fraction` (at least `order` + 1, at most MAX_PENCIL)."""
     count = len(values)
-    pencil = max(order + 1, int(count * pencil_fraction))
+    pencil = max(order + 1, min(int(count * pencil_fraction), MAX_PENCIL))
     if count - pencil < order:
         raise DecayError(f"{count} samples are too few for {order} poles")
     rows = np.lib.stride_tricks.sliding_window_view(values, pencil + 1)
-    _, _, vh = np.linalg.svd(rows, full_matrices=False)
-    basis = vh[:order].T
+    return np.linalg.svd(rows, full_matrices=False)[2]
+
+
+def pencil_poles(vectors: np.ndarray, step_s: float, order: int) -> np.ndarray:
+    """Continuous-time poles s = −α ± iω_d of `order` exponentials from `pencil_vectors`."""
+    if len(vectors) < order:
+        raise DecayError(f"a pencil of {len(vectors)} is too small for {order} poles")
+    basis = vectors[:order].T
     poles = np.linalg.eigvals(np.linalg.pinv(basis[:-1]) @ basis[1:])
     return np.log(poles.astype(complex)) / step_s
 
@@ -416,9 +429,13 @@ def fit_damped_sinusoids(time_s: ArrayLike, values: ArrayLike, max_components: i
     _, uniform, step = uniform_record(t, y)
     tau = t - t[0]
     best: DampedSinusoidFit | None = None
+    try:   # one SVD serves every K (its pencil L is theirs too, unless N < 30)
+        vectors = pencil_vectors(uniform - uniform.mean(), 3)
+    except DecayError:
+        vectors = np.empty((0, 0))
     for count in range(1, max_components + 1):
         try:
-            poles = matrix_pencil_poles(uniform - uniform.mean(), step, 2 * count + 1)
+            poles = pencil_poles(vectors, step, 2 * count + 1)
         except DecayError:
             break
         nyquist = np.pi / step
