@@ -50,6 +50,7 @@ bench: setup
 	$(BIN)/python bench/graph.py --minutes 2
 	$(BIN)/python bench/self_calibration.py
 	$(BIN)/python bench/process.py
+	$(BIN)/python bench/scaling.py
 
 clean:
 	rm -rf $(BUILD) .pytest_cache .ruff_cache demo_output
