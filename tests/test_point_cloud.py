@@ -21,11 +21,11 @@ def test_points_go_out_in_metres_and_come_back_in_mm() -> None:
     np.testing.assert_allclose(raw, [0.010, -0.020, 0.0015], rtol=1e-6)
     back = read_cloud(msg)
     assert back is not None
-    np.testing.assert_allclose(back.points_mm, points.points_mm, atol=1e-5)
-    np.testing.assert_allclose(back.height_sigma_mm, points.height_sigma_mm, rtol=1e-6)
-    np.testing.assert_allclose(back.miss_distance_mm, points.miss_distance_mm,
+    np.testing.assert_allclose(back.points.points_mm, points.points_mm, atol=1e-5)
+    np.testing.assert_allclose(back.points.height_sigma_mm, points.height_sigma_mm, rtol=1e-6)
+    np.testing.assert_allclose(back.points.miss_distance_mm, points.miss_distance_mm,
                                rtol=1e-6, equal_nan=True)
-    assert back.laser_ids.tolist() == [0, 7, LINE_LASER_ID]
+    assert back.points.laser_ids.tolist() == [0, 7, LINE_LASER_ID]
     assert back.rejected.tolist() == [False, True, False]
 
 
@@ -42,7 +42,7 @@ def test_a_cloud_recorded_in_the_old_mm_layout_reads_the_same() -> None:
     msg.fields = [PointField(name=name, offset=dtype.fields[name][1], datatype=kinds[kind],
                              count=1) for name, kind in layout]
     back = read_cloud(msg)
-    assert back is not None and back.laser_ids.tolist() == [4]
-    np.testing.assert_allclose(back.points_mm, [[12.5, -3.0, 0.75]], rtol=1e-6)
-    np.testing.assert_allclose(back.height_sigma_mm, [0.04], rtol=1e-6)
+    assert back is not None and back.points.laser_ids.tolist() == [4]
+    np.testing.assert_allclose(back.points.points_mm, [[12.5, -3.0, 0.75]], rtol=1e-6)
+    np.testing.assert_allclose(back.points.height_sigma_mm, [0.04], rtol=1e-6)
     assert not back.rejected.any()

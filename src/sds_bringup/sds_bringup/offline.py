@@ -316,9 +316,7 @@ def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:
         elif name == "sensor_msgs/msg/PointCloud2":
             cloud = read_cloud(msg)
             if cloud is not None:   # its frame is known once every spots message is read
-                clouds.append((stamp, time_s, SurfacePoints(
-                    cloud.laser_ids, cloud.points_mm, cloud.height_sigma_mm,
-                    cloud.miss_distance_mm), cloud.rejected))
+                clouds.append((stamp, time_s, cloud.points, cloud.rejected))
         elif name == "sds_msgs/msg/SurfaceFit":
             _add_fit_message(tables, msg, time_s)
         elif name == "sensor_msgs/msg/Imu" and recorded.topic == CAMERA_IMU_TOPIC:

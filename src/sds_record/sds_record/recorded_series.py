@@ -38,8 +38,8 @@ def read_surface_series(path: str | Path) -> SurfaceSeries:
             if cloud is not None and (~cloud.rejected).any():
                 kept = ~cloud.rejected
                 rows["time"].append(np.full(int(kept.sum()), stamp_s(msg)))
-                rows["id"].append(cloud.laser_ids[kept])
-                rows["xyz"].append(cloud.points_mm[kept])
+                rows["id"].append(cloud.points.laser_ids[kept])
+                rows["xyz"].append(cloud.points.points_mm[kept])
             elif recorded.type_name == RANGE_TYPE and np.isfinite(msg.range):
                 tof_time.append(stamp_s(msg))
                 tof_range.append(msg.range * 1e3)

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
+from sds_recon.reconstruction import SurfacePoints
 from sensor_msgs.msg import PointCloud2, PointField
 
 CLOUD_FIELDS = (("x", np.float32), ("y", np.float32), ("z", np.float32),
@@ -69,10 +70,7 @@ def points_to_cloud(header, laser_ids: ArrayLike, points_mm: ArrayLike,
 class CloudPoints:
     """A surface cloud read back, in mm: the points and which were left out of the fits."""
 
-    laser_ids: np.ndarray          # (N,)
-    points_mm: np.ndarray          # (N, 3)
-    height_sigma_mm: np.ndarray    # (N,)
-    miss_distance_mm: np.ndarray   # (N,), NaN for the line laser
+    points: SurfacePoints
     rejected: np.ndarray           # (N,) bool
 
 
@@ -95,10 +93,10 @@ def read_cloud(msg) -> CloudPoints | None:
 
     rejected = rows["rejected"].astype(bool) if "rejected" in names else \
         np.zeros(len(rows), dtype=bool)   # clouds recorded before the field existed
-    return CloudPoints(rows["laser_id"].astype(int),
-                       np.column_stack([rows["x"], rows["y"], rows["z"]]).astype(float) * scale,
-                       optional(f"height_sigma{suffix}"), optional(f"miss_distance{suffix}"),
-                       rejected)
+    return CloudPoints(SurfacePoints(
+        rows["laser_id"].astype(int),
+        np.column_stack([rows["x"], rows["y"], rows["z"]]).astype(float) * scale,
+        optional(f"height_sigma{suffix}"), optional(f"miss_distance{suffix}")), rejected)
 
 
 def stamp_s(msg) -> float:

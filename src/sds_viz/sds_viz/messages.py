@@ -44,7 +44,7 @@ def _cloud(scene: RerunScene, msg) -> None:
     cloud = read_cloud(msg)
     if cloud is None:
         return
-    ids, points = cloud.laser_ids, cloud.points_mm
+    ids, points = cloud.points.laser_ids, cloud.points.points_mm
     line = ids == LINE_LASER_ID
     if line.any():
         scene.log_line_points(points[line])
