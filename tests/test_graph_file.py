@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib
+import re
 from pathlib import Path
 
 import pytest
@@ -45,7 +46,11 @@ def test_each_node_declares_what_its_parameter_file_documents(repo, module, para
 
 
 def test_every_moved_plugin_names_a_node_that_loads():
-    for moved_to in MOVED_PLUGINS.values():
+    """Each old name is a node module of an algorithm package, `package.<name>_node:Class`,
+    and its new name loads the same class."""
+    for old, moved_to in MOVED_PLUGINS.items():
+        assert re.fullmatch(r"sds_[a-z]+\.[a-z_]+_node:\w+", old), old
+        assert old.split(":")[1] == moved_to.split(":")[1]
         assert issubclass(load_plugin(moved_to), Node)
 
 

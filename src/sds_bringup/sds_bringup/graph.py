@@ -68,7 +68,7 @@ MOVED_PLUGINS = {
     "sds_camera.frame_monitor_node:FrameMonitorNode": "sds_nodes.frame_monitor:FrameMonitorNode",
     "sds_tracker.tracker_node:TrackerNode": "sds_nodes.tracker:TrackerNode",
     "sds_recon.recon_node:ReconstructionNode": "sds_nodes.reconstruction:ReconstructionNode",
-    "sds_sloshing_node:SloshingNode": "sds_nodes.sloshing:SloshingNode",
+    "sds_recon.sloshing_node:SloshingNode": "sds_nodes.sloshing:SloshingNode",
     "sds_record.recorder_node:RecorderNode": "sds_nodes.recorder:RecorderNode",
     "sds_record.player_node:PlayerNode": "sds_nodes.player:PlayerNode",
     "sds_arduino.bridge_node:ArduinoBridgeNode": "sds_nodes.arduino_bridge:ArduinoBridgeNode",
