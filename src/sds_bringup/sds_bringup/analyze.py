@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -18,8 +17,8 @@ from sds_sloshing.analysis import (
     SloshingAnalysis,
     analyze,
     analyze_table,
+    with_gravity_regime,
 )
-from sds_sloshing.gravity import gravity_regime
 from sds_sloshing.surface_series import RecordingError, read_points_csv, read_series_csv
 
 from sds_bringup.paths import CONFIG
@@ -37,8 +36,11 @@ def analyse_recording(path: Path, rig_file: Path | None, options: AnalysisOption
         raise RecordingError(f"{path}: no such file")
     suffix = path.suffix.lower()
     if suffix == ".mcap":
-        return analyze(read_surface_series(path), recording_rig(path, rig_file),
-                       with_gravity_regime(path, options))
+        if options.gravity_m_s2 is None:   # only then are the accelerometers read
+            options, note = with_gravity_regime(options, read_accelerations(path))
+            if note:
+                print(f"sds: {note}")
+        return analyze(read_surface_series(path), recording_rig(path, rig_file), options)
     rig = load_rig(rig_file or DEFAULT_RIG)
     if suffix in ARDUINO_LOG_SUFFIXES:
         records, rejected = read_log(path)
@@ -54,17 +56,6 @@ def analyse_recording(path: Path, rig_file: Path | None, options: AnalysisOption
         return analyze(read_points_csv(path), rig, options)
     time_s, series = read_series_csv(path)
     return analyze_table(str(path), time_s, series, rig, options)
-
-
-def with_gravity_regime(recording: Path, options: AnalysisOptions) -> AnalysisOptions:
-    """The options, with microgravity where no gravity was given and a recorded accelerometer
-    (the Arduino's or the camera's) shows a free fall; says so on the console."""
-    if options.gravity_m_s2 is not None:
-        return options
-    gravity, note = gravity_regime(read_accelerations(recording))
-    if note:
-        print(f"sds: {note}")
-    return replace(options, gravity_m_s2=gravity)
 
 
 def _header(path: Path) -> str:

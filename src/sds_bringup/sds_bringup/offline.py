@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections import defaultdict
 from collections.abc import Iterator
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -36,9 +36,8 @@ from sds_recon.results import ResultsWriter
 from sds_record.mcap_files import decoded_messages, recorded_topics
 from sds_ros.image_msg import msg_to_image
 from sds_ros.point_cloud import read_cloud, stamp_s
-from sds_sloshing.analysis import AnalysisOptions, analyze
+from sds_sloshing.analysis import AnalysisOptions, analyze, with_gravity_regime
 from sds_sloshing.estimators import DecayError
-from sds_sloshing.gravity import gravity_regime
 from sds_sloshing.report import Truth, write_report
 from sds_sloshing.surface_series import (
     RecordingError,
@@ -362,10 +361,7 @@ def finish_analysis(tables: RunTables, source: str, out: Path, options: Analysis
     """The analysis of the run's points and ToF ranges (report, analysis.json), the tables
     closed. Without a gravity in `options`, a free fall in any accelerometer the run holds
     means microgravity (`sds process`, `sds export`, `sds run` and the demo alike)."""
-    regime = ""
-    if options.gravity_m_s2 is None:
-        gravity, regime = gravity_regime(tables.accelerations())
-        options = replace(options, gravity_m_s2=gravity)
+    options, regime = with_gravity_regime(options, tables.accelerations())
     results, note = None, ""
     try:
         analysis = analyze(tables.surface_series(source), tables.rig, options)

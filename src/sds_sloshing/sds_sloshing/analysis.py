@@ -22,6 +22,7 @@ from sds_sloshing.estimators import (
     half_power,
     log_decrement,
 )
+from sds_sloshing.gravity import gravity_regime
 from sds_sloshing.modal import ModeCoordinate, modal_series, mode_coordinates
 from sds_sloshing.surface_series import SurfaceSeries
 
@@ -57,6 +58,17 @@ class AnalysisOptions:
     expected_hz: dict[str, float] = field(default_factory=dict)
     max_components: int = 4
     min_snr: float = 8.0
+
+
+def with_gravity_regime(options: AnalysisOptions,
+                        accelerometers: dict[str, tuple[np.ndarray, np.ndarray]]
+                        ) -> tuple[AnalysisOptions, str]:
+    """The options, with microgravity where no gravity was given and an accelerometer (name →
+    times [s], N×3 m/s²) shows a free fall; and the note that says so (empty otherwise)."""
+    if options.gravity_m_s2 is not None:
+        return options, ""
+    gravity, note = gravity_regime(accelerometers)
+    return replace(options, gravity_m_s2=gravity), note
 
 
 @dataclass(frozen=True)
