@@ -15,6 +15,7 @@ from rclpy.serialization import serialize_message
 from sds_arduino.protocol import unwrap_time_s
 from sds_camera.camera_imu import read_camera_imu
 from sds_model.rig import LaserDiode, Rig, load_rig, save_rig
+from sds_recon.reconstruction import SurfacePoints
 from sds_recon.results import COLUMNS, ResultsWriter, load_results
 from sds_record.mcap_files import McapRecorder
 from sds_ros.arduino_msg import SensorSpec, record_message
@@ -180,8 +181,8 @@ def test_export_finds_the_free_fall_keeps_the_tof_and_times_early_readings_negat
         spots = [LaserSpot(laser_id=int(i), x_px=1.0, y_px=1.0, sigma_px=0.1) for i in ids]
         messages.append((stamp_ns, "/tracker/spots",
                          LaserSpotArray(header=header, frame_index=frame, spots=spots)))
-        messages.append((stamp_ns, "/recon/points", points_to_cloud(
-            header, ids, hits, np.full(len(ids), 0.01), np.zeros(len(ids)))))
+        messages.append((stamp_ns, "/recon/points", points_to_cloud(header, SurfacePoints(
+            ids, hits, np.full(len(ids), 0.01), np.zeros(len(ids))))))
     records = arduino_records(scenario)
     device_s = unwrap_time_s([r.t_us for r in records])
     for record, t_s in zip(records, device_s - device_s[0], strict=True):

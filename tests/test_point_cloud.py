@@ -13,8 +13,7 @@ def test_points_go_out_in_metres_and_come_back_in_mm() -> None:
     points = SurfacePoints(np.array([0, 7, LINE_LASER_ID]),
                            np.array([[10.0, -20.0, 1.5], [35.5, 4.25, -0.75], [0.0, 50.0, 2.0]]),
                            np.array([0.02, 0.03, 0.05]), np.array([0.001, 0.002, np.nan]))
-    msg = points_to_cloud(Header(frame_id="world"), points.laser_ids, points.points_mm,
-                          points.height_sigma_mm, points.miss_distance_mm, np.array([0, 1, 0]))
+    msg = points_to_cloud(Header(frame_id="world"), points, np.array([0, 1, 0]))
     names = [f.name for f in msg.fields]
     assert names[:3] == ["x", "y", "z"] and "height_sigma" in names
     raw = np.frombuffer(bytes(msg.data), np.float32, count=3)   # x, y, z of the first point

@@ -52,8 +52,7 @@ def frame_messages(rig, index: int) -> list[tuple[str, str, object]]:
     return [("/camera/image", "sensor_msgs/msg/Image", image_to_msg(image, stamp, "camera")),
             ("/tracker/spots", "sds_msgs/msg/LaserSpotArray", spots),
             ("/recon/points", "sensor_msgs/msg/PointCloud2",
-             points_to_cloud(spots.header, points.laser_ids, points.points_mm,
-                             points.height_sigma_mm, points.miss_distance_mm)),
+             points_to_cloud(spots.header, points)),
             ("/recon/surface_fit", "sds_msgs/msg/SurfaceFit", fit)]
 
 

@@ -86,8 +86,7 @@ class ReconstructionNode(HostedNode):
         # No input is taken before every output has its consumers (e.g. the recorder).
         start_when_consumed(self, [(self._points_pub, consumers), (self._line_pub, consumers),
                                    (self._fit_pub, fit_consumers)], self._subscribe_inputs)
-        self.get_logger().info(f"rig {p['rig']}: "
-                               f"{len(self._rig.diodes)} diodes")
+        self.get_logger().info(f"rig {p['rig']}: {len(self._rig.diodes)} diodes")
 
     def _subscribe_inputs(self) -> None:
         self.create_subscription(LaserSpotArray, "spots_live", self._on_live_spots, live_qos())
@@ -103,8 +102,7 @@ class ReconstructionNode(HostedNode):
             self._beam_weight, self._default_sigma)
         header = msg.header
         header.frame_id = self._frame_id
-        cloud = points_to_cloud(header, result.laser_ids, result.points_mm,
-                                result.height_sigma_mm, result.miss_distance_mm, fits.rejected)
+        cloud = points_to_cloud(header, result, fits.rejected)
         return cloud, result, fits
 
     def _on_live_spots(self, msg: LaserSpotArray) -> None:
@@ -120,8 +118,7 @@ class ReconstructionNode(HostedNode):
                                   msg.sigma_px, self._default_sigma)
         header = msg.header
         header.frame_id = self._frame_id
-        self._line_pub.publish(points_to_cloud(header, result.laser_ids, result.points_mm,
-                                                result.height_sigma_mm, result.miss_distance_mm))
+        self._line_pub.publish(points_to_cloud(header, result))
 
 
 def main(args: list[str] | None = None) -> None:

@@ -40,20 +40,19 @@ def cloud_dtype() -> np.dtype:
     return np.dtype([(name, kind) for name, kind in CLOUD_FIELDS])
 
 
-def points_to_cloud(header, laser_ids: ArrayLike, points_mm: ArrayLike,
-                    height_sigma_mm: ArrayLike, miss_distance_mm: ArrayLike,
-                    rejected: ArrayLike | None = None) -> PointCloud2:
+def points_to_cloud(header, points: SurfacePoints, rejected: ArrayLike | None = None
+                    ) -> PointCloud2:
     """The PointCloud2 of reconstructed points [mm in, m out]; `rejected` marks the points
     left out of the frame's fits."""
     dtype = cloud_dtype()
-    ids = np.asarray(laser_ids)
+    ids = np.asarray(points.laser_ids)
     rows = np.zeros(len(ids), dtype)
-    xyz = np.asarray(points_mm, dtype=float).reshape(len(ids), 3)
+    xyz = np.asarray(points.points_mm, dtype=float).reshape(len(ids), 3)
     for axis, name in enumerate("xyz"):
         rows[name] = xyz[:, axis] / MM_PER_M
     rows["laser_id"] = ids
-    rows["height_sigma"] = np.asarray(height_sigma_mm, dtype=float) / MM_PER_M
-    rows["miss_distance"] = np.asarray(miss_distance_mm, dtype=float) / MM_PER_M
+    rows["height_sigma"] = np.asarray(points.height_sigma_mm, dtype=float) / MM_PER_M
+    rows["miss_distance"] = np.asarray(points.miss_distance_mm, dtype=float) / MM_PER_M
     if rejected is not None:
         rows["rejected"] = rejected
     msg = PointCloud2(header=header, height=1, width=len(rows), is_bigendian=False,
