@@ -68,7 +68,7 @@ def stage_times(video: Path, rig) -> dict[str, float]:
     frames), run one after the other in this process."""
     from builtin_interfaces.msg import Time
     from rclpy.serialization import serialize_message
-    from sds_camera.frame_source import Region, open_source, select
+    from sds_camera.frame_source import Region, open_source
     from sds_recon.reconstruction import reconstruct_frame, reconstruct_line
     from sds_record.mcap_files import McapRecorder
     from sds_ros.image_msg import image_to_msg
@@ -82,13 +82,13 @@ def stage_times(video: Path, rig) -> dict[str, float]:
     times: dict[str, list[float]] = {k: [] for k in ("decode", "transport", "tracking",
                                                       "triangulation", "recording")}
     source = open_source(str(video))
-    frames = source.frames()
+    frames = source.frames(region, "red")
     while True:
         start = time.perf_counter()
         frame = next(frames, None)
         if frame is None:
             break
-        red = np.ascontiguousarray(select(frame.image, region, "red"))
+        red = frame.image
         times["decode"].append(time.perf_counter() - start)
         start = time.perf_counter()
         data = serialize_message(image_to_msg(red, Time(sec=frame.index), "camera"))
@@ -113,13 +113,12 @@ def stage_times(video: Path, rig) -> dict[str, float]:
 def decode_only(video: Path, rig) -> tuple[float, float]:
     """The frame source's own work alone: frames per second, and CPU ms per frame (the
     decoder's threads included)."""
-    from sds_camera.frame_source import Region, open_source, select
+    from sds_camera.frame_source import Region, open_source
 
     region = Region(*rig.container_region_px(rig.camera))
     source = open_source(str(video))
     start, cpu, count = time.perf_counter(), time.process_time(), 0
-    for frame in source.frames():
-        select(frame.image, region, "red")
+    for _ in source.frames(region, "red"):
         count += 1
     source.close()
     return count / (time.perf_counter() - start), 1e3 * (time.process_time() - cpu) / count

@@ -2,8 +2,9 @@
 
 Usage: python bench/process.py [--scenario drop_9p3s_catapult] [--runs 3] [--out DIR]
 Simulates the scenario at 3840x2160 (H.264), then, `--runs` times each, side by side:
-decoding the video alone (the frame source with the container's region and red channel, as
-`sds process` reads it), `sds process --video` on it (new process, imports included), reading
+FFmpeg's own command decoding the video to nothing (no conversion: the floor), decoding the
+video alone (the frame source with the container's region and red channel, as `sds process`
+reads it), `sds process --video` on it (new process, imports included), reading
 the recording that `sds process --mcap` and `sds export` read, and `sds export`. Prints each
 run's wall and CPU times, their medians and the ratios process / decode and export / read
 (issue 20's goal: 1.2 or less).
@@ -21,17 +22,17 @@ import tempfile
 import time
 from pathlib import Path
 
+from imageio_ffmpeg import get_ffmpeg_exe
+
 REPO = Path(__file__).resolve().parents[1]
 SDS = str(Path(sys.executable).with_name("sds"))
 DECODE = """
 import sys
-from sds_camera.frame_source import Region, VideoFileSource, select
+from sds_camera.frame_source import Region, VideoFileSource
 from sds_model.rig import load_rig
 rig = load_rig(sys.argv[2])
 region = Region(*rig.container_region_px(rig.camera))
-count = sum(1 for f in VideoFileSource(sys.argv[1]).frames() if select(f.image, region, "red")
-            is not None)
-print(count)
+print(sum(1 for _ in VideoFileSource(sys.argv[1]).frames(region, "red")))
 """
 READ = """
 import sys
@@ -67,8 +68,11 @@ def main() -> None:
     rig = str(scenario.rig_file)
     recording = out / "recording.mcap"
     times: dict[str, list[tuple[float, float]]] = {k: [] for k in
-                                                   ("decode", "process", "read", "export")}
+                                                   ("ffmpeg", "decode", "process", "read",
+                                                    "export")}
     for run in range(args.runs):
+        times["ffmpeg"].append(timed([get_ffmpeg_exe(), "-v", "error", "-i", str(video),
+                                      "-f", "null", "-"]))
         times["decode"].append(timed([sys.executable, "-c", DECODE, str(video), rig]))
         times["process"].append(timed([SDS, "process", "--video", str(video), "--rig", rig,
                                        "--out", str(out / f"process_{run}"), "--no-progress",
@@ -89,6 +93,7 @@ def main() -> None:
         cpus = ", ".join(f"{cpu:.2f}" for _, cpu in runs)
         print(f"  {name:<8} wall {walls} s (median {medians[name]:.2f}), CPU {cpus} s")
     print(f"  process / decode {medians['process'] / medians['decode']:.2f}   "
+          f"process / ffmpeg {medians['process'] / medians['ffmpeg']:.2f}   "
           f"export / read {medians['export'] / medians['read']:.2f}   (goal: 1.2 or less)")
 
 

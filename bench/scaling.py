@@ -36,12 +36,11 @@ SIZES = {"1080p": 0.5, "4K": 1.0, "5.3K": 5312 / 3840}
 DIODES = (60, 120)
 DECODE = """
 import sys
-from sds_camera.frame_source import Region, VideoFileSource, select
+from sds_camera.frame_source import Region, VideoFileSource
 from sds_model.rig import load_rig
 rig = load_rig(sys.argv[2])
 region = Region(*rig.container_region_px(rig.camera))
-print(sum(1 for f in VideoFileSource(sys.argv[1]).frames()
-          if select(f.image, region, "red") is not None))
+print(sum(1 for _ in VideoFileSource(sys.argv[1]).frames(region, "red")))
 """
 LIVE = """
 import json, sys, time

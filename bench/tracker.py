@@ -17,7 +17,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from sds_camera.frame_source import Region, VideoFileSource, select
+from sds_camera.frame_source import Region, VideoFileSource
 from sds_sim.scenario import load_scenario
 from sds_sim.simulate import simulate
 from sds_tracker.tracker import FrameTracker, is_lost
@@ -38,8 +38,8 @@ def main() -> None:
     x, y, w, h = rig.container_region_px(rig.camera)
     region = Region(x, y, w, h)
     frames, start = [], time.perf_counter()
-    for frame in VideoFileSource(output.video).frames():
-        frames.append(np.ascontiguousarray(select(frame.image, region, "red")))
+    for frame in VideoFileSource(output.video).frames(region, "red"):
+        frames.append(frame.image)
     decode_s = (time.perf_counter() - start) / len(frames)
     start = time.perf_counter()
     tracker = FrameTracker(rig)

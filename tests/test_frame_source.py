@@ -56,6 +56,29 @@ def test_select_crops_region_and_channel_like_numpy_and_opencv(frames):
     )
 
 
+@pytest.mark.parametrize("channel", ["red", "green", "blue", "gray", "bgr"])
+def test_a_region_of_h264_equals_opencvs_whole_frame_decode_cropped(tmp_path, frames, channel):
+    """Only the region is converted from 4:2:0 YUV (odd corners and sizes too), and the
+    pixels and times equal OpenCV's decoding of the whole frame, cropped afterwards."""
+    from sds_camera.video_writer import VideoWriter
+
+    path = tmp_path / "lossy.mp4"
+    with VideoWriter(path, 160, 90, NTSC) as writer:   # H.264, yuv420p
+        for frame in frames:
+            writer.write(frame)
+    for region in (Region(13, 7, 51, 33), Region(0, 0, 160, 90), Region(159, 89, 1, 1)):
+        capture = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
+        count = 0
+        for frame in VideoFileSource(path).frames(region, channel):
+            ok, whole = capture.read()
+            assert ok
+            np.testing.assert_array_equal(frame.image, select(whole, region, channel))
+            assert frame.image.flags.c_contiguous
+            assert frame.time_ns == round(capture.get(cv2.CAP_PROP_POS_MSEC) * 1e6)
+            count += 1
+        assert count == len(frames)
+
+
 @pytest.mark.parametrize(
     "region",
     [Region(0, 0, 161, 10), Region(-1, 0, 10, 10), Region(150, 80, 20, 20), Region(0, 0, 0, 5)],

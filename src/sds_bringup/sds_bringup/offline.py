@@ -22,7 +22,6 @@ from sds_camera.frame_source import (
     Region,
     open_source,
     read_ahead,
-    select,
 )
 from sds_model.rig import Rig
 from sds_recon.reconstruction import (
@@ -91,11 +90,10 @@ def video_frames(path: Path, rig: Rig, fps: float = 0.0) -> Iterator[RedFrame]:
 
 
 def _red_frames(source: FrameSource, region: Region) -> Iterator[RedFrame]:
-    """The region's red channel of each frame, copied (the full frame is let go at once)."""
+    """The region's red channel of each frame (a video converts only that region)."""
     try:
-        for frame in source.frames():
-            red = np.ascontiguousarray(select(frame.image, region, "red"))
-            yield RedFrame(frame.index, frame.time_ns * 1e-9, red, (region.x, region.y))
+        for frame in source.frames(region, "red"):
+            yield RedFrame(frame.index, frame.time_ns * 1e-9, frame.image, (region.x, region.y))
     finally:
         source.close()
 

@@ -102,10 +102,9 @@ def read_video_plateaus(path: Path, rig: Rig, count: int, min_still_s: float = S
         if not fps > 0:
             raise ValueError(f"{path}: a video file with a frame rate is needed")
         changes, previous = [], None
-        for frame in source.frames():
-            region.check_inside(frame.image.shape[1], frame.image.shape[0])
-            red = cv2.resize(select(frame.image, region, "red"), None, fx=0.5, fy=0.5,
-                             interpolation=cv2.INTER_AREA)
+        region.check_inside(source.width, source.height)
+        for frame in source.frames(region, "red"):
+            red = cv2.resize(frame.image, None, fx=0.5, fy=0.5, interpolation=cv2.INTER_AREA)
             changes.append(0 if previous is None else changed_pixels(previous, red))
             previous = red
     finally:

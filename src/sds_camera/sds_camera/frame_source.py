@@ -1,7 +1,7 @@
 """Frame sources (video file, V4L2 camera, image folder) with region and channel selection.
 
-Pure module: OpenCV and numpy only. Pixel convention: x = column, y = row, origin at the
-top-left pixel. Times are nanoseconds since the first frame of the stream.
+Pure module: PyAV (FFmpeg's decoders), OpenCV and numpy only. Pixel convention: x = column,
+y = row, origin at the top-left pixel. Times are nanoseconds since the start of the stream.
 """
 
 from __future__ import annotations
@@ -11,9 +11,11 @@ import threading
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
+from itertools import pairwise
 from pathlib import Path
 from typing import Protocol, TypeVar
 
+import av
 import cv2
 import numpy as np
 
@@ -69,8 +71,9 @@ class FrameSource(Protocol):
     height: int
     is_live: bool
 
-    def frames(self) -> Iterator[Frame]:
-        """Yield full frames (BGR or mono) in order; raise FrameSourceError if cut short."""
+    def frames(self, region: Region | None = None, channel: str = "bgr") -> Iterator[Frame]:
+        """Yield frames in order, the region (None: whole frame) in the channel (BGR or mono
+        as the source gives it for "bgr"); raise FrameSourceError if cut short."""
         ...
 
     def close(self) -> None:
@@ -94,8 +97,18 @@ def select(image: np.ndarray, region: Region, channel: str) -> np.ndarray:
     return np.ascontiguousarray(crop[:, :, _CHANNEL_INDEX[channel]])
 
 
+def _selected(image: np.ndarray, region: Region | None, channel: str) -> np.ndarray:
+    """The frame itself when nothing is selected, else the region in the channel."""
+    if region is None and channel == "bgr":
+        return image
+    region = region or Region.full(image.shape[1], image.shape[0])
+    region.check_inside(image.shape[1], image.shape[0])
+    return select(image, region, channel)
+
+
 class VideoFileSource:
-    """A video file; frame times are the file's own presentation times (29.97 fps stays 29.97)."""
+    """A video file decoded by FFmpeg (PyAV); frame times are the file's own presentation
+    times (29.97 fps stays 29.97), from the stream's start."""
 
     is_live = False
 
@@ -103,26 +116,54 @@ class VideoFileSource:
         self.path = Path(path)
         if not self.path.is_file():
             raise FrameSourceError(f"video file {self.path} does not exist")
-        self._capture = cv2.VideoCapture(str(self.path), cv2.CAP_FFMPEG)
-        if not self._capture.isOpened():
-            raise FrameSourceError(f"cannot open video {self.path} (corrupt or unsupported)")
-        self.width = int(self._capture.get(cv2.CAP_PROP_FRAME_WIDTH))
-        self.height = int(self._capture.get(cv2.CAP_PROP_FRAME_HEIGHT))
-        self.nominal_fps = float(self._capture.get(cv2.CAP_PROP_FPS))
-        self.announced_frames = int(self._capture.get(cv2.CAP_PROP_FRAME_COUNT))
+        try:
+            self._container = av.open(str(self.path))
+        except av.FFmpegError as error:
+            raise FrameSourceError(f"cannot open video {self.path} (corrupt or unsupported: "
+                                   f"{error.strerror})") from None
+        if not self._container.streams.video:
+            self._container.close()
+            raise FrameSourceError(f"video {self.path} has no readable video stream")
+        self._stream = self._container.streams.video[0]
+        self._stream.thread_type = "AUTO"     # frame and slice threads, as many as cores
+        self.width = self._stream.codec_context.width
+        self.height = self._stream.codec_context.height
+        rate = self._stream.average_rate or self._stream.guessed_rate
+        self.nominal_fps = float(rate) if rate else 0.0
+        self.announced_frames = self._stream.frames or self._frames_from_duration()
         if self.width <= 0 or self.height <= 0:
+            self._container.close()
             raise FrameSourceError(f"video {self.path} has no readable video stream")
 
-    def frames(self) -> Iterator[Frame]:
-        """Decode every frame; raise FrameSourceError if fewer than announced could be read."""
+    def _frames_from_duration(self) -> int:
+        """The frame count a file without one announces through its duration and rate."""
+        if self._container.duration is None or not self.nominal_fps:
+            return 0
+        return round(self._container.duration / av.time_base * self.nominal_fps)
+
+    def frames(self, region: Region | None = None, channel: str = "bgr") -> Iterator[Frame]:
+        """Decode every frame, the region (None: whole frame) in the channel; raise
+        FrameSourceError if fewer than announced could be read.
+
+        Only the region is converted from the decoder's YUV to BGR (an even-aligned superset,
+        so that the chroma samples and the result equal a whole-frame conversion's)."""
+        region = region or Region.full(self.width, self.height)
+        region.check_inside(self.width, self.height)
+        converter = _RegionConverter(self._stream, region)
+        start, time_base = self._stream.start_time, self._stream.time_base
         index = 0
-        while True:
-            ok, image = self._capture.read()
-            if not ok:
-                break
-            time_ms = self._capture.get(cv2.CAP_PROP_POS_MSEC)
-            yield Frame(index, round(time_ms * 1e6), image)
-            index += 1
+        try:
+            for decoded in self._container.decode(self._stream):
+                if decoded.pts is None or time_base is None:
+                    time_ns = round(index * 1e9 / self.nominal_fps) if self.nominal_fps else 0
+                else:
+                    start = decoded.pts if start is None else start
+                    time_ns = round((decoded.pts - start) * time_base * 10**9)
+                yield Frame(index, time_ns, select(*converter.convert(decoded), channel))
+                index += 1
+        except av.FFmpegError as error:
+            raise FrameSourceError(f"video {self.path} failed after {index} frames "
+                                   f"(corrupt: {error.strerror})") from None
         if index == 0 or index < self.announced_frames:
             raise FrameSourceError(
                 f"video {self.path} ended after {index} of {self.announced_frames} frames "
@@ -131,7 +172,33 @@ class VideoFileSource:
 
     def close(self) -> None:
         """Release the decoder."""
-        self._capture.release()
+        self._container.close()
+
+
+class _RegionConverter:
+    """FFmpeg's crop and BGR conversion of one region of each decoded frame."""
+
+    def __init__(self, stream: av.video.stream.VideoStream, region: Region) -> None:
+        # Chroma is subsampled 2x2 at most: an even corner and size keep the samples aligned.
+        x0, y0 = region.x - region.x % 2, region.y - region.y % 2
+        width, height = region.x + region.width - x0, region.y + region.height - y0
+        width = min(width + width % 2, stream.codec_context.width - x0)
+        height = min(height + height % 2, stream.codec_context.height - y0)
+        self.inner = Region(region.x - x0, region.y - y0, region.width, region.height)
+        self._graph = av.filter.Graph()
+        chain = [self._graph.add_buffer(template=stream),
+                 self._graph.add("crop", f"{width}:{height}:{x0}:{y0}:exact=1"),
+                 self._graph.add("format", "bgr24"),
+                 self._graph.add("buffersink")]
+        for upstream, downstream in pairwise(chain):
+            upstream.link_to(downstream)
+        self._graph.configure()
+
+    def convert(self, decoded: av.VideoFrame) -> tuple[np.ndarray, Region]:
+        """The superset's BGR pixels (a view) and where the region lies in them."""
+        self._graph.push(decoded)
+        converted = self._graph.pull()
+        return converted.to_ndarray(), self.inner
 
 
 class CameraSource:
@@ -152,7 +219,7 @@ class CameraSource:
         self.width = int(self._capture.get(cv2.CAP_PROP_FRAME_WIDTH))
         self.height = int(self._capture.get(cv2.CAP_PROP_FRAME_HEIGHT))
 
-    def frames(self) -> Iterator[Frame]:
+    def frames(self, region: Region | None = None, channel: str = "bgr") -> Iterator[Frame]:
         """Grab until the camera stops delivering; time is taken right after each grab."""
         index = 0
         start_ns: int | None = None
@@ -162,7 +229,7 @@ class CameraSource:
             ok, image = self._capture.retrieve()
             if not ok:
                 break
-            yield Frame(index, now_ns - start_ns, image)
+            yield Frame(index, now_ns - start_ns, _selected(image, region, channel))
             index += 1
         raise FrameSourceError(f"camera {self.device} stopped delivering after {index} frames")
 
@@ -197,13 +264,13 @@ class ImageFolderSource:
             image = cv2.cvtColor(image, cv2.COLOR_BGRA2BGR)
         return image
 
-    def frames(self) -> Iterator[Frame]:
+    def frames(self, region: Region | None = None, channel: str = "bgr") -> Iterator[Frame]:
         """Read each image once; a missing or unreadable file raises FrameSourceError."""
         for index, path in enumerate(self.paths):
             image = self._read(path)
             if image.shape[:2] != (self.height, self.width):
                 raise FrameSourceError(f"image {path} is not {self.width}x{self.height}")
-            yield Frame(index, round(index * 1e9 / self.fps), image)
+            yield Frame(index, round(index * 1e9 / self.fps), _selected(image, region, channel))
 
     def close(self) -> None:
         """Nothing to release."""

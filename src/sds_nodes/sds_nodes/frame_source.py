@@ -187,9 +187,11 @@ class FrameSourceNode(HostedNode):
         """The source's frames, played `repeat` times (0: forever) with increasing index and
         time: one continuous stream (long runs from a short file)."""
         repeat, played, index, offset_ns, period_ns = int(self._p["repeat"]), 0, 0, 0, 0
+        # The LED's corner lies outside the region: with an LED, whole frames are decoded.
+        selection = (None, "bgr") if self._led is not None else (self._region, self._p["channel"])
         while True:
             last_ns = 0
-            for frame in self._source.frames():
+            for frame in self._source.frames(*selection):
                 yield Frame(index, offset_ns + frame.time_ns, frame.image)
                 period_ns = frame.time_ns - last_ns if frame.time_ns > last_ns else period_ns
                 last_ns, index = frame.time_ns, index + 1
@@ -209,7 +211,9 @@ class FrameSourceNode(HostedNode):
                     switch = self._led.update(frame.index, frame.image)
                     if switch is not None:
                         self._led_switches[frame.index] = switch.on
-                image = select(frame.image, self._region, self._p["channel"])
+                    image = select(frame.image, self._region, self._p["channel"])
+                else:
+                    image = frame.image
                 if not self._put(Frame(frame.index, frame.time_ns, image)):
                     return
         except FrameSourceError as error:
