@@ -19,6 +19,11 @@ from sds_model.mode_theory import mode_name
 from sds_sloshing.analysis import ModeResult, SloshingAnalysis
 from sds_sloshing.estimators import amplitude_spectrum, finite_window
 
+FIGURE_DPI = 110
+MARGINS_IN = (0.85, 0.2, 0.55, 0.35, 0.45)
+"""Figure margins [in]: left, right, bottom, top, and the gap between stacked panels (room
+for the tick labels, the axis labels and each panel's title)."""
+
 Truth = dict[str, tuple[float, float]]
 """Mode name → (natural frequency [Hz], damping ratio), e.g. from a simulation's run.json."""
 
@@ -88,6 +93,19 @@ def spectrum_limit_hz(analysis: SloshingAnalysis) -> float:
     return 1.3 * max([m.frequency_hz for m in analysis.theory] + measured + [1.0])
 
 
+def _save(fig: plt.Figure, path: Path) -> None:
+    """Write a figure as PNG with fixed margins (MARGINS_IN) and close it; fixed margins
+    because matplotlib's tight layout measured every label and cost half the report's time."""
+    left, right, bottom, top, gap = MARGINS_IN
+    width, height = fig.get_size_inches()
+    rows = len(fig.axes)
+    panel = (height - bottom - top - (rows - 1) * gap) / rows
+    fig.subplots_adjust(left=left / width, right=1 - right / width, bottom=bottom / height,
+                        top=1 - top / height, hspace=gap / panel)
+    fig.savefig(path, dpi=FIGURE_DPI)
+    plt.close(fig)
+
+
 def _plot_modes(modes: tuple[ModeResult, ...], tof: tuple[ModeResult, ...],
                 window: tuple[float, float], path: Path) -> None:
     """Each mode's samples (modal coordinate q, or the ToF's range), fitted model and decay
@@ -121,9 +139,7 @@ def _plot_modes(modes: tuple[ModeResult, ...], tof: tuple[ModeResult, ...],
     if axes[0, 0].get_legend_handles_labels()[0]:
         axes[0, 0].legend(fontsize=7, loc="upper right", ncol=4)
     axes[-1, 0].set_xlabel("time since the first frame [s]")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(fig, path)
 
 
 def _plot_spectrum(analysis: SloshingAnalysis, path: Path) -> None:
@@ -156,9 +172,7 @@ def _plot_spectrum(analysis: SloshingAnalysis, path: Path) -> None:
     ax.grid(alpha=0.3, which="both")
     if ax.get_legend_handles_labels()[0]:
         ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(fig, path)
 
 
 def mode_window(mode: ModeResult, analysis: SloshingAnalysis) -> tuple[float, float | None]:
@@ -177,9 +191,7 @@ def _plot_meniscus(analysis: SloshingAnalysis, path: Path) -> None:
     ax.set_title(f"Meniscus: radial profile ({analysis.meniscus_source}, "
                  f"{int(count.sum())} points)", fontsize=9)
     ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(fig, path)
 
 
 def _format(value: float, digits: int) -> str:
