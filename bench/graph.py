@@ -165,6 +165,7 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
     entries = [replace(e, process=(processes or {}).get(e.name, e.process)) for e in entries]
     receipts: list[tuple[float, float]] = []
     live: list[tuple[float, float]] = []
+    spots_live: list[tuple[float, float]] = []
     memory: dict[str, list[tuple[float, int]]] = {}
     cpu: dict[str, list[float]] = {}
 
@@ -186,6 +187,10 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
             PointCloud2, "/recon/points",
             lambda m: receipts.append((time.time(), m.header.stamp.sec
                                        + m.header.stamp.nanosec * 1e-9)), stream_qos(100))
+        node.create_subscription(
+            LaserSpotArray, "/tracker/spots_live",
+            lambda m: spots_live.append((time.time(), m.header.stamp.sec
+                                         + m.header.stamp.nanosec * 1e-9)), live_qos())
         node.create_subscription(
             PointCloud2, "/recon/points_live",
             lambda m: live.append((time.time(), m.header.stamp.sec
@@ -228,7 +233,7 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
         launcher.run(on_started=threading.Thread(target=watch, daemon=True).start)
     per_frame = {name: 1e3 * (v[-1] - v[0]) / max(len(receipts) - 1, 1)
                  for name, v in cpu.items() if len(v) == 2}
-    return receipts, live, memory, per_frame
+    return receipts, live, spots_live, memory, per_frame
 
 
 def main() -> None:
@@ -266,7 +271,7 @@ def main() -> None:
     for index, layout in enumerate([] if args.no_flood else args.layouts):
         processes = LAYOUTS[layout]
         recording = scratch / f"flood_{index}.mcap"
-        receipts, _, memory, cpu = run_graph(
+        receipts, _, _, memory, cpu = run_graph(
             [*base, f"recorder.output={recording}",
              f"camera.max_in_flight={args.in_flight}"], frames, None, processes=processes)
         recording.unlink(missing_ok=True)
@@ -288,7 +293,7 @@ def main() -> None:
         # One core's worth of someone else's work: the graph then shares the other.
         load = subprocess.Popen([sys.executable, "-c", "while True: pass"]) if busy else None
         try:
-            receipts, live, memory, cpu = run_graph(
+            receipts, live, spots_live, memory, cpu = run_graph(
                 [*base, "camera.pacing=realtime", "camera.repeat=0",
                  f"recorder.output={recording}",
                  "recorder.exclude=[/camera/image,/tracker/spots_live,/recon/points_live]"],
@@ -317,6 +322,16 @@ def main() -> None:
                   f"{np.median(live_ms):.1f}, p95 {np.percentile(live_ms, 95):.1f}, max "
                   f"{live_ms.max():.1f}; {len(stamps) - len(first)} of {len(stamps)} frames "
                   "without a live cloud")
+            slow = np.array([s for r, s in live if s in stamps and r - s > 0.05])
+            minutes = np.bincount(((slow - receipts[30][1]) // 60).astype(int),
+                                  minlength=int(args.minutes))
+            print("  live clouds later than 50 ms, per minute of the run: "
+                  + " ".join(str(n) for n in minutes))
+        if spots_live:
+            stamps = {s for _, s in receipts[30:]}
+            spots_ms = np.array([r - s for r, s in spots_live if s in stamps]) * 1e3
+            print(f"  of which frame -> live spots (camera and tracker) [ms]: median "
+                  f"{np.median(spots_ms):.1f}, p95 {np.percentile(spots_ms, 95):.1f}")
         print("  CPU per frame [ms]: " + ", ".join(f"{k} {v:.1f}" for k, v in cpu.items()))
         for name, samples in memory.items():
             if name.endswith(" peak") or len(samples) < 4:

@@ -65,4 +65,9 @@ def graph_environment(domain_id: int, base: Mapping[str, str] | None = None,
     # the sloshing node's small fits took 9.6 ms of CPU per frame with them and 3.0 without,
     # and the live latency's p95 fell from 46 to 33 ms (bench/README.md). A user's setting wins.
     env.setdefault("OPENBLAS_NUM_THREADS", "1")
+    # Two malloc arenas: each new decoder thread (a video played again opens a new decoder)
+    # otherwise took an arena of its own, and with MALLOC_TRIM_THRESHOLD_ none was given
+    # back: the frame source grew from 36 MB to 1 GB in ten minutes of a repeated clip; with
+    # two it stays at 374 MB (bench/README.md).
+    env.setdefault("MALLOC_ARENA_MAX", "2")
     return env
