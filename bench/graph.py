@@ -47,8 +47,8 @@ LAYOUTS = {
     "capture + analysis": {"camera": "capture", "tracker": "analysis", "recon": "analysis",
                            "recorder": "capture"},
 }
-"""Process of each node: every node in its own (config/graphs/drop.yaml); camera → tracker →
-reconstruction in one, the recorder apart; all in one; camera and recorder in one, tracker and
+"""Process of each node: every node in its own; camera → tracker → reconstruction in one, the
+recorder apart (config/graphs/drop.yaml); all in one; camera and recorder in one, tracker and
 reconstruction in another. The niced sloshing node keeps its own process in each."""
 
 
@@ -304,6 +304,9 @@ def main() -> None:
                 load.wait()
             recording.unlink(missing_ok=True)
         layout = f"{layout}{', beside a busy process' if busy else ''}"
+        # Receipt times and stamps [s] of each probe topic, for a look at the run over time.
+        np.savez(args.out / f"real_time_{index}.npz", points=np.array(receipts),
+                 points_live=np.array(live), spots_live=np.array(spots_live))
         if len(receipts) < 60:
             print(f"{layout}, real time: only {len(receipts)} clouds arrived")
             continue
