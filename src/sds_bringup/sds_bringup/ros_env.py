@@ -68,6 +68,6 @@ def graph_environment(domain_id: int, base: Mapping[str, str] | None = None,
     # Two malloc arenas: each new decoder thread (a video played again opens a new decoder)
     # otherwise took an arena of its own, and with MALLOC_TRIM_THRESHOLD_ none was given
     # back: the frame source grew from 36 MB to 1 GB in ten minutes of a repeated clip; with
-    # two it stays at 374 MB (bench/README.md).
+    # two it stayed at 352-386 MB (bench/README.md, "Live preview latency").
     env.setdefault("MALLOC_ARENA_MAX", "2")
     return env
