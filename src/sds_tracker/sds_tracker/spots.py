@@ -157,22 +157,23 @@ class SpotTracker:
             return lost
         window = image[y0:y1 + 1, x0:x1 + 1].astype(np.float32)
         border = np.concatenate([window[0], window[-1], window[:, 0], window[:, -1]])
-        signal = window - float(np.median(border))
+        background = float(np.median(border))
+        signal = window - background
         count, labels, stats, centroids = cv2.connectedComponentsWithStats(
             (signal > s.threshold).astype(np.uint8), connectivity=8)
-        candidates = []
-        for label in range(1, count):
-            centre = centroids[label] + [x0, y0] + origin
-            off_path = distance_to_path(centre, path)
-            if off_path > s.path_tolerance_px + 2 * np.sqrt(
-                    stats[label, cv2.CC_STAT_AREA] / np.pi):
-                continue
-            mass = float(signal[labels == label].sum())
-            previous = self.previous[laser_id]
-            prior = 1.0 if previous is None else float(np.exp(
-                -np.sum((centre - previous) ** 2) / (2 * s.prior_sigma_px**2)))
-            candidates.append((off_path <= s.path_tolerance_px, mass * prior, mass, label,
-                               centre))
+        if count < 2:
+            return lost
+        # Every blob's centre, distance to the path and mass at once (label 0: background).
+        centres = centroids[1:] + np.array([x0, y0]) + origin
+        off_paths = distances_to_paths(centres, np.broadcast_to(path, (count - 1, *path.shape)))
+        masses = np.bincount(labels.ravel(), weights=signal.ravel(), minlength=count)[1:]
+        previous = self.previous[laser_id]
+        priors = np.ones(count - 1) if previous is None else np.exp(
+            -np.sum((centres - previous) ** 2, axis=1) / (2 * s.prior_sigma_px**2))
+        near_path = off_paths <= s.path_tolerance_px + 2 * np.sqrt(
+            stats[1:, cv2.CC_STAT_AREA] / np.pi)
+        candidates = [(bool(off_paths[k] <= s.path_tolerance_px), float(masses[k] * priors[k]),
+                       float(masses[k]), k + 1, centres[k]) for k in np.flatnonzero(near_path)]
         if not candidates:
             return lost
         # A blob centred on the path comes first: a long stretch of laser line crossing the
@@ -182,7 +183,6 @@ class SpotTracker:
         flags = 0
         if any(c[0] == on_path and c[2] >= s.min_competitor * mass for c in candidates[1:]):
             flags |= REFLECTION_SUSPECTED
-        background = float(np.median(border))
         radius = max(s.aperture_factor * np.sqrt(stats[label, cv2.CC_STAT_AREA] / np.pi), 3.0)
         peak_signal = float(signal[labels == label].max())
         floor = background + s.clip_fraction * peak_signal
@@ -222,10 +222,12 @@ class SpotTracker:
         if x0 < 0 or y0 < 0 or x1 >= image.shape[1] or y1 >= image.shape[0]:
             return None
         raw = image[y0:y1 + 1, x0:x1 + 1].astype(np.float32)
-        ys, xs = np.mgrid[y0:y1 + 1, x0:x1 + 1].astype(float)
-        xs, ys = xs + origin[0], ys + origin[1]
-        inside = (xs - centre[0]) ** 2 + (ys - centre[1]) ** 2 <= radius**2
-        return xs[inside], ys[inside], np.clip(raw[inside] - background, 0, None), raw[inside]
+        columns = np.arange(x0, x1 + 1) + origin[0]
+        rows = np.arange(y0, y1 + 1) + origin[1]
+        inside = (columns[None] - centre[0]) ** 2 + (rows[:, None] - centre[1]) ** 2 <= radius**2
+        ys, xs = np.nonzero(inside)
+        return (columns[xs], rows[ys], np.clip(raw[inside] - background, 0, None),
+                raw[inside])
 
 
 def line_free_centre(image: np.ndarray, origin: np.ndarray, centre: np.ndarray,
