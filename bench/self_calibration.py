@@ -12,9 +12,10 @@ from __future__ import annotations
 import argparse
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
-from sds_bringup.calibration_trial import SECOND_AXIS, trial
+from sds_bringup.calibration_trial import SECOND_AXIS, GeometryErrors, trial
 
 RIG = Path(__file__).resolve().parents[1] / "config" / "rigs" / "stelium.yaml"
 
@@ -27,7 +28,8 @@ def main() -> None:
     rows = []
     print("seed  wrong/spots  calibrated  unidentified  camera err deg (sigma)  cam mm  "
           "beam max deg  plane deg (sigma)  unseen tilt deg / RMSE mm: self | beam-only  "
-          "drop RMSE mm, missed  two-axis: camera deg, beam max deg, plane deg  s")
+          "drop RMSE mm, missed  two-axis: camera deg (sigma), beam max deg (its sigma), "
+          "plane deg (sigma)  s")
     for seed in range(args.first_seed, args.first_seed + args.rigs):
         start = time.perf_counter()
         r = trial(seed, RIG, second_axis=True)
@@ -45,8 +47,10 @@ def main() -> None:
               f"{r['self'].tilt_error_deg:.3f} / {r['self'].heights.rmse_mm:.3f} | "
               f"{r['beam_only'].tilt_error_deg:.3f} / {r['beam_only'].heights.rmse_mm:.3f}"
               f"  {r['drop'].heights.rmse_mm:.3f}, {r['drop'].missed}/{r['drop'].spots}"
-              f" ({r['drop'].rejected} rejected)  {np.abs(two.camera_deg).max():.4f}, "
-              f"{max(two.beams_deg.values()):.4f}, {two.line_plane_deg:.4f}"
+              f" ({r['drop'].rejected} rejected)  {np.abs(two.camera_deg).max():.4f} "
+              f"({two.camera_sigma_deg.max():.4f}), {max(two.beams_deg.values()):.4f} "
+              f"({two.beams_sigma_deg[max(two.beams_deg, key=two.beams_deg.get)]:.4f}), "
+              f"{two.line_plane_deg:.4f} ({two.line_plane_sigma_deg:.4f})"
               f"   {time.perf_counter() - start:.1f}", flush=True)
     beams = np.concatenate([list(r["beam_error_deg"].values()) for r in rows])
     two_beams = np.concatenate([list(r["two_axis"].beams_deg.values()) for r in rows])
@@ -63,6 +67,11 @@ def main() -> None:
           f"{max(np.abs(r['two_axis'].camera_mm).max() for r in rows):.3f} mm; beams: median "
           f"{np.median(two_beams):.4f} deg, max {two_beams.max():.4f}; line plane max "
           f"{max(r['two_axis'].line_plane_deg for r in rows):.4f} deg")
+    for label, protocol in (("one-axis", [geometry(r) for r in rows]),
+                            ("two-axis", [r["two_axis"] for r in rows])):
+        camera, beams, plane = np.max([worst_ratios(g) for g in protocol], axis=0)
+        print(f"{label} error/sigma, max over the rigs (honest sigmas stay near 3 or below): "
+              f"camera angles {camera:.1f}, beams {beams:.1f}, line plane {plane:.1f}")
     for key in ("self", "beam_only"):
         tilt = [r[key].tilt_error_deg for r in rows]
         rmse = [r[key].heights.rmse_mm for r in rows]
@@ -79,6 +88,27 @@ def main() -> None:
           f"{max(d.heights.normalised_rms for d in drops):.2f}; spots missed "
           f"{sum(d.missed for d in drops)} of {sum(d.spots for d in drops)}, rejected by the "
           f"fits {sum(d.rejected for d in drops)}")
+
+
+def geometry(r: dict[str, Any]) -> GeometryErrors:
+    """The one-axis calibration's errors and σs from a trial's result."""
+    return GeometryErrors(r["camera_error_deg"], r["camera_sigma_deg"], r["camera_error_mm"],
+                          r["beam_error_deg"], r["beam_sigma_deg"], r["line_plane_error_deg"],
+                          r["line_plane_sigma_deg"])
+
+
+def worst_ratios(g: GeometryErrors) -> tuple[float, float, float]:
+    """Largest |error| / σ of the camera's angles, the beams and the line plane (a value kept
+    from the rig file has no σ and is left out)."""
+
+    def worst(errors: list[float], sigmas: list[float]) -> float:
+        ratio = np.abs(np.asarray(errors, float)) / np.asarray(sigmas, float)
+        return float(np.max(ratio[np.isfinite(ratio)], initial=0.0))
+
+    laser_ids = list(g.beams_deg)
+    return (worst(list(g.camera_deg), list(g.camera_sigma_deg)),
+            worst([g.beams_deg[i] for i in laser_ids], [g.beams_sigma_deg[i] for i in laser_ids]),
+            worst([g.line_plane_deg], [g.line_plane_sigma_deg]))
 
 
 if __name__ == "__main__":

@@ -19,7 +19,7 @@ from sds_model.rig import Rig, load_rig
 from sds_recon.calibration.lasers import calibrate_beams
 from sds_recon.calibration.rig_calibration import RigCalibration
 from sds_recon.calibration.rig_model import LINE_PLANE
-from sds_recon.calibration.rig_report import calibrated_rig
+from sds_recon.calibration.rig_report import beam_sigma_deg, calibrated_rig
 from sds_recon.reconstruction import fit_surface, reconstruct_spots
 from sds_sim.render import FrameRenderer
 from sds_sim.scenario import load_scenario
@@ -152,12 +152,13 @@ def sloshing_drop(rig: Rig, true: Rig, scale: float, seed: int, frames: int = 30
 class GeometryErrors:
     """A calibrated rig against the true one: camera turn [deg, rotation vector] and shift
     [mm], each beam's direction error [deg], the line plane's normal error [deg]; with the
-    fitted σ of the camera's angles [deg] and the plane's normal [deg]."""
+    fitted σ of the camera's angles, each beam's direction and the plane's normal [deg]."""
 
     camera_deg: np.ndarray
     camera_sigma_deg: np.ndarray
     camera_mm: np.ndarray
     beams_deg: dict[int, float]
+    beams_sigma_deg: dict[int, float]
     line_plane_deg: float
     line_plane_sigma_deg: float
 
@@ -176,7 +177,8 @@ def geometry_errors(rig: Rig, true: Rig, result: RigCalibration) -> GeometryErro
         # NaN where a tilt was not determined and kept from the rig file
         plane_sigma = float(np.degrees(np.max([result.fit.sigma_of(n) for n in LINE_PLANE[:2]])))
     return GeometryErrors(np.degrees(turn), np.degrees(result.fit.sigmas[:3]),
-                          rig.camera_position_mm - true.camera_position_mm, beams, plane_deg,
+                          rig.camera_position_mm - true.camera_position_mm, beams,
+                          {i: beam_sigma_deg(result, i) for i in result.laser_ids}, plane_deg,
                           plane_sigma)
 
 
@@ -226,7 +228,7 @@ def trial(seed: int, rig_file: Path, scale: float = 1.0, errors: RigErrors | Non
             "camera_sigma_deg": geometry.camera_sigma_deg,
             "camera_error_mm": geometry.camera_mm,
             "beam_error_deg": geometry.beams_deg,
-            "beam_sigma_deg": {d.laser_id: d.direction_sigma_deg for d in rig.tracked_diodes},
+            "beam_sigma_deg": geometry.beams_sigma_deg,
             "line_plane_error_deg": geometry.line_plane_deg,
             "line_plane_sigma_deg": geometry.line_plane_sigma_deg, "two_axis": two_axis,
             "self": unseen(rig, other), "beam_only": unseen(beam_only, other),
