@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 import time
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from sds_bringup.calibration_trial import SECOND_AXIS, GeometryErrors, trial
@@ -67,7 +66,7 @@ def main() -> None:
           f"{max(np.abs(r['two_axis'].camera_mm).max() for r in rows):.3f} mm; beams: median "
           f"{np.median(two_beams):.4f} deg, max {two_beams.max():.4f}; line plane max "
           f"{max(r['two_axis'].line_plane_deg for r in rows):.4f} deg")
-    for label, protocol in (("one-axis", [geometry(r) for r in rows]),
+    for label, protocol in (("one-axis", [r["geometry"] for r in rows]),
                             ("two-axis", [r["two_axis"] for r in rows])):
         camera, beams, plane = np.max([worst_ratios(g) for g in protocol], axis=0)
         print(f"{label} error/sigma, max over the rigs (honest sigmas stay near 3 or below): "
@@ -88,13 +87,6 @@ def main() -> None:
           f"{max(d.heights.normalised_rms for d in drops):.2f}; spots missed "
           f"{sum(d.missed for d in drops)} of {sum(d.spots for d in drops)}, rejected by the "
           f"fits {sum(d.rejected for d in drops)}")
-
-
-def geometry(r: dict[str, Any]) -> GeometryErrors:
-    """The one-axis calibration's errors and σs from a trial's result."""
-    return GeometryErrors(r["camera_error_deg"], r["camera_sigma_deg"], r["camera_error_mm"],
-                          r["beam_error_deg"], r["beam_sigma_deg"], r["line_plane_error_deg"],
-                          r["line_plane_sigma_deg"])
 
 
 def worst_ratios(g: GeometryErrors) -> tuple[float, float, float]:
