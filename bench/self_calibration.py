@@ -32,17 +32,17 @@ def main() -> None:
     for seed in range(args.first_seed, args.first_seed + args.rigs):
         start = time.perf_counter()
         r = trial(seed, RIG, second_axis=True)
-        two = r["two_axis"]
+        one, two = r["geometry"], r["two_axis"]
         # NaN: the plane's turn about the line was not determined and kept from the rig file
-        plane_sigma = "kept" if np.isnan(r["line_plane_sigma_deg"]) else \
-            f"{r['line_plane_sigma_deg']:.3f}"
+        plane_sigma = "kept" if np.isnan(one.line_plane_sigma_deg) else \
+            f"{one.line_plane_sigma_deg:.3f}"
         rows.append(r)
         print(f"{seed:>4}  {r['wrong']:>3}/{r['spots']:<6}  {len(r['calibrated']):>10}  "
               f"{len(r['unidentified']):>12}  "
-              f"{np.abs(r['camera_error_deg']).max():>6.3f} ({r['camera_sigma_deg'].max():.3f})"
-              f"  {np.abs(r['camera_error_mm']).max():>6.3f}  "
-              f"{max(r['beam_error_deg'].values()):>12.3f}  "
-              f"{r['line_plane_error_deg']:>9.3f} ({plane_sigma})  "
+              f"{np.abs(one.camera_deg).max():>6.3f} ({one.camera_sigma_deg.max():.3f})"
+              f"  {np.abs(one.camera_mm).max():>6.3f}  "
+              f"{max(one.beams_deg.values()):>12.3f}  "
+              f"{one.line_plane_deg:>9.3f} ({plane_sigma})  "
               f"{r['self'].tilt_error_deg:.3f} / {r['self'].heights.rmse_mm:.3f} | "
               f"{r['beam_only'].tilt_error_deg:.3f} / {r['beam_only'].heights.rmse_mm:.3f}"
               f"  {r['drop'].heights.rmse_mm:.3f}, {r['drop'].missed}/{r['drop'].spots}"
@@ -51,15 +51,16 @@ def main() -> None:
               f"({two.beams_sigma_deg[max(two.beams_deg, key=two.beams_deg.get)]:.4f}), "
               f"{two.line_plane_deg:.4f} ({two.line_plane_sigma_deg:.4f})"
               f"   {time.perf_counter() - start:.1f}", flush=True)
-    beams = np.concatenate([list(r["beam_error_deg"].values()) for r in rows])
+    beams = np.concatenate([list(r["geometry"].beams_deg.values()) for r in rows])
     two_beams = np.concatenate([list(r["two_axis"].beams_deg.values()) for r in rows])
     print(f"\n{len(rows)} rigs: wrong identities {sum(r['wrong'] for r in rows)}, "
           f"unidentified diodes {sum(len(r['unidentified']) for r in rows)}")
-    print(f"camera angle error max {max(np.abs(r['camera_error_deg']).max() for r in rows):.3f}"
-          f" deg, position {max(np.abs(r['camera_error_mm']).max() for r in rows):.3f} mm; "
+    print(f"camera angle error max "
+          f"{max(np.abs(r['geometry'].camera_deg).max() for r in rows):.3f} deg, position "
+          f"{max(np.abs(r['geometry'].camera_mm).max() for r in rows):.3f} mm; "
           f"beams: median {np.median(beams):.3f} deg, 95 % {np.percentile(beams, 95):.3f}, "
           f"max {beams.max():.3f}; line plane: max "
-          f"{max(r['line_plane_error_deg'] for r in rows):.3f} deg; "
+          f"{max(r['geometry'].line_plane_deg for r in rows):.3f} deg; "
           f"weakly determined in {sum(bool(r['weak']) for r in rows)} rigs")
     print(f"two-axis protocol (+{len(SECOND_AXIS)} tilts about Y): camera angle error max "
           f"{max(np.abs(r['two_axis'].camera_deg).max() for r in rows):.4f} deg, position "

@@ -48,15 +48,16 @@ def test_self_calibration_of_a_random_true_rig(seed: int) -> None:
     assert set(result["visible"]) <= named
     # Camera pose: within 0.1°, or within 3 σ where the data determine an angle less well
     # (one-axis tilts leave the rotation about the world X axis at σ about 0.1°).
-    error, sigma = result["camera_error_deg"], result["camera_sigma_deg"]
+    geometry = result["geometry"]
+    error, sigma = geometry.camera_deg, geometry.camera_sigma_deg
     assert np.all(np.abs(error) <= np.maximum(3 * sigma, 0.1)), (error, sigma)
     assert np.max(sigma) < 0.15
-    assert np.max(np.abs(result["camera_error_mm"])) < 0.3
-    for laser_id, beam_error in result["beam_error_deg"].items():
-        assert beam_error < max(0.05, 4 * result["beam_sigma_deg"][laser_id]), laser_id
+    assert np.max(np.abs(geometry.camera_mm)) < 0.3
+    for laser_id, beam_error in geometry.beams_deg.items():
+        assert beam_error < max(0.05, 4 * geometry.beams_sigma_deg[laser_id]), laser_id
     # The line laser's plane, fitted with the rest (one-axis tilts leave its turn about the
     # line's own direction at σ ≈ 0.1°, like the camera's).
-    assert result["line_plane_error_deg"] <= max(0.1, 3 * result["line_plane_sigma_deg"])
+    assert geometry.line_plane_deg <= max(0.1, 3 * geometry.line_plane_sigma_deg)
     # What the data determine only loosely is named, with the data that would help.
     if np.max(sigma) > 0.033:
         assert "second axis" in result["weak"]["camera rotation about X"]
@@ -77,7 +78,7 @@ def test_tilts_about_the_second_axis_pin_down_camera_beams_and_line_plane() -> N
     two = result["two_axis"]
     # One axis: the camera's rotation about it is this rig's worst (0.17°, σ 0.1°); three
     # tilts about the other axis determine it, the beams and the line plane.
-    assert np.max(np.abs(result["camera_error_deg"])) > 0.1
+    assert np.max(np.abs(result["geometry"].camera_deg)) > 0.1
     assert np.max(np.abs(two.camera_deg)) < 0.02 and np.max(two.camera_sigma_deg) < 0.02
     assert np.max(np.abs(two.camera_mm)) < 0.1
     assert np.median(list(two.beams_deg.values())) < 0.01
