@@ -16,7 +16,12 @@ from sds_model.rig import load_rig, save_rig
 from sds_recon.calibration.identification import identify_spots
 from sds_recon.calibration.lasers import KnownSurface
 from sds_recon.calibration.rig_model import RigModel
-from sds_recon.calibration.self_calibration import self_calibrate
+from sds_recon.calibration.self_calibration import (
+    SIGMA_FLOOR_PX,
+    isotropic_covariance,
+    self_calibrate,
+    spot_whitening,
+)
 from sds_sim.tilt_series import render_tilt_series
 from sds_sim.true_rig import RigErrors, random_layout, true_rig
 from sds_tracker.plateaus import find_plateaus
@@ -108,6 +113,21 @@ def test_a_diode_without_a_consistent_beam_is_named_not_calibrated() -> None:
             assert ids[owner] == laser_id
 
 
+def test_a_spots_residual_is_measured_in_its_own_sigma_in_each_direction() -> None:
+    """A spot beside the laser line: σ 0.07 px along the line, 0.13 px across. The same
+    residual counts almost twice as much along the line as across it; a σ below the floor
+    counts as the floor."""
+    along = np.array([0.6, 0.8])
+    across = np.array([0.8, -0.6])
+    covariance = np.array([0.07**2 * np.outer(along, along) + 0.13**2 * np.outer(across, across),
+                           np.diag([1e-6, 1e-6])])
+    whitening = spot_whitening(covariance)
+    residuals = np.array([0.14 * along, 0.1 * across])
+    in_sigma = np.linalg.norm(np.einsum("nij,nj->ni", whitening, residuals), axis=1)
+    assert in_sigma == pytest.approx([2.0, 0.1 / SIGMA_FLOOR_PX])
+    assert np.linalg.norm(whitening[0] @ (0.13 * across)) == pytest.approx(1.0)
+
+
 def test_parameters_the_data_cannot_determine_are_named_with_the_data_that_would() -> None:
     rng = np.random.default_rng(5)
     nominal = random_layout(load_rig(STELIUM), rng)
@@ -115,10 +135,10 @@ def test_parameters_the_data_cannot_determine_are_named_with_the_data_that_would
     surfaces = [KnownSurface(0.0, np.radians(a), 0.0) for a in ANGLES]
     ids, diode, frame, pixels = _exact_spots(true, surfaces)
     pixels = pixels + rng.normal(0, 0.07, pixels.shape)
-    sigma = np.full(len(pixels), 0.07)
+    covariance = isotropic_covariance(np.full(len(pixels), 0.07))
     # Emitters free and tilts about one axis only: a shift of the whole head along Y (camera
     # and emitters together) changes no image, so those parameters cannot all be fitted.
-    loose = self_calibrate(nominal, ids, surfaces, diode, frame, pixels, sigma,
+    loose = self_calibrate(nominal, ids, surfaces, diode, frame, pixels, covariance,
                            fit_emitters=True)
     assert loose.fixed
     assert loose.rms_px < 0.15      # what remains free still fits the spots (no run-off)
@@ -126,7 +146,7 @@ def test_parameters_the_data_cannot_determine_are_named_with_the_data_that_would
                for advice in loose.fixed.values())
     assert np.all(np.isnan(loose.sigmas[[loose.names.index(n) for n in loose.fixed]]))
     # With known emitters the same data determine everything.
-    known = self_calibrate(nominal, ids, surfaces, diode, frame, pixels, sigma)
+    known = self_calibrate(nominal, ids, surfaces, diode, frame, pixels, covariance)
     assert not known.fixed
     assert 1e2 < known.condition_number < 1e6
 

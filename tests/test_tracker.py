@@ -11,7 +11,13 @@ from scipy import stats
 from sds_sim.render import FrameRenderer
 from sds_sim.scenario import load_scenario
 from sds_tracker.hampel import HampelBank
-from sds_tracker.spots import HAMPEL_REPLACED, SpotSettings, subtract_line_centroid
+from sds_tracker.spots import (
+    HAMPEL_REPLACED,
+    ON_LINE_SIGMA_PX,
+    SpotSettings,
+    SpotTracker,
+    spot_without_line,
+)
 from sds_tracker.tracker import TRACKING_PARAMETERS, FrameTracker, is_lost
 
 
@@ -140,7 +146,7 @@ def test_manual_seeds_start_the_spots_and_bad_seeds_are_refused(repo: Path) -> N
 
 
 def test_the_line_is_subtracted_from_a_spot_beside_it() -> None:
-    """A spot 4 px beside the laser line: its centroid without the line's light."""
+    """A spot 4 px beside the laser line: its centre without the line's light."""
     settings = SpotSettings()
     size = 2 * settings.window_px + 1
     rows, columns = np.mgrid[0:size, 0:size].astype(float)
@@ -151,8 +157,71 @@ def test_the_line_is_subtracted_from_a_spot_beside_it() -> None:
                                                  (rows - spot[1]) ** 2) / 2.0**2)
     plain = np.array([np.sum(light * columns), np.sum(light * rows)]) / np.sum(light)
     assert np.hypot(*(plain - spot)) > 0.5                         # the line pulls it
-    found = subtract_line_centroid(light, line_x, spot + np.array([1.5, -1.0]), settings)
-    assert found is not None and np.hypot(*(found - spot)) < 0.1
+    found = spot_without_line(light, line_x, spot + np.array([1.5, -1.0]), settings)
+    assert found is not None and np.hypot(*(found.centre - spot)) < 0.1
+
+
+def saturated_spot_and_line(spot: np.ndarray, line_x: np.ndarray, size: int) -> np.ndarray:
+    """A window where a bright spot (x, y) and a bright slanted line both clip at 255."""
+    rows, columns = np.mgrid[0:size, 0:size].astype(float)
+    line = 400.0 * np.exp(-0.5 * ((columns - line_x[:, None]) / 1.8) ** 2)
+    light = 8.0 + line + 900.0 * np.exp(-0.5 * ((columns - spot[0]) ** 2 +
+                                                (rows - spot[1]) ** 2) / 3.0**2)
+    return np.minimum(np.round(light), 255.0).astype(np.float32)
+
+
+@pytest.mark.parametrize("beside_px", [1.5, 3.0, 6.0, 9.0])
+def test_a_spot_overlapping_a_saturated_line_is_measured_by_its_symmetry(beside_px: float
+                                                                          ) -> None:
+    """Where spot and line both saturate, the spot's light on the line is unknown: taking
+    the saturated pixels as the spot's pulls it towards the line; the spot's symmetry does
+    not (taking them pulls it 0.6–3.8 px here). The line's direction comes back, and the two
+    are reported as overlapping."""
+    settings = SpotSettings()
+    size = 2 * settings.window_px + 1
+    line_x = 24.3 + 0.1 * (np.arange(size) - 24)
+    along = np.array([0.1, 1.0]) / np.hypot(0.1, 1.0)
+    spot = np.array([24.3 - beside_px * along[1], 23.6 + beside_px * along[0]])
+    window = saturated_spot_and_line(spot, line_x, size)
+    found = spot_without_line(window, line_x, np.round(spot), settings)
+    assert found is not None and np.hypot(*(found.centre - spot)) < 0.2, found
+    assert abs(found.along @ along) > 0.999
+    assert found.clearance_px < 0
+
+
+def test_the_tracker_takes_the_lines_light_out_of_a_spot_it_overlaps() -> None:
+    """A spot 6 px beside a saturated line, the line's light pulling its plain centroid along
+    its path (so the path cannot tell), another spot 18 px away: tracked with the line, it is
+    measured with the line's light taken away and carries the σ of such spots."""
+    settings = SpotSettings()
+    size = 160
+    line_x = np.full(size, 80.3)
+    spot = np.array([74.3, 81.6])
+    rows, columns = np.mgrid[0:size, 0:size]
+    neighbour = 900.0 * np.exp(-0.5 * ((columns - 56.3) ** 2 + (rows - 83.0) ** 2) / 3.0**2)
+    image = np.minimum(saturated_spot_and_line(spot, line_x, size) + neighbour,
+                       255).astype(np.uint8)
+    step = np.array([40.0, 0.0])
+    path = np.array([spot - step, spot + step])
+    tracker = SpotTracker({0: path}, settings)
+    tracker.previous[0] = spot + np.array([1.0, 0.5])
+    (estimate,) = tracker.update(image, (0, 0), (np.arange(size), line_x))
+    assert np.hypot(estimate.x_px - spot[0], estimate.y_px - spot[1]) < 0.2, estimate
+    assert estimate.sigma_px >= ON_LINE_SIGMA_PX[1]
+    tracker.previous[0] = spot + np.array([1.0, 0.5])
+    (plain,) = tracker.update(image, (0, 0))
+    assert np.hypot(plain.x_px - spot[0], plain.y_px - spot[1]) > 0.5   # without the line
+
+
+def test_a_spot_clear_of_the_line_is_reported_clear() -> None:
+    settings = SpotSettings()
+    size = 2 * settings.window_px + 1
+    line_x = np.full(size, 40.0)
+    spot = np.array([20.4, 24.2])
+    found = spot_without_line(saturated_spot_and_line(spot, line_x, size), line_x,
+                                   spot, settings)
+    assert found is not None and np.hypot(*(found.centre - spot)) < 0.1
+    assert found.clearance_px > 0
 
 
 def test_the_parameter_file_states_the_trackers_own_defaults(repo: Path) -> None:

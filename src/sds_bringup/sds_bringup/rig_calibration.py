@@ -168,7 +168,7 @@ def calibrate_images(rig: Rig, images: list[np.ndarray], surfaces: list[KnownSur
     found = observe(rig, images)
     line = found.line if len(found.line.frame) else None
     result = calibrate_rig(rig, surfaces, [s.pixels for s in found.spots],
-                           [s.sigma_px for s in found.spots], line, settings)
+                           [s.covariance_px2 for s in found.spots], line, settings)
     return result, found
 
 

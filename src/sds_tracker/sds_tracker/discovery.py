@@ -14,26 +14,30 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
-from sds_tracker.spots import LOST, SpotSettings, SpotTracker, line_free_centre
+from sds_tracker.spots import (
+    LOST,
+    ON_LINE_SIGMA_PX,
+    LineFreeSpot,
+    SpotSettings,
+    SpotTracker,
+    line_free_centre,
+    spot_window,
+    window_without_line,
+)
 
 BACKGROUND_SCALE = 4
 """The background is estimated on the region shrunk by this factor (cheap, spots vanish)."""
 BACKGROUND_KERNEL_PX = 9
 """Opening kernel at the shrunk scale: wider than any spot, narrower than the rim's bends."""
-BESIDE_LINE_SIGMA_PX = 1.2
-"""Least uncertainty of a spot measured on or beside the laser line (the line's light taken
-away or left out symmetrically). Measured against the truth on six random rigs' one-axis tilt
-series: 78 such spots, error RMS 1.22 px (p90 1.8, max 4.1; a diode under the line keeps its
-bias in every frame), where the other 882 spots have 0.058 px. Taken as 0.5 px, such spots
-moved a beam by up to 12 times its stated σ in the two-axis protocol."""
 
 
 @dataclass(frozen=True)
 class SpotCandidates:
-    """Blobs found in one frame: full-frame centroid (N×2 px), σ [px], raw peak."""
+    """Blobs found in one frame: full-frame centroid (N×2 px), its covariance (N×2×2 px²),
+    raw peak."""
 
     pixels: np.ndarray
-    sigma_px: np.ndarray
+    covariance_px2: np.ndarray
     peak: np.ndarray
 
     def __len__(self) -> int:
@@ -49,8 +53,9 @@ def find_spots(red: np.ndarray, offset: tuple[int, int] = (0, 0),
 
     With `line`, the laser line's full-frame rows and columns in this image, a spot the line
     passes is measured with the line's light subtracted, as the tracker does
-    (`sds_tracker.spots.line_free_centre`); without it, with the line's pixels left out
-    symmetrically."""
+    (`sds_tracker.spots.line_free_centre`); without it, the light of the thin structure
+    beside the spot is taken away likewise (`_beside_line`). A spot whose light overlaps the
+    line's gets ON_LINE_SIGMA_PX along and across it."""
     s = settings or SpotSettings()
     image = np.ascontiguousarray(red)
     small = cv2.resize(image, None, fx=1 / BACKGROUND_SCALE, fy=1 / BACKGROUND_SCALE,
@@ -62,7 +67,7 @@ def find_spots(red: np.ndarray, offset: tuple[int, int] = (0, 0),
     starts, line_mask = _blob_starts(mask, min_area_px, max_area_px)
     starts = starts + np.asarray(offset, dtype=float)
     if len(starts) == 0:
-        return SpotCandidates(np.zeros((0, 2)), np.zeros(0), np.zeros(0))
+        return SpotCandidates(np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros(0))
     # The tracker's centroid, with each blob's own start as its prior and path.
     tracker = SpotTracker({k: np.array([p, p]) for k, p in enumerate(starts)},
                           replace(s, path_tolerance_px=1e9))
@@ -72,20 +77,29 @@ def find_spots(red: np.ndarray, offset: tuple[int, int] = (0, 0),
     found = [k for k, e in enumerate(estimates) if not e.flags & LOST]
     pixels = np.array([[estimates[k].x_px, estimates[k].y_px] for k in found]).reshape(-1, 2)
     sigma = np.array([estimates[k].sigma_px for k in found])
-    for row, k in enumerate(found):
+    covariance = sigma[:, None, None] ** 2 * np.eye(2)
+    for row in range(len(found)):
         refined = None
         if line is not None and len(line[0]) > 1:
             refined = line_free_centre(image, np.asarray(offset, float), pixels[row], line, s)
         if refined is None:
-            refined = _beside_line(image, np.asarray(offset, float), pixels[row], line_mask, s,
-                                   estimates[k].peak)
+            refined = _beside_line(image, np.asarray(offset, float), pixels[row], line_mask, s)
         if refined is not None:
-            pixels[row] = refined
-            sigma[row] = max(sigma[row], BESIDE_LINE_SIGMA_PX)
+            pixels[row] = refined.centre
+            if refined.clearance_px < 0:
+                covariance[row] = _on_line_covariance(refined.along, sigma[row])
     # Two starts on one blob settle on the same centroid: keep one.
     unique = _first_of_duplicates(pixels, tolerance_px=1.0)
-    return SpotCandidates(pixels[unique], sigma[unique],
+    return SpotCandidates(pixels[unique], covariance[unique],
                           np.array([estimates[k].peak for k in found])[unique])
+
+
+def _on_line_covariance(along: np.ndarray, sigma_px: float) -> np.ndarray:
+    """The covariance [px²] of a spot overlapping the line: ON_LINE_SIGMA_PX along and across
+    the line's unit direction `along`, or the spot's own σ where that is larger."""
+    across = np.array([along[1], -along[0]])
+    sigma_along, sigma_across = (max(sigma_px, floor) for floor in ON_LINE_SIGMA_PX)
+    return sigma_along**2 * np.outer(along, along) + sigma_across**2 * np.outer(across, across)
 
 
 def _blob_starts(mask: np.ndarray, min_area_px: int, max_area_px: int
@@ -118,58 +132,37 @@ def _blob_starts(mask: np.ndarray, min_area_px: int, max_area_px: int
 
 
 def _beside_line(image: np.ndarray, offset: np.ndarray, centre: np.ndarray,
-                 line_mask: np.ndarray, s: SpotSettings, peak: float,
-                 iterations: int = 8) -> np.ndarray | None:
-    """The spot-core centroid with the line's pixels left out, and their mirror images about
-    the centre too, so that the spot's own symmetry keeps the centroid unbiased. Spots with no
-    line pixel nearby come back unchanged."""
-    half = s.window_px
-    cx, cy = np.round(centre - offset).astype(int)
-    x0, y0, x1, y1 = cx - half, cy - half, cx + half + 1, cy + half + 1
-    if x0 < 0 or y0 < 0 or x1 > image.shape[1] or y1 > image.shape[0]:
+                 line_mask: np.ndarray, s: SpotSettings) -> LineFreeSpot | None:
+    """The spot measured with the light of the thin structure beside it (the laser line, on
+    the liquid or a wall) subtracted, as the tracker subtracts the tracked line
+    (`window_without_line`); None for a spot with no such structure nearby, or one that
+    runs closer to the rows than to the columns."""
+    window = spot_window(image.shape, offset, centre, s.window_px)
+    if window is None:
         return None
-    near_line = _line_band(line_mask[y0:y1, x0:x1], centre - offset - (x0, y0),
-                           0.75 * s.window_px)
-    if not near_line.any():
+    x0, y0, x1, y1 = window
+    band = _line_band(line_mask[y0:y1, x0:x1], centre - offset - (x0, y0),
+                      0.75 * s.window_px)
+    if band is None or abs(band[1][1]) < abs(band[1][0]):
         return None
-    raw = image[y0:y1, x0:x1].astype(np.float32)
-    border = np.concatenate([raw[0], raw[-1], raw[:, 0], raw[:, -1]])
-    background = float(np.median(border))
-    weights = np.clip(raw - background - s.clip_fraction * (peak - background), 0, None)
-    ys, xs = np.mgrid[y0:y1, x0:x1].astype(float)
-    xs, ys = xs + offset[0], ys + offset[1]
-    local = centre - offset - (x0, y0)
-    for _ in range(iterations):
-        mirror_x = np.round(2 * local[0] - (xs - offset[0] - x0)).astype(int)
-        mirror_y = np.round(2 * local[1] - (ys - offset[1] - y0)).astype(int)
-        inside = (mirror_x >= 0) & (mirror_x < near_line.shape[1]) & (mirror_y >= 0) & \
-            (mirror_y < near_line.shape[0])
-        mirrored = np.ones_like(near_line)
-        mirrored[inside] = near_line[mirror_y[inside], mirror_x[inside]]
-        use = weights * ~(near_line | mirrored)
-        total = float(use.sum())
-        if total <= 0:
-            return None
-        centre = np.array([np.sum(use * xs), np.sum(use * ys)]) / total
-        local = centre - offset - (x0, y0)
-    return centre
+    middle, along = band
+    line_x = middle[0] + (np.arange(y1 - y0) - middle[1]) * along[0] / along[1]
+    return window_without_line(image, offset, window, line_x, centre, s)
 
 
-def _line_band(thin: np.ndarray, spot: np.ndarray, spot_radius_px: float) -> np.ndarray:
-    """The straight band that the thin pixels of a window make away from the spot, continued
-    across the whole window (under the spot the line is hidden in the spot's own blob)."""
+def _line_band(thin: np.ndarray, spot: np.ndarray, spot_radius_px: float
+               ) -> tuple[np.ndarray, np.ndarray] | None:
+    """The straight band that the thin pixels of a window make away from the spot: a point on
+    its centre line and its unit direction; None where too few thin pixels lie away from the
+    spot."""
     ys, xs = np.nonzero(thin)
     points = np.column_stack([xs, ys]).astype(float)
     points = points[np.linalg.norm(points - spot, axis=1) > spot_radius_px]
     if len(points) < 5:
-        return np.zeros_like(thin)
+        return None
     middle = points.mean(axis=0)
     along = np.linalg.eigh(np.cov((points - middle).T))[1][:, -1]
-    across = np.array([-along[1], along[0]])
-    half_width = float(np.percentile(np.abs((points - middle) @ across), 95)) + 1.0
-    grid_y, grid_x = np.mgrid[0:thin.shape[0], 0:thin.shape[1]]
-    distance = np.abs((grid_x - middle[0]) * across[0] + (grid_y - middle[1]) * across[1])
-    return distance <= half_width
+    return middle, along
 
 
 def _first_of_duplicates(pixels: np.ndarray, tolerance_px: float) -> list[int]:

@@ -1,4 +1,5 @@
-"""Compiled (numba) inner loops of the tracker: the spot windows and the line's rows.
+"""Compiled (numba) inner loops of the tracker: the spot windows, the line's rows, and a
+spot the line overlaps (the line's light removed, the spot's centre of symmetry).
 
 Each frame reads only small windows, so the work is a few loops over tens of thousands of
 pixels; compiled, they cost well under a millisecond where numpy needed several (bench/).
@@ -144,9 +145,153 @@ def line_rows(image: np.ndarray, rows: np.ndarray, starts: np.ndarray, width: in
     return centres, sigmas, peaks, tops
 
 
+@njit(cache=True, fastmath=True)
+def remove_line(window: np.ndarray, background: float, slope: float, intercept: float,
+                spot_row: float, reach: int, step_px: float, threshold: float,
+                saturation_level: float) -> tuple[np.ndarray, np.ndarray, float, int]:
+    """The window's signal with a straight laser line's light taken away.
+
+    The line's centre on row y is at column intercept + slope·y; its cross profile (signal
+    against the column's offset from that centre, in bins of `step_px`) is the median of each
+    bin over the pixels within `reach` of the centre on the rows farther than `reach` from
+    `spot_row`, and is subtracted (interpolated) from every pixel within `reach` of the line.
+    Returns what is left (0 on the unknown pixels), the unknown pixels (saturated where the
+    line alone is above `threshold`), the line's half width at `threshold` [px, along the
+    row], and how many pixels the profile rests on."""
+    height, width = window.shape
+    bins = 2 * int(np.round(reach / step_px)) + 1
+    middle = bins // 2
+    counts = np.zeros(bins, np.int64)
+    for y in range(height):
+        if abs(y - spot_row) <= reach:
+            continue
+        for x in range(width):
+            offset = x - (intercept + slope * y)
+            if abs(offset) <= reach:
+                counts[int(np.round(offset / step_px)) + middle] += 1
+    starts = np.zeros(bins + 1, np.int64)
+    for b in range(bins):
+        starts[b + 1] = starts[b] + counts[b]
+    values = np.empty(starts[bins])
+    filled = starts[:-1].copy()
+    for y in range(height):
+        if abs(y - spot_row) <= reach:
+            continue
+        for x in range(width):
+            offset = x - (intercept + slope * y)
+            if abs(offset) <= reach:
+                b = int(np.round(offset / step_px)) + middle
+                values[filled[b]] = window[y, x] - background
+                filled[b] += 1
+    # The medians of the bins that hold pixels, interpolated across the empty ones.
+    known = np.flatnonzero(counts)
+    left = np.zeros((height, width))
+    unknown = np.zeros((height, width), np.bool_)
+    if len(known) == 0:
+        return left, unknown, 0.0, 0
+    medians = np.zeros(len(known))
+    half_width = 0.0
+    for k, index in enumerate(known):
+        ordered = np.sort(values[starts[index]:starts[index + 1]])
+        n = counts[index]
+        medians[k] = 0.5 * (ordered[(n - 1) // 2] + ordered[n // 2])
+        if medians[k] > threshold:
+            half_width = max(half_width, abs(index - middle) * step_px)
+    profile = np.interp(np.arange(bins + 1).astype(np.float64), known.astype(np.float64),
+                        medians)
+    for y in range(height):
+        for x in range(width):
+            signal = window[y, x] - background
+            offset = x - (intercept + slope * y)
+            light = 0.0
+            if abs(offset) <= reach:
+                position = min(max(offset / step_px + middle, 0.0), bins - 1.0)
+                lower = int(position)
+                light = profile[lower] + (position - lower) * (profile[lower + 1] -
+                                                               profile[lower])
+            if window[y, x] >= saturation_level and light > threshold:
+                unknown[y, x] = True
+            else:
+                left[y, x] = signal - light
+    return left, unknown, half_width, int(starts[bins])
+
+
+@njit(cache=True, fastmath=True)
+def symmetry_mismatch(left: np.ndarray, unknown: np.ndarray, cx: float, cy: float, reach: int,
+                      threshold: float, stride: int) -> tuple[float, int]:
+    """Mean squared difference between `left` at each known pixel within `reach` of (cx, cy)
+    (every `stride`-th row and column) and at its mirror image about that centre (bilinear,
+    all four neighbours known), over the pairs where either side is above `threshold`; and
+    the number of such pairs."""
+    height, width = left.shape
+    x0, x1 = max(int(np.floor(cx)) - reach, 0), min(int(np.ceil(cx)) + reach + 1, width)
+    y0, y1 = max(int(np.floor(cy)) - reach, 0), min(int(np.ceil(cy)) + reach + 1, height)
+    total, count = 0.0, 0
+    for y in range(y0, y1, stride):
+        for x in range(x0, x1, stride):
+            if unknown[y, x] or (x - cx) ** 2 + (y - cy) ** 2 > reach * reach:
+                continue
+            mx, my = 2 * cx - x, 2 * cy - y
+            ix, iy = int(np.floor(mx)), int(np.floor(my))
+            if ix < 0 or iy < 0 or ix + 1 >= width or iy + 1 >= height:
+                continue
+            if unknown[iy, ix] or unknown[iy, ix + 1] or unknown[iy + 1, ix] or \
+                    unknown[iy + 1, ix + 1]:
+                continue
+            fx, fy = mx - ix, my - iy
+            mirror = (left[iy, ix] * (1 - fx) * (1 - fy) + left[iy, ix + 1] * fx * (1 - fy)
+                      + left[iy + 1, ix] * (1 - fx) * fy + left[iy + 1, ix + 1] * fx * fy)
+            if left[y, x] <= threshold and mirror <= threshold:
+                continue
+            total += (left[y, x] - mirror) ** 2
+            count += 1
+    return total / max(count, 1), count
+
+
+@njit(cache=True, fastmath=True)
+def symmetric_centre(left: np.ndarray, unknown: np.ndarray, start_x: float, start_y: float,
+                     reach: int, threshold: float, span_px: int, min_pairs: int
+                     ) -> tuple[float, float, float]:
+    """The centre [window px] about which `left` is most nearly point-symmetric
+    (`symmetry_mismatch`), searched within `span_px` of the start in steps of 2 px, then
+    around the best in steps of 1, 1/2, 1/4 and 1/8 px, and a parabola through the last;
+    with its mismatch (inf where no centre has `min_pairs`)."""
+    best_x, best_y, best = start_x, start_y, np.inf
+    step, radius = 2.0, (span_px + 1) // 2
+    for _ in range(5):
+        # Steps of a pixel or more compare every other pixel (a quarter of the pairs).
+        stride = 2 if step >= 1 else 1
+        centre_x, centre_y, best = best_x, best_y, np.inf
+        for j in range(-radius, radius + 1):
+            for i in range(-radius, radius + 1):
+                x, y = centre_x + i * step, centre_y + j * step
+                mismatch, pairs = symmetry_mismatch(left, unknown, x, y, reach, threshold,
+                                                    stride)
+                if pairs * stride * stride >= min_pairs and mismatch < best:
+                    best_x, best_y, best = x, y, mismatch
+        step, radius = step / 2, 1
+    if not np.isfinite(best):
+        return best_x, best_y, best
+    # A parabola through the finest step's neighbours, along each axis.
+    step *= 2
+    offsets = np.zeros(2)
+    for axis in range(2):
+        dx, dy = (step, 0.0) if axis == 0 else (0.0, step)
+        below = symmetry_mismatch(left, unknown, best_x - dx, best_y - dy, reach, threshold,
+                                  1)[0]
+        above = symmetry_mismatch(left, unknown, best_x + dx, best_y + dy, reach, threshold,
+                                  1)[0]
+        curvature = below - 2 * best + above
+        if curvature > 0:
+            offsets[axis] = min(max(0.5 * step * (below - above) / curvature, -step), step)
+    return best_x + offsets[0], best_y + offsets[1], best
+
+
 def warm_up() -> None:
-    """Compile (or load from numba's cache) both kernels now, not on the first frames."""
+    """Compile (or load from numba's cache) the kernels now, not on the first frames."""
     image = np.zeros((64, 64), np.uint8)
     spot_windows(image, np.zeros((1, 2), np.int64), 24, np.ones((49, 49)), 30.0, 0.3, 1.6,
                  0.15, 2.0)
     line_rows(image, np.zeros(1, np.int64), np.zeros(1, np.int64), 61, 6, 10, 0.15, 30.0, 2.0)
+    symmetric_centre(np.zeros((9, 9)), np.zeros((9, 9), np.bool_), 4.0, 4.0, 3, 30.0, 1, 1)
+    remove_line(np.zeros((49, 49), np.float32), 0.0, 0.0, 24.0, 24.0, 12, 0.25, 30.0, 250.0)

@@ -7,13 +7,23 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from sds_tracker.kernels import spot_windows
+from sds_tracker.kernels import remove_line, spot_windows, symmetric_centre
 
 LOST, SATURATED, REFLECTION_SUSPECTED, OFF_PATH, HAMPEL_REPLACED, NOT_FILTERED = 1, 2, 4, 8, 16, 32
 """Flag bits, the same as sds_msgs/LaserSpot's."""
-LINE_SIGMA_PX = 0.5
-"""Least uncertainty of a spot measured with the laser line's light subtracted (a saturated
-spot on the line keeps a bias of about 1.4 px across the line)."""
+PROFILE_STEP_PX = 0.25
+"""Bin width [px] of the laser line's cross profile that is subtracted from a spot."""
+SYMMETRY_SEARCH_PX = 4
+"""How far [px] from each start the centre of a spot's symmetry is searched."""
+SYMMETRY_PAIRS = 20
+"""Fewest mirrored pixel pairs that make a centre of symmetry."""
+ON_LINE_SIGMA_PX = (0.07, 0.13)
+"""Least uncertainty [px] along and across the laser line of a spot whose light overlaps the
+line's, measured with the line's light subtracted (`spot_without_line`): where both
+saturate, the spot's light on the line is unknown and its centre rests on its symmetry.
+Measured against the truth on 16 random rigs' tilt series about both axes (eight to develop
+the method, eight held out): 95 such spots, 0.066 and 0.132 px RMS (max 0.31 and 0.37 px; a
+diode under the line keeps its bias in every frame), against 0.058 px for the other 3424."""
 
 
 @dataclass(frozen=True)
@@ -91,17 +101,22 @@ class SpotTracker:
         Spots tracked in the previous frame go through one batched pass over all their windows;
         any spot that pass cannot settle (not found, a competing blob, off its path, near the
         image edge) and every spot not yet acquired take the full per-spot search. `line`, the
-        laser line's full-frame (rows, columns) in this frame, if given, rescues a spot the
-        line's light pulls off its path (`subtract_line_centroid`).
+        laser line's full-frame (rows, columns) in this frame, if given, keeps the line's light
+        out of the spots it passes (`spot_without_line`): a tracked spot it overlaps is
+        measured that way alone (`_track_on_line`), with no per-spot search.
         """
         origin = np.array(offset, dtype=float)
         tracked = [i for i in self.paths if self.previous[i] is not None]
         settled = self._track_batch(image, origin, tracked) if tracked else {}
+        if line is not None and len(line[0]) < 2:
+            line = None
         estimates = []
         for laser_id, path in self.paths.items():
-            estimate = settled.get(laser_id) or self._track(
-                image, origin, laser_id, path, line if line is not None and len(line[0]) > 1
-                else None)
+            estimate = settled.get(laser_id)
+            if estimate is None and line is not None and self.previous[laser_id] is not None:
+                estimate = self._track_on_line(image, origin, laser_id, path, line)
+            if estimate is None:
+                estimate = self._track(image, origin, laser_id, path, line)
             self.previous[laser_id] = None if estimate.flags & LOST else \
                 np.array([estimate.x_px, estimate.y_px])
             estimates.append(estimate)
@@ -137,6 +152,25 @@ class SpotTracker:
             settled[laser_id] = SpotEstimate(laser_id, float(full[k, 0]), float(full[k, 1]),
                                              float(sigma[k]), float(peak_raw[k]), flags)
         return settled
+
+    def _track_on_line(self, image: np.ndarray, origin: np.ndarray, laser_id: int,
+                       path: np.ndarray, line: tuple[np.ndarray, np.ndarray]
+                       ) -> SpotEstimate | None:
+        """A tracked spot that overlaps the laser line, measured around its last position with
+        the line's light taken away, σ ON_LINE_SIGMA_PX across the line; None for a spot
+        clear of the line or off its path (the full search decides)."""
+        s = self.settings
+        previous = self.previous[laser_id]
+        assert previous is not None   # update() calls this for tracked spots only
+        refined = line_free_centre(image, origin, previous, line, s)
+        if refined is None or refined.clearance_px >= 0 or \
+                distance_to_path(refined.centre, path) > s.path_tolerance_px:
+            return None
+        x, y = np.round(refined.centre - origin).astype(int)
+        peak = float(image[max(y - 2, 0):y + 3, max(x - 2, 0):x + 3].max())
+        return SpotEstimate(laser_id, float(refined.centre[0]), float(refined.centre[1]),
+                            ON_LINE_SIGMA_PX[1], peak,
+                            SATURATED if peak >= s.saturation_level else 0)
 
     def _search_box(self, laser_id: int, path: np.ndarray) -> np.ndarray:
         """(x0, y0, x1, y1) full-frame: around the previous position, or the whole path."""
@@ -199,13 +233,17 @@ class SpotTracker:
         variance = np.clip(raw, 0, None) + s.read_noise**2
         sigma = float(np.sqrt(np.sum(variance * ((xs - centre[0]) ** 2 +
                                                  (ys - centre[1]) ** 2)) / 2) / total)
+        # The laser line's light pulls a spot it passes towards itself, even off its path:
+        # such a spot is measured again with the line's light subtracted, around where it
+        # was in the last frame if it was tracked.
+        refined = None if line is None else line_free_centre(
+            image, origin, centre if previous is None else previous, line, s)
+        if refined is not None:
+            centre = refined.centre
+            if refined.clearance_px < 0:
+                sigma = max(sigma, ON_LINE_SIGMA_PX[1])
         if distance_to_path(centre, path) > s.path_tolerance_px:
-            # A spot merged with the laser line is pulled off its path: measured again with
-            # the line's light subtracted, it is kept if it is then on its path.
-            refined = None if line is None else line_free_centre(image, origin, centre, line, s)
-            if refined is None or distance_to_path(refined, path) > s.path_tolerance_px:
-                return SpotEstimate(laser_id, np.nan, np.nan, np.nan, 0.0, LOST | OFF_PATH)
-            centre, sigma = refined, max(sigma, LINE_SIGMA_PX)
+            return SpotEstimate(laser_id, np.nan, np.nan, np.nan, 0.0, LOST | OFF_PATH)
         if peak >= s.saturation_level:
             flags |= SATURATED
         return SpotEstimate(laser_id, float(centre[0]), float(centre[1]), sigma, peak, flags)
@@ -230,22 +268,51 @@ class SpotTracker:
                 raw[inside])
 
 
+@dataclass(frozen=True)
+class LineFreeSpot:
+    """A spot measured with the laser line's light taken away (`spot_without_line`).
+
+    `centre` [px] and `along` (unit vector of the line's direction) are in the caller's frame;
+    `clearance_px` is the gap between the spot's edge and the line's edge at the threshold
+    (negative where the two overlap, and there the centre is uncertain across the line: a
+    saturated line hides the spot's light on its side; along the line it is not)."""
+
+    centre: np.ndarray
+    along: np.ndarray
+    clearance_px: float
+
+
 def line_free_centre(image: np.ndarray, origin: np.ndarray, centre: np.ndarray,
-                     line: tuple[np.ndarray, np.ndarray], s: SpotSettings) -> np.ndarray | None:
-    """The centroid (full-frame px) of the spot in the window around `centre` after the laser
-    line's light is subtracted (`subtract_line_centroid`); None where the line (full-frame
-    rows and columns) does not cross the window or the window leaves the image."""
+                     line: tuple[np.ndarray, np.ndarray], s: SpotSettings) -> LineFreeSpot | None:
+    """The spot in the window around `centre` (full-frame px) with the laser line's light
+    subtracted (`spot_without_line`); None where the line (full-frame rows, ascending, and
+    columns) does not cross the window or the window leaves the image."""
     window = spot_window(image.shape, origin, centre, s.window_px)
     if window is None:
         return None
-    x0, y0, x1, y1 = window
-    line_x = np.interp(np.arange(y0, y1) + origin[1], line[0], line[1],
-                       left=np.nan, right=np.nan) - origin[0] - x0
+    x0, y0, _, y1 = window
+    rows = np.arange(y0, y1) + origin[1]
+    # Only the rows the line was measured on: across a gap it need not be straight.
+    measured = np.round(line[0])
+    nearest = measured[np.minimum(np.searchsorted(measured, rows), len(measured) - 1)]
+    line_x = np.where(nearest == rows, np.interp(rows, line[0], line[1]), np.nan) - \
+        origin[0] - x0
     if not np.any(np.abs(line_x - s.window_px) <= 1.5 * s.window_px):
         return None
-    local = subtract_line_centroid(image[y0:y1, x0:x1].astype(np.float32), line_x,
-                                   centre - origin - (x0, y0), s)
-    return None if local is None else local + origin + (x0, y0)
+    return window_without_line(image, origin, window, line_x, centre, s)
+
+
+def window_without_line(image: np.ndarray, origin: np.ndarray,
+                        window: tuple[int, int, int, int], line_x: np.ndarray,
+                        centre: np.ndarray, s: SpotSettings) -> LineFreeSpot | None:
+    """`spot_without_line` on a window of the region (`spot_window` bounds; `line_x` in
+    window columns per window row), started at `centre`, in full-frame px."""
+    x0, y0, x1, y1 = window
+    local = spot_without_line(image[y0:y1, x0:x1].astype(np.float32), line_x,
+                              centre - origin - (x0, y0), s)
+    if local is None:
+        return None
+    return LineFreeSpot(local.centre + origin + (x0, y0), local.along, local.clearance_px)
 
 
 def spot_window(shape: tuple[int, ...], offset: np.ndarray, centre: np.ndarray, half: int
@@ -259,24 +326,26 @@ def spot_window(shape: tuple[int, ...], offset: np.ndarray, centre: np.ndarray, 
     return int(x0), int(y0), int(x1), int(y1)
 
 
-def subtract_line_centroid(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
-                           s: SpotSettings, iterations: int = 4) -> np.ndarray | None:
-    """A spot's centroid [window px] with the laser line's light taken away; None when the
-    line does not reach enough of the window's rows or no spot is left.
+def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
+                      s: SpotSettings) -> LineFreeSpot | None:
+    """A spot's centre [window px] with the laser line's light taken away, the line's
+    direction and the clearance between the two; None when the line does not reach enough of
+    the window's rows or no spot is left.
 
     `line_x[r]` is the line's centre column on window row r (NaN where unknown); a straight
     line through it on the rows beyond half a window from the spot is used. The line's
-    cross profile (signal against the column's offset from `line_x`, whole pixels) is the
-    median over the rows that lie beyond half a window from the spot, and is subtracted from
-    every row, the spot's included (but for saturated pixels): a spot on the line keeps its
-    own light and loses the line's, a spot beside it no longer leans towards it. Then the
-    centroid of what is left above `clip_fraction` of its peak, in a disc of half a window,
-    iterated from the brightest 5×5 patch of what is left (a spot beside a bright line, taken
-    for one blob with it, can lie more than half a window from `spot`).
+    cross profile (signal against the column's offset from that line, in PROFILE_STEP_PX
+    bins) is the median over the rows that lie beyond half a window from the spot, and is
+    subtracted from every row, the spot's included: a spot on the line keeps its own light
+    and loses the line's, a spot beside it no longer leans towards it. A saturated pixel the
+    line lights holds an unknown share of the spot's light, so the centre is not a centroid
+    but the point about which what is left is most nearly symmetric, over the known pixels
+    within half a window (`kernels.symmetric_centre`): a spot's own light is point-symmetric
+    (a Gaussian, or an ellipse on a tilted surface), the line's ragged remainder is not.
     """
     rows, columns = np.indices(window.shape)
     border = np.concatenate([window[0], window[-1], window[:, 0], window[:, -1]])
-    signal = window - float(np.median(border))
+    background = float(np.median(border))
     reach = s.window_px // 2
     # The line's own centre is pulled towards a spot on its rows: a straight line through
     # its centres on the rows away from the spot stands for it on every row.
@@ -284,35 +353,58 @@ def subtract_line_centroid(window: np.ndarray, line_x: np.ndarray, spot: np.ndar
     usable = np.isfinite(line_x) & (np.abs(row_index - spot[1]) > reach)
     if usable.sum() < 4:
         return None
-    slope, intercept = np.polyfit(row_index[usable], line_x[usable], 1)
-    offset = np.round(columns - (intercept + slope * rows))
-    on_line = np.abs(offset) <= reach
-    far_rows = np.abs(rows - spot[1]) > reach
-    profile_pixels = on_line & far_rows
-    if profile_pixels.sum() < 3 * (2 * reach + 1):
+    fit_rows, fit_columns = row_index[usable], line_x[usable]
+    centred = fit_rows - fit_rows.mean()
+    slope = float(centred @ (fit_columns - fit_columns.mean()) / (centred @ centred))
+    intercept = float(fit_columns.mean() - slope * fit_rows.mean())
+    left, unknown, line_half_width, profile_pixels = remove_line(
+        window, background, slope, intercept, spot[1], reach, PROFILE_STEP_PX, s.threshold,
+        s.saturation_level)
+    if profile_pixels < 3 * (2 * reach + 1):
         return None
-    bins = (offset[profile_pixels] + reach).astype(int)
-    profile = np.zeros(2 * reach + 1)
-    for b in range(2 * reach + 1):
-        values = signal[profile_pixels][bins == b]
-        profile[b] = float(np.median(values)) if len(values) else 0.0
-    line_light = np.zeros_like(signal)
-    line_light[on_line] = profile[(offset[on_line] + reach).astype(int)]
-    # A saturated pixel holds less than spot plus line: nothing of the line is taken from it.
-    line_light[window >= s.saturation_level] = 0.0
-    left = signal - line_light
-    # A 5×5 mean: a compact spot outweighs the few saturated line pixels left standing.
+    # Two starts: `spot`, and the brightest 5×5 patch of what is left within half a window
+    # of it (not another spot's or a reflection's farther away), where that is not already
+    # within the search around `spot`.
     patch = cv2.blur(left.astype(np.float32), (5, 5))
+    patch[(columns - spot[0]) ** 2 + (rows - spot[1]) ** 2 > reach**2] = -np.inf
     row, column = np.unravel_index(int(np.argmax(patch)), patch.shape)
-    centre = np.array([column, row], dtype=float)
-    for _ in range(iterations):
-        inside = (columns - centre[0]) ** 2 + (rows - centre[1]) ** 2 <= reach**2
-        peak = float(left[inside].max()) if inside.any() else 0.0
-        if peak <= s.threshold:
-            return None
-        weights = np.where(inside, np.clip(left - s.clip_fraction * peak, 0, None), 0.0)
-        total = float(weights.sum())
-        if total <= 0:
-            return None
-        centre = np.array([np.sum(weights * columns), np.sum(weights * rows)]) / total
-    return centre
+    # Only the light joined to the spot (through the line's unknown pixels, too): a
+    # neighbouring spot's would break the symmetry.
+    _, labels = cv2.connectedComponents(((left > s.threshold) | unknown).astype(np.uint8))
+    joined = cv2.dilate((labels == labels[row, column]).astype(np.uint8), np.ones((5, 5)))
+    left = np.where(joined > 0, left, 0.0)
+    starts = [(float(spot[0]), float(spot[1]))]
+    if np.hypot(column - spot[0], row - spot[1]) > SYMMETRY_SEARCH_PX / 2:
+        starts.append((float(column), float(row)))
+    x, y, mismatch = min((symmetric_centre(left, unknown, x, y, reach, s.threshold,
+                                           SYMMETRY_SEARCH_PX, SYMMETRY_PAIRS)
+                          for x, y in starts), key=lambda found: found[2])
+    centre = np.array([x, y])
+    near = (columns - x) ** 2 + (rows - y) ** 2 <= reach**2
+    if not np.isfinite(mismatch) or left[near].max(initial=0.0) <= s.threshold:
+        return None
+    # Clearance: the spot's reach on its side away from the line (where the line's light is
+    # not) and the line's half width at the threshold, against their centres' distance.
+    norm = float(np.hypot(slope, 1.0))
+    across = np.array([1.0, -slope]) / norm
+    to_line = (intercept + slope * centre[1] - centre[0]) / norm
+    along = np.array([slope, 1.0]) / norm
+    spot_rows, spot_columns = np.nonzero(near & (left > s.threshold))
+    spot_pixels = np.column_stack([spot_columns, spot_rows])
+    return LineFreeSpot(centre, along, _clearance(spot_pixels, centre, to_line * across, along,
+                                                  line_half_width / norm))
+
+
+def _clearance(spot_pixels: np.ndarray, centre: np.ndarray, to_line: np.ndarray,
+               along: np.ndarray, line_half_width_px: float) -> float:
+    """Gap [px] between a spot's edge and the laser line's edge (negative: they overlap).
+
+    `spot_pixels` (N×2) are the spot's pixels above the threshold, `to_line` the vector from
+    its centre to the nearest point of the line's centre, `along` the line's unit direction.
+    The spot's reach is taken on its side away from the line, where the line's light is not.
+    """
+    across = np.array([along[1], -along[0]])
+    distance = float(abs(to_line @ across))
+    away = -1.0 if to_line @ across > 0 else 1.0
+    reach = float(np.max(away * ((spot_pixels - centre) @ across), initial=0.0))
+    return distance - reach - line_half_width_px

@@ -72,25 +72,26 @@ class RigCalibration:
 
 
 def _observations(identification: Identification, blobs: list[np.ndarray],
-                  sigmas: list[np.ndarray]
+                  covariances: list[np.ndarray]
                   ) -> tuple[list[int], np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     ids = sorted(identification.assigned)
-    diode, frame, blob, pixels, sigma = [], [], [], [], []
+    diode, frame, blob, pixels, covariance = [], [], [], [], []
     for index, laser_id in enumerate(ids):
         for f, b in sorted(identification.assigned[laser_id].items()):
             diode.append(index)
             frame.append(f)
             blob.append(b)
             pixels.append(blobs[f][b])
-            sigma.append(sigmas[f][b])
+            covariance.append(covariances[f][b])
     return (ids, np.array(diode, int), np.array(frame, int), np.array(blob, int),
-            np.array(pixels).reshape(-1, 2), np.array(sigma, float))
+            np.array(pixels).reshape(-1, 2), np.array(covariance, float).reshape(-1, 2, 2))
 
 
 def calibrate_rig(rig: Rig, surfaces: list[KnownSurface], blobs: list[np.ndarray],
-                  blob_sigma_px: list[np.ndarray], line: LineObservations | None = None,
+                  blob_covariance_px2: list[np.ndarray], line: LineObservations | None = None,
                   settings: CalibrationSettings | None = None) -> RigCalibration:
-    """Identify the spots and fit the rig (camera pose, beams, line plane) to them."""
+    """Identify the spots and fit the rig (camera pose, beams, line plane) to them (`blobs`
+    and `blob_covariance_px2`: per frame N×2 pixels and N×2×2 covariances [px²])."""
     s = settings or CalibrationSettings()
     wide = IdentificationSettings(cone_deg=s.cone_deg + s.camera_turn_deg, gate_mm=s.gate_mm)
     identification = identify_spots(rig, surfaces, blobs, wide)
@@ -98,19 +99,20 @@ def calibrate_rig(rig: Rig, surfaces: list[KnownSurface], blobs: list[np.ndarray
         raise ValueError("no diode could be identified on these surfaces: "
                          + "; ".join(f"{i}: {why}" for i, why in
                                      sorted(identification.unidentified.items())[:3]))
-    ids, diode, frame, blob, pixels, sigma = _observations(identification, blobs, blob_sigma_px)
-    fit = self_calibrate(rig, ids, surfaces, diode, frame, pixels, sigma,
+    ids, diode, frame, blob, pixels, covariance = _observations(identification, blobs,
+                                                                blob_covariance_px2)
+    fit = self_calibrate(rig, ids, surfaces, diode, frame, pixels, covariance,
                          s.fit_emitters, s.fit_camera)
     narrow = IdentificationSettings(cone_deg=s.cone_deg, gate_mm=s.refined_gate_mm)
     identification = identify_spots(fit.rig, surfaces, blobs, narrow)
-    ids, diode, frame, blob, pixels, sigma = _observations(identification, blobs, blob_sigma_px)
+    ids, diode, frame, blob, pixels, covariance = _observations(identification, blobs,
+                                                                blob_covariance_px2)
     unidentified = dict(identification.unidentified)
     outliers: list[tuple[int, int, float]] = []
     while True:
-        fit = self_calibrate(rig, ids, surfaces, diode, frame, pixels, sigma,
+        fit = self_calibrate(rig, ids, surfaces, diode, frame, pixels, covariance,
                              s.fit_emitters, s.fit_camera)
-        scale = np.sqrt(max(fit.chi2_per_dof, 1.0))
-        normalised = np.linalg.norm(fit.spot_residuals_px, axis=1) / (sigma * scale)
+        normalised = fit.spot_residuals_sigma / np.sqrt(max(fit.chi2_per_dof, 1.0))
         keep = normalised <= s.outlier_sigma
         bad_diodes = [i for k, i in enumerate(ids)
                       if np.sqrt(np.mean(normalised[diode == k] ** 2)) > s.diode_rms_sigma
@@ -127,7 +129,7 @@ def calibrate_rig(rig: Rig, surfaces: list[KnownSurface], blobs: list[np.ndarray
         remaining = sorted({ids[d] for d in diode[keep]})
         remap = {ids.index(i): n for n, i in enumerate(remaining)}
         diode = np.array([remap[d] for d in diode[keep]], int)
-        frame, blob, pixels, sigma = frame[keep], blob[keep], pixels[keep], sigma[keep]
+        frame, blob, pixels, covariance = frame[keep], blob[keep], pixels[keep], covariance[keep]
         ids = remaining
     plane, used = None, None
     if line is not None and len(line.frame) >= 3 and rig.line_laser is not None:
@@ -138,7 +140,7 @@ def calibrate_rig(rig: Rig, surfaces: list[KnownSurface], blobs: list[np.ndarray
         # determine must stay at the rig file's value.
         start = (rig.line_laser.normal, plane.point_mm)
         for attempt in range(LINE_FITS):
-            fit = self_calibrate(rig, ids, surfaces, diode, frame, pixels, sigma,
+            fit = self_calibrate(rig, ids, surfaces, diode, frame, pixels, covariance,
                                  s.fit_emitters, s.fit_camera, used, start)
             normalised = fit.line_residuals_px / used.sigma_px
             rms = float(np.sqrt(np.mean(normalised**2)))

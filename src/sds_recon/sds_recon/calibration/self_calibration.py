@@ -2,8 +2,9 @@
 
 The seed calibrates each beam alone with the camera's pose assumed (Sec. 3.3.1) and blames
 its Table 3 errors on that assumption. Here every spot on a known surface constrains the
-camera and its own beam together: the residual is the distance [px] between the observed spot
-and the projection of the beam's hit on that surface, divided by the spot's σ. Parameters the data
+camera and its own beam together: the residual is the offset [px] between the observed spot
+and the projection of the beam's hit on that surface, whitened by the spot's covariance (a
+spot beside the laser line is known well along the line, poorly across it). Parameters the data
 cannot determine (their σ would exceed a limit) are not fitted: they keep the rig file's
 value and the result says which extra data would fix them.
 """
@@ -32,6 +33,9 @@ determined, with the data that would pin it down: a third of the error the calib
 meant to reach (camera 0.1° and 0.3 mm, beams 0.05°). Tilts about one axis leave the camera's
 rotation about that axis and the beams' common lean across it at σ ≈ 0.1° (the spots see
 only their difference); three tilts about the second axis bring both to σ ≈ 0.005°."""
+
+SIGMA_FLOOR_PX = 0.02
+"""Least spot or line-pixel σ [px] the fit believes (in any direction)."""
 
 NULL_SINGULAR = 1e-9
 """Singular values below this share of the largest (scaled Jacobian) are null directions."""
@@ -77,12 +81,26 @@ class SelfCalibration:
     rms_px: float                   # spot residuals
     chi2_per_dof: float
     spot_residuals_px: np.ndarray   # N×2, observed − predicted
+    spot_residuals_sigma: np.ndarray  # N, the same in the spot's own σ (Mahalanobis)
     line_residuals_px: np.ndarray   # along the row, one per line pixel (empty without a line)
     model: RigModel = field(repr=False)
 
     def sigma_of(self, name: str) -> float:
         """One-sigma uncertainty of a parameter by name (NaN if fixed)."""
         return float(self.sigmas[self.names.index(name)])
+
+
+def spot_whitening(covariance_px2: np.ndarray) -> np.ndarray:
+    """Per spot (N×2×2 covariance [px²]) the matrix W with WᵀW = C⁻¹, the covariance's
+    eigenvalues floored at SIGMA_FLOOR_PX²: |W r| is a residual r [px] in σ."""
+    values, vectors = np.linalg.eigh(np.asarray(covariance_px2, dtype=float))
+    values = np.maximum(values, SIGMA_FLOOR_PX**2)
+    return np.swapaxes(vectors, 1, 2) / np.sqrt(values)[:, :, None]
+
+
+def isotropic_covariance(sigma_px: np.ndarray) -> np.ndarray:
+    """N×2×2 covariances [px²] of spots with the same σ [px] in every direction."""
+    return np.asarray(sigma_px, dtype=float)[:, None, None] ** 2 * np.eye(2)
 
 
 def _jacobian(residuals: Callable[[np.ndarray], np.ndarray], values: np.ndarray,
@@ -99,19 +117,19 @@ def _jacobian(residuals: Callable[[np.ndarray], np.ndarray], values: np.ndarray,
 
 def self_calibrate(rig: Rig, laser_ids: list[int], surfaces: list[KnownSurface],
                    diode: np.ndarray, frame: np.ndarray, pixels: np.ndarray,
-                   sigma_px: np.ndarray, fit_emitters: bool = False,
+                   covariance_px2: np.ndarray, fit_emitters: bool = False,
                    fit_camera: bool = True, line: LineObservations | None = None,
                    line_plane: tuple[np.ndarray, np.ndarray] | None = None) -> SelfCalibration:
     """Fit camera pose and beams (emitters optionally), and with `line` the line laser's plane
     (started at `line_plane`: normal, point [mm]), to spots and line pixels on known surfaces.
 
     `diode` indexes `laser_ids` and `frame` indexes `surfaces` for each spot (`pixels` N×2,
-    `sigma_px` N). Undetermined parameters are fixed one by one (the least determined first)
-    until every fitted one is within LIMITS.
+    `covariance_px2` N×2×2). Undetermined parameters are fixed one by one (the least
+    determined first) until every fitted one is within LIMITS.
     """
     model = RigModel(rig, laser_ids, surfaces, fit_emitters, line, line_plane)
-    sigma = np.maximum(np.asarray(sigma_px, dtype=float), 0.02)
-    line_sigma = np.maximum(line.sigma_px, 0.02) if line is not None else np.empty(0)
+    whitening = spot_whitening(covariance_px2)
+    line_sigma = np.maximum(line.sigma_px, SIGMA_FLOOR_PX) if line is not None else np.empty(0)
     free = np.ones(model.size, bool)
     if not fit_camera:
         free[:6] = False
@@ -121,7 +139,7 @@ def self_calibrate(rig: Rig, laser_ids: list[int], surfaces: list[KnownSurface],
     def residuals(values: np.ndarray) -> np.ndarray:
         full = x.copy()
         full[free] = values
-        spot = (model.predict(full, diode, frame) - pixels) / sigma[:, None]
+        spot = np.einsum("nij,nj->ni", whitening, model.predict(full, diode, frame) - pixels)
         if line is None:
             return np.nan_to_num(spot.ravel(), nan=1e3)
         on_line = model.line_residuals(full) / line_sigma
@@ -175,5 +193,7 @@ def self_calibrate(rig: Rig, laser_ids: list[int], surfaces: list[KnownSurface],
         fixed=fixed, weak=weak, condition_number=float(singular[0] / max(singular[-1], 1e-300)),
         rms_px=float(np.sqrt(np.nanmean(np.sum(spot_residuals**2, axis=1)))),
         chi2_per_dof=chi2, spot_residuals_px=spot_residuals,
+        spot_residuals_sigma=np.linalg.norm(np.einsum("nij,nj->ni", whitening, spot_residuals),
+                                            axis=1),
         line_residuals_px=model.line_residuals(x) if line is not None else np.empty(0),
         model=model)
