@@ -161,42 +161,40 @@ def remove_line(window: np.ndarray, background: float, slope: float, intercept: 
     height, width = window.shape
     bins = 2 * int(np.round(reach / step_px)) + 1
     middle = bins // 2
-    counts = np.zeros(bins, np.int64)
+    bin_of = np.empty(height * width, np.int64)
+    value_of = np.empty(height * width)
+    count = 0
     for y in range(height):
         if abs(y - spot_row) <= reach:
             continue
         for x in range(width):
             offset = x - (intercept + slope * y)
             if abs(offset) <= reach:
-                counts[int(np.round(offset / step_px)) + middle] += 1
-    starts = np.zeros(bins + 1, np.int64)
-    for b in range(bins):
-        starts[b + 1] = starts[b] + counts[b]
-    values = np.empty(starts[bins])
-    filled = starts[:-1].copy()
-    for y in range(height):
-        if abs(y - spot_row) <= reach:
-            continue
-        for x in range(width):
-            offset = x - (intercept + slope * y)
-            if abs(offset) <= reach:
-                b = int(np.round(offset / step_px)) + middle
-                values[filled[b]] = window[y, x] - background
-                filled[b] += 1
-    # The medians of the bins that hold pixels, interpolated across the empty ones.
-    known = np.flatnonzero(counts)
+                bin_of[count] = int(np.round(offset / step_px)) + middle
+                value_of[count] = window[y, x] - background
+                count += 1
     left = np.zeros((height, width))
     unknown = np.zeros((height, width), np.bool_)
-    if len(known) == 0:
+    if count == 0:
         return left, unknown, 0.0, 0
-    medians = np.zeros(len(known))
-    half_width = 0.0
-    for k, index in enumerate(known):
-        ordered = np.sort(values[starts[index]:starts[index + 1]])
-        n = counts[index]
-        medians[k] = 0.5 * (ordered[(n - 1) // 2] + ordered[n // 2])
-        if medians[k] > threshold:
-            half_width = max(half_width, abs(index - middle) * step_px)
+    # Each bin's median (the bins that hold pixels), interpolated across the empty ones.
+    order = np.argsort(bin_of[:count], kind="mergesort")
+    sorted_bins, sorted_values = bin_of[:count][order], value_of[:count][order]
+    known = np.zeros(bins, np.int64)
+    medians = np.zeros(bins)
+    found, half_width, first = 0, 0.0, 0
+    while first < count:
+        last = first
+        while last < count and sorted_bins[last] == sorted_bins[first]:
+            last += 1
+        ordered = np.sort(sorted_values[first:last])
+        n = last - first
+        known[found] = sorted_bins[first]
+        medians[found] = 0.5 * (ordered[(n - 1) // 2] + ordered[n // 2])
+        if medians[found] > threshold:
+            half_width = max(half_width, abs(sorted_bins[first] - middle) * step_px)
+        found, first = found + 1, last
+    known, medians = known[:found], medians[:found]
     profile = np.interp(np.arange(bins + 1).astype(np.float64), known.astype(np.float64),
                         medians)
     for y in range(height):
@@ -213,7 +211,7 @@ def remove_line(window: np.ndarray, background: float, slope: float, intercept: 
                 unknown[y, x] = True
             else:
                 left[y, x] = signal - light
-    return left, unknown, half_width, int(starts[bins])
+    return left, unknown, half_width, count
 
 
 @njit(cache=True, fastmath=True)
