@@ -18,7 +18,6 @@ from sds_recon.calibration.lasers import KnownSurface
 from sds_recon.calibration.rig_model import RigModel
 from sds_recon.calibration.self_calibration import (
     SIGMA_FLOOR_PX,
-    isotropic_covariance,
     self_calibrate,
     spot_whitening,
 )
@@ -135,7 +134,7 @@ def test_parameters_the_data_cannot_determine_are_named_with_the_data_that_would
     surfaces = [KnownSurface(0.0, np.radians(a), 0.0) for a in ANGLES]
     ids, diode, frame, pixels = _exact_spots(true, surfaces)
     pixels = pixels + rng.normal(0, 0.07, pixels.shape)
-    covariance = isotropic_covariance(np.full(len(pixels), 0.07))
+    covariance = np.full((len(pixels), 1, 1), 0.07**2) * np.eye(2)   # σ 0.07 px each way
     # Emitters free and tilts about one axis only: a shift of the whole head along Y (camera
     # and emitters together) changes no image, so those parameters cannot all be fitted.
     loose = self_calibrate(nominal, ids, surfaces, diode, frame, pixels, covariance,

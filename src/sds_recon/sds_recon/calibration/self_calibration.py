@@ -98,11 +98,6 @@ def spot_whitening(covariance_px2: np.ndarray) -> np.ndarray:
     return np.swapaxes(vectors, 1, 2) / np.sqrt(values)[:, :, None]
 
 
-def isotropic_covariance(sigma_px: np.ndarray) -> np.ndarray:
-    """N×2×2 covariances [px²] of spots with the same σ [px] in every direction."""
-    return np.asarray(sigma_px, dtype=float)[:, None, None] ** 2 * np.eye(2)
-
-
 def _jacobian(residuals: Callable[[np.ndarray], np.ndarray], values: np.ndarray,
               scales: np.ndarray) -> np.ndarray:
     """Forward-difference Jacobian of the residuals, steps of 1e-6 of each parameter's scale."""
