@@ -13,6 +13,7 @@ from sds_sim.scenario import load_scenario
 from sds_tracker.hampel import HampelBank
 from sds_tracker.spots import (
     HAMPEL_REPLACED,
+    LOST,
     ON_LINE_SIGMA_PX,
     SpotSettings,
     SpotTracker,
@@ -211,6 +212,22 @@ def test_the_tracker_takes_the_lines_light_out_of_a_spot_it_overlaps() -> None:
     tracker.previous[0] = spot + np.array([1.0, 0.5])
     (plain,) = tracker.update(image, (0, 0))
     assert np.hypot(plain.x_px - spot[0], plain.y_px - spot[1]) > 0.5   # without the line
+
+
+@pytest.mark.parametrize("last_seen", [(76.0, 81.0), (80.0, 81.0), None])
+def test_a_spot_gone_where_its_path_crosses_the_line_is_lost_not_put_on_the_line(
+        last_seen: tuple[float, float] | None) -> None:
+    """The line's light alone is a blob on the spot's path: it is no spot."""
+    size = 160
+    line_x = 80.3 + 0.05 * (np.arange(size) - 80)
+    noise = np.random.default_rng(1).normal(0, 3, (size, size))
+    image = np.clip(saturated_spot_and_line(np.array([-100.0, -100.0]), line_x, size) + noise,
+                    0, 255).astype(np.uint8)
+    path = np.array([[36.0, 81.0], [116.0, 81.0]])
+    tracker = SpotTracker({0: path}, SpotSettings())
+    tracker.previous[0] = None if last_seen is None else np.array(last_seen)
+    (estimate,) = tracker.update(image, (0, 0), (np.arange(size), line_x))
+    assert estimate.flags & LOST and np.isnan(estimate.x_px)
 
 
 def test_a_spot_clear_of_the_line_is_reported_clear() -> None:

@@ -88,8 +88,10 @@ def find_spots(red: np.ndarray, offset: tuple[int, int] = (0, 0),
             pixels[row] = refined.centre
             if refined.clearance_px < 0:
                 covariance[row] = _on_line_covariance(refined.along, sigma[row])
-    # Two starts on one blob settle on the same centroid: keep one.
-    unique = _first_of_duplicates(pixels, tolerance_px=1.0)
+    # A blob that was the line's light alone is no spot; two starts on one blob settle on
+    # the same centre: keep one.
+    spots = np.flatnonzero(np.isfinite(pixels).all(axis=1))
+    unique = spots[_first_of_duplicates(pixels[spots], tolerance_px=1.0)]
     return SpotCandidates(pixels[unique], covariance[unique],
                           np.array([estimates[k].peak for k in found])[unique])
 

@@ -163,7 +163,8 @@ class SpotTracker:
         previous = self.previous[laser_id]
         assert previous is not None   # update() calls this for tracked spots only
         refined = line_free_centre(image, origin, previous, line, s)
-        if refined is None or refined.clearance_px >= 0 or \
+        if refined is None or not np.isfinite(refined.centre).all() or \
+                refined.clearance_px >= 0 or \
                 distance_to_path(refined.centre, path) > s.path_tolerance_px:
             return None
         x, y = np.round(refined.centre - origin).astype(int)
@@ -239,6 +240,8 @@ class SpotTracker:
         refined = None if line is None else line_free_centre(
             image, origin, centre if previous is None else previous, line, s)
         if refined is not None:
+            if not np.isfinite(refined.centre).all():
+                return lost   # the blob was the line's light alone
             centre = refined.centre
             if refined.clearance_px < 0:
                 sigma = max(sigma, ON_LINE_SIGMA_PX[1])
@@ -275,7 +278,8 @@ class LineFreeSpot:
     `centre` [px] and `along` (unit vector of the line's direction) are in the caller's frame;
     `clearance_px` is the gap between the spot's edge and the line's edge at the threshold
     (negative where the two overlap, and there the centre is uncertain across the line: a
-    saturated line hides the spot's light on its side; along the line it is not)."""
+    saturated line hides the spot's light on its side; along the line it is not). Both are
+    NaN where the line's light was all there was: no spot."""
 
     centre: np.ndarray
     along: np.ndarray
@@ -381,14 +385,14 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
                           for x, y in starts), key=lambda found: found[2])
     centre = np.array([x, y])
     near = (columns - x) ** 2 + (rows - y) ** 2 <= reach**2
+    norm = float(np.hypot(slope, 1.0))
+    along = np.array([slope, 1.0]) / norm
     if not np.isfinite(mismatch) or left[near].max(initial=0.0) <= s.threshold:
-        return None
+        return LineFreeSpot(np.full(2, np.nan), along, np.nan)
     # Clearance: the spot's reach on its side away from the line (where the line's light is
     # not) and the line's half width at the threshold, against their centres' distance.
-    norm = float(np.hypot(slope, 1.0))
     across = np.array([1.0, -slope]) / norm
     to_line = (intercept + slope * centre[1] - centre[0]) / norm
-    along = np.array([slope, 1.0]) / norm
     spot_rows, spot_columns = np.nonzero(near & (left > s.threshold))
     spot_pixels = np.column_stack([spot_columns, spot_rows])
     return LineFreeSpot(centre, along, _clearance(spot_pixels, centre, to_line * across, along,
