@@ -334,7 +334,7 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
                       s: SpotSettings) -> LineFreeSpot | None:
     """A spot's centre [window px] with the laser line's light taken away, the line's
     direction and the clearance between the two; None when the line does not reach enough of
-    the window's rows or no spot is left.
+    the window's rows, a NaN centre when no spot is left.
 
     `line_x[r]` is the line's centre column on window row r (NaN where unknown); a straight
     line through it on the rows beyond half a window from the spot is used. The line's
