@@ -113,10 +113,16 @@ class SpotTracker:
         estimates = []
         for laser_id, path in self.paths.items():
             estimate = settled.get(laser_id)
-            if estimate is None and line is not None and self.previous[laser_id] is not None:
-                estimate = self._track_on_line(image, origin, laser_id, path, line)
             if estimate is None:
-                estimate = self._track(image, origin, laser_id, path, line)
+                # A tracked spot is measured without the line's light once, around its last
+                # position: alone if it overlaps the line, else within the full search.
+                previous = self.previous[laser_id]
+                refined = None if line is None or previous is None else \
+                    line_free_centre(image, origin, previous, line, self.settings)
+                if refined is not None:
+                    estimate = self._track_on_line(image, origin, laser_id, path, refined)
+                if estimate is None:
+                    estimate = self._track(image, origin, laser_id, path, line, refined)
             self.previous[laser_id] = None if estimate.flags & LOST else \
                 np.array([estimate.x_px, estimate.y_px])
             estimates.append(estimate)
@@ -154,17 +160,12 @@ class SpotTracker:
         return settled
 
     def _track_on_line(self, image: np.ndarray, origin: np.ndarray, laser_id: int,
-                       path: np.ndarray, line: tuple[np.ndarray, np.ndarray]
-                       ) -> SpotEstimate | None:
-        """A tracked spot that overlaps the laser line, measured around its last position with
-        the line's light taken away, σ ON_LINE_SIGMA_PX across the line; None for a spot
-        clear of the line or off its path (the full search decides)."""
+                       path: np.ndarray, refined: LineFreeSpot) -> SpotEstimate | None:
+        """A tracked spot that overlaps the laser line, from its measurement without the
+        line's light (`refined`), σ ON_LINE_SIGMA_PX across the line; None for a spot clear
+        of the line, off its path or not there (the full search decides)."""
         s = self.settings
-        previous = self.previous[laser_id]
-        assert previous is not None   # update() calls this for tracked spots only
-        refined = line_free_centre(image, origin, previous, line, s)
-        if refined is None or not np.isfinite(refined.centre).all() or \
-                refined.clearance_px >= 0 or \
+        if not np.isfinite(refined.centre).all() or refined.clearance_px >= 0 or \
                 distance_to_path(refined.centre, path) > s.path_tolerance_px:
             return None
         x, y = np.round(refined.centre - origin).astype(int)
@@ -182,7 +183,11 @@ class SpotTracker:
         return np.array([*(path.min(axis=0) - half), *(path.max(axis=0) + half)])
 
     def _track(self, image: np.ndarray, origin: np.ndarray, laser_id: int, path: np.ndarray,
-               line: tuple[np.ndarray, np.ndarray] | None = None) -> SpotEstimate:
+               line: tuple[np.ndarray, np.ndarray] | None = None,
+               refined: LineFreeSpot | None = None) -> SpotEstimate:
+        """The full per-spot search; `refined`: a tracked spot's measurement without the
+        line's light around its last position, as update() made it (a spot being acquired
+        is measured so around the blob this search chooses)."""
         s = self.settings
         lost = SpotEstimate(laser_id, np.nan, np.nan, np.nan, 0.0, LOST)
         box = np.round(self._search_box(laser_id, path) - np.tile(origin, 2)).astype(int)
@@ -235,10 +240,9 @@ class SpotTracker:
         sigma = float(np.sqrt(np.sum(variance * ((xs - centre[0]) ** 2 +
                                                  (ys - centre[1]) ** 2)) / 2) / total)
         # The laser line's light pulls a spot it passes towards itself, even off its path:
-        # such a spot is measured again with the line's light subtracted, around where it
-        # was in the last frame if it was tracked.
-        refined = None if line is None else line_free_centre(
-            image, origin, centre if previous is None else previous, line, s)
+        # such a spot is measured again with the line's light subtracted.
+        if previous is None and line is not None:
+            refined = line_free_centre(image, origin, centre, line, s)
         if refined is not None:
             if not np.isfinite(refined.centre).all():
                 return lost   # the blob was the line's light alone
