@@ -88,6 +88,23 @@ def test_a_killed_consumer_stops_the_graph_and_is_named(repo, tmp_path, clip):
     assert wait_until(lambda: not pid_alive(pids["camera"]), timeout=10), output
 
 
+def test_a_node_process_that_crashes_leaves_every_threads_stack_in_the_log(repo, tmp_path, clip):
+    """A fatal signal (SIGSEGV in a C extension) leaves no Python traceback of its own: the
+    graph's processes print each thread's stack first (faulthandler), the clue to its cause."""
+    graph = SdsGraphRun(str(camera_and_recorder(repo, tmp_path)), "--set",
+                        f"camera.source={clip}",
+                        "--set", f"recorder.output={tmp_path / 'crashed.mcap'}")
+    graph.wait_for_line("recording /camera/image", timeout=60)
+    time.sleep(1.0)
+    pids = dict(zip(("camera", "recorder"), graph.child_pids(), strict=True))
+    os.kill(pids["camera"], signal.SIGSEGV)
+    assert graph.wait(timeout=30) == 128 + signal.SIGSEGV
+    output = graph.output()
+    assert "camera (camera) was killed by SIGSEGV" in output, output
+    assert "Fatal Python error: Segmentation fault" in output, output
+    assert "in _publish_frames" in output and "in _read_frames" in output, output
+
+
 def test_a_file_fed_graph_ends_by_itself_once_the_file_is_done(clip):
     graph = SdsGraphRun("camera_monitor.yaml", "--set", f"camera.source={clip}",
                         "--set", "camera.linger_s=0.5")

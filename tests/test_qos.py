@@ -2,16 +2,19 @@
 
 from __future__ import annotations
 
+import os
+import signal
 import subprocess
 import sys
+import threading
 import time
 import xml.etree.ElementTree as ElementTree
 
 import pytest
 from ros_helpers import RELIABLE, Probe, wait_until
 from sds_bringup.ros_env import graph_environment
-from sds_ros.qos import start_when_consumed, stream_qos
-from std_msgs.msg import Header
+from sds_ros.qos import start_when_consumed, stream_qos, wait_for_acks
+from std_msgs.msg import Header, String
 
 pytestmark = pytest.mark.ros
 
@@ -67,3 +70,48 @@ def test_graph_processes_load_the_fast_dds_profile_with_a_quick_heartbeat():
     done = subprocess.run([sys.executable, "-c", script], env=environment, capture_output=True,
                           text=True, timeout=60)
     assert done.returncode == 0 and "XMLPARSER" not in done.stdout + done.stderr, done.stderr
+
+
+ACK_READER = """
+import rclpy
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from std_msgs.msg import String
+rclpy.init()
+node = Node("ack_reader")
+node.create_subscription(String, "/qos_test/acks", lambda msg: None,
+                         QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+rclpy.spin(node)
+"""
+
+
+def test_waiting_for_a_stopped_readers_acks_freezes_nothing_and_ends_on_stop_or_timeout():
+    """The frame source's and player's end-of-stream wait: a reader that stopped acknowledging
+    (SIGSTOP) neither freezes the waiting process's other threads nor outlasts the stop."""
+    probe = Probe("qos_probe")
+    reader = subprocess.Popen([sys.executable, "-c", ACK_READER], env=dict(os.environ))
+    try:
+        publisher = probe.node.create_publisher(String, "/qos_test/acks", RELIABLE)
+        assert wait_until(lambda: publisher.get_subscription_count() == 1, timeout=30)
+        publisher.publish(String(data="first"))
+        assert wait_for_acks(publisher, 10.0, threading.Event())
+        os.kill(reader.pid, signal.SIGSTOP)
+        publisher.publish(String(data="x" * 100_000))
+        stop, result = threading.Event(), []
+        waiter = threading.Thread(
+            target=lambda: result.append(wait_for_acks(publisher, 30.0, stop)))
+        start = time.monotonic()
+        waiter.start()
+        time.sleep(0.5)
+        # rclpy's own wait_for_all_acked(30 s) would hold the GIL: this sleep would last 30 s.
+        assert time.monotonic() - start < 2.0 and waiter.is_alive()
+        stop.set()
+        waiter.join(timeout=2.0)
+        assert result == [False] and time.monotonic() - start < 3.0
+        start = time.monotonic()
+        assert not wait_for_acks(publisher, 0.3, threading.Event())
+        assert 0.3 <= time.monotonic() - start < 1.5
+    finally:
+        reader.kill()
+        reader.wait(timeout=10)
+        probe.close()

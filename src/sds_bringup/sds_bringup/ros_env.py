@@ -60,6 +60,9 @@ def graph_environment(domain_id: int, base: Mapping[str, str] | None = None,
     env["ROS_DOMAIN_ID"] = str(domain_id)
     env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     env["PYTHONUNBUFFERED"] = "1"
+    # A process that dies of a fatal signal (SIGSEGV in a C extension) prints every thread's
+    # Python stack to its log first: the one clue such a rare crash leaves.
+    env["PYTHONFAULTHANDLER"] = "1"
     env["RCUTILS_COLORIZED_OUTPUT"] = "0"
     # The graph's parallelism is its processes. OpenBLAS's own threads spin while they wait:
     # the sloshing node's small fits took 9.6 ms of CPU per frame with them and 3.0 without,

@@ -10,7 +10,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from rclpy.duration import Duration
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.subscription import RCLError
 from rclpy.time import Time
@@ -30,6 +29,7 @@ from sds_ros.ack_credit import AckCredit
 from sds_ros.hosted_node import HostedNode
 from sds_ros.image_msg import image_to_msg
 from sds_ros.imu_msg import imu_message
+from sds_ros.qos import wait_for_acks
 from sensor_msgs.msg import Image, Imu
 from std_msgs.msg import Header
 
@@ -242,7 +242,7 @@ class FrameSourceNode(HostedNode):
             time.sleep(0.02)
         # The model first, where its readers have matched (not a guarantee: a reader that
         # matches later gets it after the first frames; the tracker keeps those frames).
-        if not self._model_pub.wait_for_all_acked(Duration(seconds=5)):
+        if not wait_for_acks(self._model_pub, 5.0, self._stop):
             self.get_logger().warning("camera_model not acknowledged by every subscriber in "
                                       "5 s; publishing frames anyway")
         return not self._stop.is_set()
@@ -299,8 +299,8 @@ class FrameSourceNode(HostedNode):
             self._credit.wait(0)
         if self._stop.is_set():
             return
-        self._image_pub.wait_for_all_acked(Duration(seconds=5))
-        self._imu_pub.wait_for_all_acked(Duration(seconds=5))
+        wait_for_acks(self._image_pub, 5.0, self._stop)
+        wait_for_acks(self._imu_pub, 5.0, self._stop)
         if error is not None:
             self._fail(f"{error}; the {self.published} frames published before stay valid")
             return

@@ -6,7 +6,6 @@ import threading
 import time
 from pathlib import Path
 
-from rclpy.duration import Duration
 from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
@@ -14,7 +13,7 @@ from rosgraph_msgs.msg import Clock
 from sds_record.mcap_files import header_stamp_ns, read_messages, recorded_topics
 from sds_ros.ack_credit import AckCredit
 from sds_ros.hosted_node import HostedNode
-from sds_ros.qos import stream_qos
+from sds_ros.qos import stream_qos, wait_for_acks
 from std_msgs.msg import Header
 
 from sds_nodes.recorder import message_class
@@ -151,15 +150,18 @@ class PlayerNode(HostedNode):
         if flow_topic:
             self._credit.drain(timeout_s=10.0)
         for publisher in self._outputs.values():
-            publisher.wait_for_all_acked(Duration(seconds=5))
+            wait_for_acks(publisher, 5.0, self._stop)
         self.get_logger().info(f"played {self.published} messages from {p['input']}")
         self._stop.wait(p["linger_s"])   # the consumers' last outputs (e.g. the Hampel window)
         self.finished.set()
 
     def close(self) -> None:
-        """Stop publishing (the graph is shutting down)."""
+        """Stop publishing (the graph is shutting down) and wait for the publish thread."""
         self._stop.set()
         self._credit.release()
+        thread = getattr(self, "_thread", None)
+        if thread is not None:
+            thread.join(timeout=2.0)
 
 
 def main(args: list[str] | None = None) -> None:

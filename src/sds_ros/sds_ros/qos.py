@@ -1,9 +1,13 @@
-"""QoS of the measuring chain's data topics, and the start-up wait for their consumers."""
+"""QoS of the measuring chain's data topics, the start-up wait for their consumers and the
+end-of-stream wait for their acknowledgements."""
 
 from __future__ import annotations
 
+import threading
+import time
 from collections.abc import Callable, Sequence
 
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -45,6 +49,26 @@ def start_when_consumed(node: Node, outputs: Sequence[tuple[Publisher, int]],
             start()
 
     timer = node.create_timer(period_s, check)
+
+ACK_POLL_S = 0.02
+"""How often `wait_for_acks` asks whether everything is acknowledged [s]."""
+
+
+def wait_for_acks(publisher: Publisher, timeout_s: float, stop: threading.Event) -> bool:
+    """Wait until every reader has acknowledged what `publisher` sent, for at most `timeout_s`
+    [s] or until `stop` is set; True once everything is acknowledged.
+
+    rclpy's own `wait_for_all_acked(timeout)` holds the GIL for the whole wait: with a stopped
+    reader, a 10 s wait in one thread froze every other thread of the process (executor and
+    signal handlers included) for 10 s (Kilted wheels). So this asks without waiting, every
+    ACK_POLL_S, and sleeps in between with the GIL free.
+    """
+    deadline = time.monotonic() + timeout_s
+    while not publisher.wait_for_all_acked(Duration(seconds=0)):
+        if stop.wait(ACK_POLL_S) or time.monotonic() >= deadline:
+            return False
+    return True
+
 
 LIVE_DEPTH = 5
 """Messages a live preview's writer and reader keep (the newest matters)."""
