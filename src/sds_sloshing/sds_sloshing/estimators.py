@@ -371,49 +371,76 @@ def _model_columns(tau: np.ndarray, rates: np.ndarray, omegas: np.ndarray) -> np
     return columns
 
 
+def _nonlinear_columns(tau: np.ndarray, columns: np.ndarray, linear: np.ndarray,
+                       count: int) -> np.ndarray:
+    """∂(model)/∂(α₁, ω₁, …) of `_model_columns` · `linear` [one column per parameter]."""
+    a, b = linear[1::2], linear[2::2]
+    cos_part, sin_part = columns[:, 1::2], columns[:, 2::2]
+    jac = np.empty((len(tau), 2 * count))
+    with np.errstate(over="ignore", invalid="ignore"):
+        jac[:, 0::2] = -tau[:, None] * (a * cos_part + b * sin_part)
+        jac[:, 1::2] = tau[:, None] * (b * cos_part - a * sin_part)
+    return np.nan_to_num(jac, nan=0.0, posinf=0.0, neginf=0.0)
+
+
 def _fit_components(tau: np.ndarray, values: np.ndarray, poles: np.ndarray
                     ) -> tuple[np.ndarray, np.ndarray, float]:
     """Nonlinear least squares of offset + damped sinusoids from initial poles.
 
-    Returns the parameters (α₁, ω₁, …, c, a₁, b₁, …), their covariance (scaled by the residual
-    variance, widened by (1 + ρ)/(1 − ρ) when the residuals' lag-1 correlation ρ is
-    significant) and the residual sum of squares.
+    Variable projection (Golub & Pereyra, with Kaufman's Jacobian): for given rates and
+    frequencies the offset and amplitudes are a linear least-squares solution, so only the
+    2K rates and frequencies are iterated on. Same minimum as fitting all 4K + 1 parameters,
+    in far fewer steps: a record with little more than noise took up to 1400 evaluations,
+    and hit the evaluation limit, with all of them free.
+
+    Returns the parameters (α₁, ω₁, …, c, a₁, b₁, …), their covariance (from the full
+    problem's Jacobian, scaled by the residual variance, widened by (1 + ρ)/(1 − ρ) when the
+    residuals' lag-1 correlation ρ is significant) and the residual sum of squares.
     """
     count = len(poles)
-    rates, omegas = -poles.real, poles.imag
-    linear, *_ = np.linalg.lstsq(_model_columns(tau, rates, omegas), values, rcond=None)
-    start = np.concatenate([np.column_stack([rates, omegas]).ravel(), linear])
+    start = np.column_stack([-poles.real, poles.imag]).ravel()
 
-    def unpack(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return p[0:2 * count:2], p[1:2 * count:2], p[2 * count:]
+    last: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]] = {}
+
+    def projected(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+        """Design matrix, least-squares amplitudes, residual and an orthonormal basis of the
+        columns at p (None where the model overflows); the Jacobian reuses the residual's."""
+        key = p.tobytes()
+        if key not in last:
+            last.clear()
+            with np.errstate(over="ignore", invalid="ignore"):
+                columns = _model_columns(tau, p[0::2], p[1::2])
+            if not np.isfinite(columns).all():
+                last[key] = (columns, np.zeros(columns.shape[1]),
+                             np.full(len(values), 1e12), None)
+            else:
+                basis, triangle = np.linalg.qr(columns)
+                linear, *_ = np.linalg.lstsq(triangle, basis.T @ values, rcond=None)
+                last[key] = (columns, linear, columns @ linear - values, basis)
+        return last[key]
 
     def residual(p: np.ndarray) -> np.ndarray:
-        r, w, lin = unpack(p)
-        with np.errstate(over="ignore", invalid="ignore"):
-            value = _model_columns(tau, r, w) @ lin - values
-        return np.where(np.isfinite(value), value, 1e12)
+        return projected(p)[2]
 
     def jacobian(p: np.ndarray) -> np.ndarray:
-        r, w, lin = unpack(p)
-        columns = _model_columns(tau, r, w)
-        a, b = lin[1::2], lin[2::2]
-        cos_part, sin_part = columns[:, 1::2], columns[:, 2::2]
-        jac = np.empty((len(tau), len(p)))
-        with np.errstate(over="ignore", invalid="ignore"):
-            jac[:, 0:2 * count:2] = -tau[:, None] * (a * cos_part + b * sin_part)
-            jac[:, 1:2 * count:2] = tau[:, None] * (b * cos_part - a * sin_part)
-        jac[:, 2 * count:] = columns
-        return np.nan_to_num(jac, nan=0.0, posinf=0.0, neginf=0.0)
+        columns, linear, _, basis = projected(p)
+        if basis is None:
+            return np.zeros((len(values), len(p)))
+        derivative = _nonlinear_columns(tau, columns, linear, count)
+        return derivative - basis @ (basis.T @ derivative)
 
     result = least_squares(residual, start, jac=jacobian, method="lm", x_scale="jac")
-    rss = float(result.fun @ result.fun)
-    dof = len(values) - len(start)
+    columns, linear, fitted_residual, _ = projected(result.x)
+    parameters = np.concatenate([result.x, linear])
+    rss = float(fitted_residual @ fitted_residual)
+    dof = len(values) - len(parameters)
     variance = rss / dof
-    correlation = float(np.corrcoef(result.fun[:-1], result.fun[1:])[0, 1])
+    correlation = float(np.corrcoef(fitted_residual[:-1], fitted_residual[1:])[0, 1])
     if correlation > 2.0 / np.sqrt(len(values)):
         variance *= (1 + correlation) / (1 - correlation)
-    covariance = variance * np.linalg.pinv(result.jac.T @ result.jac)
-    return result.x, covariance, rss
+    full_jacobian = np.hstack([_nonlinear_columns(tau, columns, linear, count), columns])
+    covariance = variance * np.linalg.pinv(full_jacobian.T @ full_jacobian)
+    return parameters, covariance, rss
 
 
 def fit_damped_sinusoids(time_s: ArrayLike, values: ArrayLike, max_components: int = 4,
