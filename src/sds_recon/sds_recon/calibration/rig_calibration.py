@@ -7,7 +7,13 @@
    camera pose hid come back), and fit again.
 4. Spots whose residual exceeds `outlier_sigma` are left out, and a diode whose spots do not
    fit its own beam is named unidentified, never calibrated on a wrong blob.
-5. With line pixels, the line laser's plane is started by a robust fit through the fitted
+5. The diodes left out are identified once more, among the blobs no calibrated diode uses,
+   through the camera the others determined and from the rig file's beams (not their own
+   beams of step 2, which a wrong first choice had bent towards its blobs); whatever is
+   found must pass step 4 in a joint fit with all the others. Two diodes ~10 mm apart whose
+   beams each reach the other's spots within the gate on every surface were swapped in
+   step 1, and step 3 kept the swap: 58 σ off at the ends, only 0.24 mm on the surface.
+6. With line pixels, the line laser's plane is started by a robust fit through the fitted
    camera; the line pixels within OUTLIER_MM of it (not the line's ends on the wall) then join
    the spots in one fit of camera, beams and plane. The line pixels' σ is scaled until their
    normalised RMS is 1 (the tracker's σ is a relative weight), and line pixels beyond
@@ -16,7 +22,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from sds_model.rig import Rig
@@ -71,20 +77,94 @@ class RigCalibration:
     line: LineObservations | None = None     # the line pixels the joint fit used
 
 
-def _observations(identification: Identification, blobs: list[np.ndarray],
-                  covariances: list[np.ndarray]
-                  ) -> tuple[list[int], np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    ids = sorted(identification.assigned)
+@dataclass(frozen=True)
+class _Spots:
+    """The spots a joint fit uses: per spot its diode (index into `ids`), frame, blob index,
+    pixel (N×2) and covariance (N×2×2 px²)."""
+
+    ids: list[int]
+    diode: np.ndarray
+    frame: np.ndarray
+    blob: np.ndarray
+    pixels: np.ndarray
+    covariance: np.ndarray
+
+    def kept(self, keep: np.ndarray) -> _Spots:
+        """The spots where `keep` holds, their diodes renumbered."""
+        remaining = sorted({self.ids[d] for d in self.diode[keep]})
+        remap = {self.ids.index(i): n for n, i in enumerate(remaining)}
+        return _Spots(remaining, np.array([remap[d] for d in self.diode[keep]], int),
+                      self.frame[keep], self.blob[keep], self.pixels[keep],
+                      self.covariance[keep])
+
+    def used(self) -> set[tuple[int, int]]:
+        """The (frame, blob index) pairs of these spots."""
+        return set(zip(self.frame.tolist(), self.blob.tolist(), strict=True))
+
+    def assigned(self) -> dict[int, dict[int, int]]:
+        """Laser id → frame → blob index."""
+        return {i: dict(zip(self.frame[self.diode == k].tolist(),
+                            self.blob[self.diode == k].tolist(), strict=True))
+                for k, i in enumerate(self.ids)}
+
+
+def _observations(assigned: dict[int, dict[int, int]], blobs: list[np.ndarray],
+                  covariances: list[np.ndarray]) -> _Spots:
+    """The spots of the assigned diodes (laser id → frame → blob index)."""
+    ids = sorted(assigned)
     diode, frame, blob, pixels, covariance = [], [], [], [], []
     for index, laser_id in enumerate(ids):
-        for f, b in sorted(identification.assigned[laser_id].items()):
+        for f, b in sorted(assigned[laser_id].items()):
             diode.append(index)
             frame.append(f)
             blob.append(b)
             pixels.append(blobs[f][b])
             covariance.append(covariances[f][b])
-    return (ids, np.array(diode, int), np.array(frame, int), np.array(blob, int),
-            np.array(pixels).reshape(-1, 2), np.array(covariance, float).reshape(-1, 2, 2))
+    return _Spots(ids, np.array(diode, int), np.array(frame, int), np.array(blob, int),
+                  np.array(pixels).reshape(-1, 2), np.array(covariance, float).reshape(-1, 2, 2))
+
+
+def _fit_without_outliers(rig: Rig, surfaces: list[KnownSurface], spots: _Spots,
+                          s: CalibrationSettings, unidentified: dict[int, str],
+                          outliers: list[tuple[int, int, float]]
+                          ) -> tuple[SelfCalibration, _Spots]:
+    """Fit, leave out the spots beyond `outlier_sigma` and the diodes whose spots do not fit
+    one beam (named in `unidentified`, the spots in `outliers`), until none is left out."""
+    while True:
+        fit = self_calibrate(rig, spots.ids, surfaces, spots.diode, spots.frame, spots.pixels,
+                             spots.covariance, s.fit_emitters, s.fit_camera)
+        normalised = fit.spot_residuals_sigma / np.sqrt(max(fit.chi2_per_dof, 1.0))
+        keep = normalised <= s.outlier_sigma
+        rms = {i: float(np.sqrt(np.mean(normalised[spots.diode == k] ** 2)))
+               for k, i in enumerate(spots.ids)}
+        bad_diodes = [i for i in spots.ids if rms[i] > s.diode_rms_sigma * np.sqrt(2)]
+        if keep.all() and not bad_diodes:
+            return fit, spots
+        for k, i in enumerate(spots.ids):
+            if i in bad_diodes:
+                unidentified[i] = f"its spots do not fit one beam (RMS {rms[i]:.1f} σ)"
+                keep &= spots.diode != k
+        outliers += [(spots.ids[spots.diode[k]], int(spots.frame[k]), float(normalised[k]))
+                     for k in np.flatnonzero(~keep) if spots.ids[spots.diode[k]] not in bad_diodes]
+        spots = spots.kept(keep)
+
+
+def _identify_again(fitted: Rig, nominal: Rig, laser_ids: list[int],
+                    surfaces: list[KnownSurface], blobs: list[np.ndarray],
+                    taken: set[tuple[int, int]], settings: IdentificationSettings
+                    ) -> Identification:
+    """The diodes `laser_ids` identified through the fitted camera from the rig file's beams,
+    among the blobs not `taken` ((frame, blob) pairs); blob indices are the frames' own."""
+    beams = [d for d in nominal.diodes if d.laser_id in laser_ids]
+    if not beams:
+        return Identification({}, {})
+    free = [np.array([j for j in range(len(b)) if (f, j) not in taken], int)
+            for f, b in enumerate(blobs)]
+    found = identify_spots(replace(fitted, diodes=tuple(beams)), surfaces,
+                           [b[index] for b, index in zip(blobs, free, strict=True)], settings)
+    assigned = {i: {f: int(free[f][b]) for f, b in support.items()}
+                for i, support in found.assigned.items()}
+    return Identification(assigned, found.unidentified)
 
 
 def calibrate_rig(rig: Rig, surfaces: list[KnownSurface], blobs: list[np.ndarray],
@@ -99,38 +179,36 @@ def calibrate_rig(rig: Rig, surfaces: list[KnownSurface], blobs: list[np.ndarray
         raise ValueError("no diode could be identified on these surfaces: "
                          + "; ".join(f"{i}: {why}" for i, why in
                                      sorted(identification.unidentified.items())[:3]))
-    ids, diode, frame, blob, pixels, covariance = _observations(identification, blobs,
-                                                                blob_covariance_px2)
-    fit = self_calibrate(rig, ids, surfaces, diode, frame, pixels, covariance,
-                         s.fit_emitters, s.fit_camera)
+    spots = _observations(identification.assigned, blobs, blob_covariance_px2)
+    fit = self_calibrate(rig, spots.ids, surfaces, spots.diode, spots.frame, spots.pixels,
+                         spots.covariance, s.fit_emitters, s.fit_camera)
     narrow = IdentificationSettings(cone_deg=s.cone_deg, gate_mm=s.refined_gate_mm)
     identification = identify_spots(fit.rig, surfaces, blobs, narrow)
-    ids, diode, frame, blob, pixels, covariance = _observations(identification, blobs,
-                                                                blob_covariance_px2)
     unidentified = dict(identification.unidentified)
     outliers: list[tuple[int, int, float]] = []
-    while True:
-        fit = self_calibrate(rig, ids, surfaces, diode, frame, pixels, covariance,
-                             s.fit_emitters, s.fit_camera)
-        normalised = fit.spot_residuals_sigma / np.sqrt(max(fit.chi2_per_dof, 1.0))
-        keep = normalised <= s.outlier_sigma
-        bad_diodes = [i for k, i in enumerate(ids)
-                      if np.sqrt(np.mean(normalised[diode == k] ** 2)) > s.diode_rms_sigma
-                      * np.sqrt(2)]
-        if keep.all() and not bad_diodes:
-            break
-        for k, i in enumerate(ids):
-            if i in bad_diodes:
-                unidentified[i] = ("its spots do not fit one beam (RMS "
-                                   f"{np.sqrt(np.mean(normalised[diode == k] ** 2)):.1f} σ)")
-                keep &= diode != k
-        outliers += [(ids[diode[k]], int(frame[k]), float(normalised[k]))
-                     for k in np.flatnonzero(~keep) if ids[diode[k]] not in bad_diodes]
-        remaining = sorted({ids[d] for d in diode[keep]})
-        remap = {ids.index(i): n for n, i in enumerate(remaining)}
-        diode = np.array([remap[d] for d in diode[keep]], int)
-        frame, blob, pixels, covariance = frame[keep], blob[keep], pixels[keep], covariance[keep]
-        ids = remaining
+    spots = _observations(identification.assigned, blobs, blob_covariance_px2)
+    fit, spots = _fit_without_outliers(rig, surfaces, spots, s, unidentified, outliers)
+    again = _identify_again(fit.rig, rig, sorted(unidentified), surfaces, blobs, spots.used(),
+                            narrow)
+    if again.assigned:
+        retry_unidentified = {i: why for i, why in unidentified.items()
+                              if i not in again.assigned}
+        retry_outliers = list(outliers)
+        retry_fit, retry_spots = _fit_without_outliers(
+            rig, surfaces,
+            _observations(spots.assigned() | again.assigned, blobs, blob_covariance_px2), s,
+            retry_unidentified, retry_outliers)
+        # Kept only if no diode that fitted before is lost (a wrong blob could pull the
+        # camera away from a right one).
+        if set(spots.ids) <= set(retry_spots.ids):
+            fit, spots, unidentified, outliers = (retry_fit, retry_spots, retry_unidentified,
+                                                  retry_outliers)
+    claimed = spots.used()
+    identification = Identification(
+        spots.assigned(), unidentified,
+        [[j for j in range(len(b)) if (f, j) not in claimed] for f, b in enumerate(blobs)])
+    ids, diode, frame, blob, pixels, covariance = (spots.ids, spots.diode, spots.frame,
+                                                   spots.blob, spots.pixels, spots.covariance)
     plane, used = None, None
     if line is not None and len(line.frame) >= 3 and rig.line_laser is not None:
         plane, used = _line_plane(fit.rig, surfaces, line, s.line_cone_deg)
