@@ -50,6 +50,7 @@ def start_when_consumed(node: Node, outputs: Sequence[tuple[Publisher, int]],
 
     timer = node.create_timer(period_s, check)
 
+
 ACK_POLL_S = 0.02
 """How often `wait_for_acks` asks whether everything is acknowledged [s]."""
 
