@@ -120,6 +120,21 @@ def test_the_fit_is_a_least_squares_minimum_in_every_parameter(noise: float) -> 
     assert 2 * refined.cost >= rss * (1 - 1e-7)
 
 
+def test_a_growing_oscillation_gets_an_honest_sigma_not_a_vanishing_one() -> None:
+    """An oscillation that grows from 1e-12 mm to 0.65 mm at the window's end: its rate and
+    frequency are known from the last second or two only, and its σ must say so (the
+    covariance's inverse once cut them to 1e-26 next to the e^27 columns)."""
+    t = np.arange(0, 8.0, 1 / 30)
+    rng = np.random.default_rng(4)
+    y = 1e-12 * np.exp(3.4 * t) * np.cos(2 * np.pi * 2.0 * t) + rng.normal(0, 0.02, len(t))
+    fit = fit_damped_sinusoids(t, y)
+    component = max(fit.components, key=lambda c: np.abs(c.evaluate(t[-30:] - t[0])).max())
+    f_sigma, z_sigma = component.sigmas()
+    assert component.decay_rate_s < 0   # growing
+    assert 1e-4 < f_sigma < 0.1 and z_sigma > 1e-4, (f_sigma, z_sigma)
+    assert abs(component.natural_frequency_hz - np.hypot(2.0, 3.4 / (2 * np.pi))) < 4 * f_sigma
+
+
 def test_classical_estimators_on_one_decay() -> None:
     t = np.arange(0, 9.3, 1 / 30)
     y = damped(t, 2.0, 0.02, 2.0) + np.random.default_rng(0).normal(0, 0.02, len(t))

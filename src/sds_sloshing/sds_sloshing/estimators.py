@@ -394,8 +394,9 @@ def _fit_components(tau: np.ndarray, values: np.ndarray, poles: np.ndarray
     and hit the evaluation limit, with all of them free.
 
     Returns the parameters (α₁, ω₁, …, c, a₁, b₁, …), their covariance (from the full
-    problem's Jacobian, scaled by the residual variance, widened by (1 + ρ)/(1 − ρ) when the
-    residuals' lag-1 correlation ρ is significant) and the residual sum of squares.
+    problem's Jacobian, its columns scaled to unit norm, times the residual variance,
+    widened by (1 + ρ)/(1 − ρ) when the residuals' lag-1 correlation ρ is significant) and
+    the residual sum of squares (infinite where the model overflows).
     """
     count = len(poles)
     start = np.column_stack([-poles.real, poles.imag]).ravel()
@@ -430,8 +431,10 @@ def _fit_components(tau: np.ndarray, values: np.ndarray, poles: np.ndarray
         return derivative - basis @ (basis.T @ derivative)
 
     result = least_squares(residual, start, jac=jacobian, method="lm", x_scale="jac")
-    columns, linear, fitted_residual, _ = projected(result.x)
+    columns, linear, fitted_residual, basis = projected(result.x)
     parameters = np.concatenate([result.x, linear])
+    if basis is None:   # the model overflows at the end point: no fit (the caller skips it)
+        return parameters, np.full((len(parameters), len(parameters)), np.nan), np.inf
     rss = float(fitted_residual @ fitted_residual)
     dof = len(values) - len(parameters)
     variance = rss / dof
@@ -439,7 +442,13 @@ def _fit_components(tau: np.ndarray, values: np.ndarray, poles: np.ndarray
     if correlation > 2.0 / np.sqrt(len(values)):
         variance *= (1 + correlation) / (1 - correlation)
     full_jacobian = np.hstack([_nonlinear_columns(tau, columns, linear, count), columns])
-    covariance = variance * np.linalg.pinv(full_jacobian.T @ full_jacobian)
+    # Columns scaled to unit norm before the inverse: a growing component's columns reach
+    # e^30 at the window's end, and pinv's cut-off, relative to them, zeroed the variance of
+    # every rate and frequency (σ 1e-26 Hz reported for a 2 Hz component known to ±0.1 Hz).
+    scale = np.linalg.norm(full_jacobian, axis=0)
+    scale[scale == 0] = 1.0
+    scaled = full_jacobian / scale
+    covariance = variance * np.linalg.pinv(scaled.T @ scaled) / np.outer(scale, scale)
     return parameters, covariance, rss
 
 
