@@ -17,6 +17,11 @@ SYMMETRY_SEARCH_PX = 4
 """How far [px] from each start the centre of a spot's symmetry is searched."""
 SYMMETRY_PAIRS = 20
 """Fewest mirrored pixel pairs that make a centre of symmetry."""
+LINE_SPECKLE_PEAK = 8.0
+"""How far above the laser line's own speckle (robust σ of what its profile leaves on the
+rows away from the spot) a spot's light must rise once the line's light is taken away. On a
+4K drop the speckle's σ was 10-14 DN and it left peaks up to 72 DN (5 σ) where no spot was;
+a spot on the line left 246 DN (22 σ)."""
 ON_LINE_SIGMA_PX = (0.07, 0.13)
 """Least uncertainty [px] along and across the laser line of a spot whose light overlaps the
 line's, measured with the line's light subtracted (`spot_without_line`): where both
@@ -123,6 +128,9 @@ class SpotTracker:
                     estimate = self._track_on_line(image, origin, laser_id, path, refined)
                 if estimate is None:
                     estimate = self._track(image, origin, laser_id, path, line, refined)
+                if estimate.flags & LOST and previous is None and line is not None:
+                    estimate = self._acquire_on_line(image, origin, laser_id, path, line) \
+                        or estimate
             self.previous[laser_id] = None if estimate.flags & LOST else \
                 np.array([estimate.x_px, estimate.y_px])
             estimates.append(estimate)
@@ -173,6 +181,34 @@ class SpotTracker:
         return SpotEstimate(laser_id, float(refined.centre[0]), float(refined.centre[1]),
                             ON_LINE_SIGMA_PX[1], peak,
                             SATURATED if peak >= s.saturation_level else 0)
+
+    def _acquire_on_line(self, image: np.ndarray, origin: np.ndarray, laser_id: int,
+                         path: np.ndarray, line: tuple[np.ndarray, np.ndarray]
+                         ) -> SpotEstimate | None:
+        """A spot not yet acquired that overlaps the laser line: its light and the line's are
+        one blob, whose centre lies on the line, not on the path (a path can run beside the
+        line for 200 px). Measured without the line's light (`settled_line_free_centre`,
+        `_track_on_line`) from starts every half window along the stretch of its path within
+        a window of the line; None unless exactly one spot (finds within a quarter window of
+        each other) is there."""
+        s = self.settings
+        step = s.window_px / 2
+        lengths = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0),
+                                                                  axis=1))])
+        along = np.arange(0.0, lengths[-1] + step, step)
+        starts = np.column_stack([np.interp(along, lengths, path[:, 0]),
+                                  np.interp(along, lengths, path[:, 1])])
+        line_x = np.interp(starts[:, 1], line[0], line[1], left=np.nan, right=np.nan)
+        found: list[SpotEstimate] = []
+        for start in starts[np.abs(starts[:, 0] - line_x) <= s.window_px]:
+            refined = settled_line_free_centre(image, origin, start, line, s)
+            estimate = None if refined is None else \
+                self._track_on_line(image, origin, laser_id, path, refined)
+            if estimate is not None and all(np.hypot(estimate.x_px - f.x_px,
+                                                     estimate.y_px - f.y_px) > step / 2
+                                            for f in found):
+                found.append(estimate)
+        return found[0] if len(found) == 1 else None
 
     def _search_box(self, laser_id: int, path: np.ndarray) -> np.ndarray:
         """(x0, y0, x1, y1) full-frame: around the previous position, or the whole path."""
@@ -242,7 +278,7 @@ class SpotTracker:
         # The laser line's light pulls a spot it passes towards itself, even off its path:
         # such a spot is measured again with the line's light subtracted.
         if previous is None and line is not None:
-            refined = line_free_centre(image, origin, centre, line, s)
+            refined = settled_line_free_centre(image, origin, centre, line, s)
         if refined is not None:
             if not np.isfinite(refined.centre).all():
                 return lost   # the blob was the line's light alone
@@ -310,6 +346,23 @@ def line_free_centre(image: np.ndarray, origin: np.ndarray, centre: np.ndarray,
     return window_without_line(image, origin, window, line_x, centre, s)
 
 
+def settled_line_free_centre(image: np.ndarray, origin: np.ndarray, centre: np.ndarray,
+                             line: tuple[np.ndarray, np.ndarray], s: SpotSettings,
+                             rounds: int = 3) -> LineFreeSpot | None:
+    """`line_free_centre`, measured again from where it lands until that moves less than a
+    quarter pixel (at most `rounds` times): from a start far from the spot (a blob's centre
+    on the line, a point of its path) the window's rows and its brightest patch are not the
+    spot's, and one measurement landed up to 6 px off; the next, centred on it, is right."""
+    refined = None
+    for _ in range(rounds):
+        refined = line_free_centre(image, origin, centre, line, s)
+        if refined is None or not np.isfinite(refined.centre).all() or \
+                np.hypot(*(refined.centre - centre)) < 0.25:
+            return refined
+        centre = refined.centre
+    return refined
+
+
 def window_without_line(image: np.ndarray, origin: np.ndarray,
                         window: tuple[int, int, int, int], line_x: np.ndarray,
                         centre: np.ndarray, s: SpotSettings) -> LineFreeSpot | None:
@@ -338,7 +391,8 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
                       s: SpotSettings) -> LineFreeSpot | None:
     """A spot's centre [window px] with the laser line's light taken away, the line's
     direction and the clearance between the two; None when the line does not reach enough of
-    the window's rows, a NaN centre when no spot is left.
+    the window's rows, a NaN centre when no spot is left (nothing above the threshold
+    beside the line, nothing LINE_SPECKLE_PEAK times the line's speckle on it).
 
     `line_x[r]` is the line's centre column on window row r (NaN where unknown); a straight
     line through it on the rows beyond half a window from the spot is used. The line's
@@ -370,6 +424,12 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
         s.saturation_level)
     if profile_pixels < 3 * (2 * reach + 1):
         return None
+    # The line's speckle leaves light of its own within the line's band: what it leaves on
+    # the profile's rows says how much.
+    band = np.abs(columns - intercept - slope * rows) <= line_half_width
+    on_line = band & ~unknown & (np.abs(rows - spot[1]) > reach)
+    speckle = 1.4826 * float(np.median(np.abs(left[on_line]))) if on_line.any() else 0.0
+    floor = max(s.threshold, LINE_SPECKLE_PEAK * speckle)
     # Two starts: `spot`, and the brightest 5×5 patch of what is left within half a window
     # of it (not another spot's or a reflection's farther away), where that is not already
     # within the search around `spot`.
@@ -391,7 +451,8 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
     near = (columns - x) ** 2 + (rows - y) ** 2 <= reach**2
     norm = float(np.hypot(slope, 1.0))
     along = np.array([slope, 1.0]) / norm
-    if not np.isfinite(mismatch) or left[near].max(initial=0.0) <= s.threshold:
+    if not np.isfinite(mismatch) or (left[near & ~band].max(initial=0.0) <= s.threshold and
+                                     left[near & band].max(initial=0.0) <= floor):
         return LineFreeSpot(np.full(2, np.nan), along, np.nan)
     # Clearance: the spot's reach on its side away from the line (where the line's light is
     # not) and the line's half width at the threshold, against their centres' distance.
