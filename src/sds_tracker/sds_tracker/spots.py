@@ -108,7 +108,8 @@ class SpotTracker:
         image edge) and every spot not yet acquired take the full per-spot search. `line`, the
         laser line's full-frame (rows, columns) in this frame, if given, keeps the line's light
         out of the spots it passes (`spot_without_line`): a tracked spot it overlaps is
-        measured that way alone (`_track_on_line`), with no per-spot search.
+        measured that way alone (`_track_on_line`), with no per-spot search, and a spot not
+        yet acquired that the search misses is looked for on the line (`_acquire_on_line`).
         """
         origin = np.array(offset, dtype=float)
         tracked = [i for i in self.paths if self.previous[i] is not None]
