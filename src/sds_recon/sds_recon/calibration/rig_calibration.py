@@ -152,19 +152,19 @@ def _fit_without_outliers(rig: Rig, surfaces: list[KnownSurface], spots: _Spots,
 def _identify_again(fitted: Rig, nominal: Rig, laser_ids: list[int],
                     surfaces: list[KnownSurface], blobs: list[np.ndarray],
                     taken: set[tuple[int, int]], settings: IdentificationSettings
-                    ) -> Identification:
+                    ) -> dict[int, dict[int, int]]:
     """The diodes `laser_ids` identified through the fitted camera from the rig file's beams,
-    among the blobs not `taken` ((frame, blob) pairs); blob indices are the frames' own."""
+    among the blobs not `taken` ((frame, blob) pairs): laser id → frame → blob index (the
+    frames' own indices)."""
     beams = [d for d in nominal.diodes if d.laser_id in laser_ids]
     if not beams:
-        return Identification({}, {})
+        return {}
     free = [np.array([j for j in range(len(b)) if (f, j) not in taken], int)
             for f, b in enumerate(blobs)]
     found = identify_spots(replace(fitted, diodes=tuple(beams)), surfaces,
                            [b[index] for b, index in zip(blobs, free, strict=True)], settings)
-    assigned = {i: {f: int(free[f][b]) for f, b in support.items()}
-                for i, support in found.assigned.items()}
-    return Identification(assigned, found.unidentified)
+    return {i: {f: int(free[f][b]) for f, b in support.items()}
+            for i, support in found.assigned.items()}
 
 
 def calibrate_rig(rig: Rig, surfaces: list[KnownSurface], blobs: list[np.ndarray],
@@ -190,13 +190,13 @@ def calibrate_rig(rig: Rig, surfaces: list[KnownSurface], blobs: list[np.ndarray
     fit, spots = _fit_without_outliers(rig, surfaces, spots, s, unidentified, outliers)
     again = _identify_again(fit.rig, rig, sorted(unidentified), surfaces, blobs, spots.used(),
                             narrow)
-    if again.assigned:
+    if again:
         retry_unidentified = {i: why for i, why in unidentified.items()
-                              if i not in again.assigned}
+                              if i not in again}
         retry_outliers = list(outliers)
         retry_fit, retry_spots = _fit_without_outliers(
             rig, surfaces,
-            _observations(spots.assigned() | again.assigned, blobs, blob_covariance_px2), s,
+            _observations(spots.assigned() | again, blobs, blob_covariance_px2), s,
             retry_unidentified, retry_outliers)
         # Kept only if no diode that fitted before is lost (a wrong blob could pull the
         # camera away from a right one).
