@@ -22,7 +22,8 @@ LAYERS = {
 """0: pure algorithms (numpy, SciPy, OpenCV); 1: the ROS layer (node host, QoS, message codecs,
 recordings, the Rerun scene of messages); 2: the graph's nodes; 3: launcher and `sds`."""
 ROS_MODULES = ("rclpy", "sds_msgs", "sensor_msgs", "std_msgs", "builtin_interfaces",
-               "geometry_msgs", "tf2_msgs", "rosgraph_msgs", "rosidl_runtime_py", "mcap_ros2")
+               "geometry_msgs", "tf2_msgs", "rosgraph_msgs", "rosidl_runtime_py", "mcap_ros2",
+               "rosbags")
 
 
 def imported_modules(path: Path) -> set[str]:

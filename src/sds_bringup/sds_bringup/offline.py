@@ -309,7 +309,7 @@ def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:
             frames += 1
         elif name == "sds_msgs/msg/LaserLineProfile":
             tables.add_line(msg.frame_index, time_s, msg.x_px, msg.y_px, msg.sigma_px,
-                            msg.peak_intensity, np.frombuffer(bytearray(msg.flags), np.uint8))
+                            msg.peak_intensity, np.asarray(msg.flags, np.uint8))
         elif name == "sensor_msgs/msg/PointCloud2":
             cloud = read_cloud(msg)
             if cloud is not None:   # its frame is known once every spots message is read

@@ -3,9 +3,9 @@
 Files follow rosbag2's MCAP layout (profile "ros2", schemas in `ros2msg` encoding, CDR
 messages), so the `mcap` readers, `rosbags` and Foxglove open them. Every tool reads
 recordings through `read_messages` (CDR bytes) or `decoded_messages` (message objects decoded
-from the embedded schemas, no generated classes needed). A recording whose recorder did not
-close it (a crash, SIGKILL) has no summary: it is read in file order up to its last complete
-chunk, and a warning (logger `sds_record.mcap_files`) says how many messages that gave and
+by rosbags from the embedded schemas, no generated classes needed). A recording whose recorder
+did not close it (a crash, SIGKILL) has no summary: it is read in file order up to its last
+complete chunk, and a warning (logger `sds_record.mcap_files`) says how many messages that gave and
 that `sds mcap-repair` gives the file an index.
 """
 
@@ -15,8 +15,9 @@ import logging
 import struct
 import threading
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +27,9 @@ from mcap.records import Channel, Message, Schema
 from mcap.stream_reader import StreamReader
 from mcap.summary import Summary
 from mcap.writer import CompressionType, Writer
-from mcap_ros2.decoder import DecoderFactory
+from rosbags.serde import SerdeError
+from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
+from rosbags.typesys.base import TypesysError
 
 from sds_record.schemas import MESSAGE_ENCODING, SCHEMA_ENCODING, message_definition
 
@@ -194,21 +197,46 @@ def read_messages(path: str | Path, topics: Iterable[str] | None = None
 def decoded_messages(path: str | Path, topics: Iterable[str] | None = None,
                      types: Iterable[str] | None = None
                      ) -> Iterator[tuple[RecordedMessage, Any]]:
-    """Messages with their objects, decoded by the schemas the file embeds (fields as in
-    rclpy's classes); only `types` ('pkg/msg/Type') if given, so that a reader of small
-    messages does not decode the frames; messages of a schema-less channel are skipped."""
-    factory = DecoderFactory()
-    decoders: dict[int, Any] = {}
+    """Messages with their objects, decoded by the schemas the file embeds (rclpy's field
+    names; arrays of numbers as numpy arrays); only `types` ('pkg/msg/Type') if given, so that
+    a reader of small messages does not decode the frames. Messages of a channel without a
+    schema or not in CDR are skipped; a message or schema that does not decode raises
+    ValueError naming its topic."""
+    decoders: dict[int, Callable[[memoryview], Any]] = {}
     wanted_types = set(types) if types is not None else None
     for schema, channel, message in _records(Path(path), topics):
-        if schema is None or (wanted_types is not None and schema.name not in wanted_types):
+        if schema is None or channel.message_encoding != MESSAGE_ENCODING or (
+                wanted_types is not None and schema.name not in wanted_types):
             continue
         if schema.id not in decoders:
-            decoders[schema.id] = factory.decoder_for(channel.message_encoding, schema)
+            decoders[schema.id] = _decoder(schema, channel.topic)
         recorded = RecordedMessage(channel.topic, schema.name, message.data, message.log_time,
                                    message.publish_time,
                                    channel.metadata.get(DURABILITY_KEY) == "transient_local")
-        yield recorded, decoders[schema.id](message.data)
+        try:
+            decoded = decoders[schema.id](memoryview(message.data))
+        except SerdeError as error:
+            raise ValueError(f"{channel.topic}: the message logged at {message.log_time} ns "
+                             f"does not decode ({error})") from None
+        yield recorded, decoded
+
+
+def _decoder(schema: Schema, topic: str) -> Callable[[memoryview], Any]:
+    """CDR → message object for one schema (rosbags, its own typestore: two schemas may
+    define a nested type differently)."""
+    store = get_typestore(Stores.EMPTY)
+    try:
+        text = schema.data.decode()
+        if schema.encoding == SCHEMA_ENCODING:
+            store.register(get_types_from_msg(text, schema.name))
+        elif schema.encoding == "ros2idl":
+            store.register(get_types_from_idl(text))
+        else:
+            raise TypesysError(f"schema encoding {schema.encoding!r} is not ROS 2's")
+        store.get_msgdef(schema.name)
+    except (TypesysError, UnicodeDecodeError, KeyError) as error:
+        raise ValueError(f"{topic}: its schema {schema.name} does not parse ({error})") from None
+    return partial(store.deserialize_cdr, typename=schema.name)
 
 
 def recorded_topics(path: str | Path) -> dict[str, tuple[str, bool]]:
