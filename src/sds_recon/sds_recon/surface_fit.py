@@ -113,9 +113,12 @@ def _leave_one_out(design: np.ndarray, heights: np.ndarray, rejected: np.ndarray
     a point that pulls the fit onto itself (leverage h) cannot hide its error. NaN where
     1 − h < LEVERAGE_FLOOR (the point alone fixes a term) and for rejected points."""
     used = design[~rejected]
-    coefficients, *_ = np.linalg.lstsq(used, heights[~rejected], rcond=None)
+    # One thin SVD gives the least-squares fit and the hat matrix's diagonal (the leverages).
+    u, singular, vt = np.linalg.svd(used, full_matrices=False)
+    kept = singular > singular[0] * max(used.shape) * np.finfo(float).eps   # lstsq's cutoff
+    coefficients = vt[kept].T @ ((u[:, kept].T @ heights[~rejected]) / singular[kept])
     leverage = np.ones(len(heights))
-    leverage[~rejected] = np.sum(used * (used @ np.linalg.pinv(used.T @ used)), axis=1)
+    leverage[~rejected] = np.sum(u[:, kept] ** 2, axis=1)
     residual = np.abs(heights - np.nan_to_num(design) @ coefficients)
     judged = 1.0 - leverage >= LEVERAGE_FLOOR
     result = np.full(len(heights), np.nan)
