@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 import pytest
 from builtin_interfaces.msg import Time
+from mcap.writer import Writer
 from rclpy.serialization import serialize_message
 from sds_record.mcap_files import McapRecorder, decoded_messages
 from sds_ros.image_msg import image_to_msg
@@ -99,3 +100,26 @@ def test_a_message_that_does_not_decode_is_a_one_line_error(tmp_path: Path) -> N
     with pytest.raises(ValueError, match=r"^/tracker/spots: the message logged at 2 ns does "
                                          r"not decode \(.*\)$"):
         next(read)
+
+
+def _foreign_file(path: Path, schema_encoding: str, schema_text: str, data: bytes) -> None:
+    """One std_msgs/String written by the mcap library itself with the given schema."""
+    with path.open("wb") as stream:
+        writer = Writer(stream)
+        writer.start(profile="ros2", library="another recorder")
+        schema = writer.register_schema("std_msgs/msg/String", schema_encoding,
+                                        schema_text.encode())
+        channel = writer.register_channel("/chatter", "cdr", schema)
+        writer.add_message(channel, log_time=5, publish_time=5, data=data)
+        writer.finish()
+
+
+def test_an_idl_schema_decodes_and_an_unknown_encoding_is_named(tmp_path: Path) -> None:
+    data = serialize_message(String(data="from IDL"))
+    idl = "module std_msgs { module msg { struct String { string data; }; }; };"
+    _foreign_file(tmp_path / "idl.mcap", "ros2idl", idl, data)
+    assert [m.data for _, m in decoded_messages(tmp_path / "idl.mcap")] == ["from IDL"]
+    _foreign_file(tmp_path / "json.mcap", "jsonschema", "{}", data)
+    with pytest.raises(ValueError, match=r"^/chatter: its schema std_msgs/msg/String does not "
+                                         r"parse \(.*'jsonschema'.*\)$"):
+        list(decoded_messages(tmp_path / "json.mcap"))
