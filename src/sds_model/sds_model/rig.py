@@ -128,12 +128,17 @@ class Rig:
                           [camera.width_px, camera.height_px]).astype(int)
         return int(low[0]), int(low[1]), int(high[0] - low[0]), int(high[1] - low[1])
 
+    @cached_property
+    def _diodes_by_id(self) -> dict[int, LaserDiode]:
+        """Laser id → diode (built once: every triangulated spot looks its diode up)."""
+        return {diode.laser_id: diode for diode in self.diodes}
+
     def diode(self, laser_id: int) -> LaserDiode:
         """The diode with this id."""
-        for diode in self.diodes:
-            if diode.laser_id == laser_id:
-                return diode
-        raise KeyError(f"no laser diode with id {laser_id}")
+        try:
+            return self._diodes_by_id[laser_id]
+        except KeyError:
+            raise KeyError(f"no laser diode with id {laser_id}") from None
 
 
 def _vector(content: dict[str, Any], key: str, where: str, unit: bool = False) -> np.ndarray:
