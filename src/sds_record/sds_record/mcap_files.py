@@ -5,8 +5,8 @@ messages), so the `mcap` readers, `rosbags` and Foxglove open them. Every tool r
 recordings through `read_messages` (CDR bytes) or `decoded_messages` (message objects decoded
 by rosbags from the embedded schemas, no generated classes needed). A recording whose recorder
 did not close it (a crash, SIGKILL) has no summary: it is read in file order up to its last
-complete chunk, and a warning (logger `sds_record.mcap_files`) says how many messages that gave and
-that `sds mcap-repair` gives the file an index.
+complete chunk, and a warning (logger `sds_record.mcap_files`) says how many messages that
+gave and that `sds mcap-repair` gives the file an index.
 """
 
 from __future__ import annotations
@@ -28,8 +28,13 @@ from mcap.stream_reader import StreamReader
 from mcap.summary import Summary
 from mcap.writer import CompressionType, Writer
 from rosbags.serde import SerdeError
-from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
-from rosbags.typesys.base import TypesysError
+from rosbags.typesys import (
+    Stores,
+    TypesysError,
+    get_types_from_idl,
+    get_types_from_msg,
+    get_typestore,
+)
 
 from sds_record.schemas import MESSAGE_ENCODING, SCHEMA_ENCODING, message_definition
 
