@@ -13,20 +13,23 @@ import yaml
 from builtin_interfaces.msg import Time
 from rclpy.serialization import serialize_message
 from sds_arduino.protocol import unwrap_time_s
+from sds_bringup.offline import FRAMES_BEFORE_MODEL, RecordingError, mcap_frames
 from sds_camera.camera_imu import read_camera_imu
 from sds_model.rig import LaserDiode, Rig, load_rig, save_rig
 from sds_recon.reconstruction import SurfacePoints
 from sds_recon.results import COLUMNS, ResultsWriter, load_results
 from sds_record.mcap_files import McapRecorder
 from sds_ros.arduino_msg import SensorSpec, record_message
+from sds_ros.image_msg import image_to_msg
 from sds_ros.point_cloud import points_to_cloud
 from sds_sim.arduino import arduino_records
 from sds_sim.optics import ray_surface_points
 from sds_sim.scenario import load_scenario
 from sds_sim.simulate import simulate
+from sensor_msgs.msg import RegionOfInterest
 from std_msgs.msg import Header
 
-from sds_msgs.msg import LaserSpot, LaserSpotArray
+from sds_msgs.msg import CameraModel, LaserSpot, LaserSpotArray
 
 SDS = str(Path(sys.executable).with_name("sds"))
 
@@ -206,3 +209,38 @@ def test_export_finds_the_free_fall_keeps_the_tof_and_times_early_readings_negat
         assert np.all(np.diff(table["t_s"]) > 0)      # in time order, none squeezed onto 0
     analysis = yaml.safe_load((tmp_path / "out" / "analysis.json").read_text())
     assert analysis["tof"] and analysis["tof"][0]["estimates"], analysis["tof"]
+
+
+def _frames_recording(path: Path, frames: int, model_after: int | None) -> None:
+    """`frames` small mono8 frames 1/30 s apart, the camera model (region at x 40, y 24)
+    logged after frame `model_after` (None: never), as a late-matching recorder logs it."""
+    recorder = McapRecorder(path)
+    recorder.add_topic("/camera/image", "sensor_msgs/msg/Image")
+    recorder.add_topic("/camera/camera_model", "sds_msgs/msg/CameraModel", latched=True)
+    model = CameraModel(roi=RegionOfInterest(x_offset=40, y_offset=24, width=8, height=6))
+    for index in range(frames):
+        stamp_ns = 10**9 + index * 10**9 // 30
+        image = np.full((6, 8), index, np.uint8)
+        time = Time(sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9)
+        recorder.write("/camera/image", serialize_message(image_to_msg(image, time, "camera")),
+                       stamp_ns, stamp_ns)
+        if index == model_after:
+            recorder.write("/camera/camera_model", serialize_message(model), stamp_ns + 1,
+                           stamp_ns + 1)
+    recorder.close()
+
+
+def test_frames_recorded_before_the_camera_model_wait_for_it(tmp_path: Path) -> None:
+    _frames_recording(tmp_path / "late.mcap", 12, model_after=3)
+    frames = list(mcap_frames(tmp_path / "late.mcap"))
+    assert [f.index for f in frames] == list(range(12))
+    assert [int(f.red[0, 0]) for f in frames] == list(range(12))   # in recorded order
+    assert all(f.offset == (40, 24) for f in frames)
+    np.testing.assert_allclose([f.time_s for f in frames], np.arange(12) / 30, atol=1e-9)
+    _frames_recording(tmp_path / "none.mcap", 5, model_after=None)
+    with pytest.raises(RecordingError, match="camera frames but no camera model"):
+        list(mcap_frames(tmp_path / "none.mcap"))
+    _frames_recording(tmp_path / "far.mcap", FRAMES_BEFORE_MODEL + 2, model_after=None)
+    with pytest.raises(RecordingError, match=f"{FRAMES_BEFORE_MODEL + 1} camera frames before "
+                                             "any camera model"):
+        list(mcap_frames(tmp_path / "far.mcap"))

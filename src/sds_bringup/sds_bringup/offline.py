@@ -64,6 +64,9 @@ LINE_FRAME_STEP = 10
 """The analysis keeps the line's points of the first LINE_FRAMES_IN_FULL frames (a minute at
 30 fps), then of every LINE_FRAME_STEP-th: they serve only the meniscus, a mean radial profile,
 and all of a 10-minute 4K run's would hold 0.8 GB (the result files keep every one)."""
+FRAMES_BEFORE_MODEL = 90
+"""Camera frames a recording may hold before its first camera model (3 s at 30 fps; the
+recorder logs the latched model once it matches, about 3 frames late in the graph's tests)."""
 
 
 @dataclass(frozen=True)
@@ -108,21 +111,32 @@ def mcap_frames(path: Path) -> Iterator[RedFrame]:
 
 
 def _recorded_frames(path: Path) -> Iterator[RedFrame]:
-    offset, first, index = None, None, 0
+    """The frames in recorded order, each with the latest camera model's region offset; the
+    frames before the first model wait for it (a recorder may log the latched model after
+    the first frames), at most FRAMES_BEFORE_MODEL of them."""
+    offset: tuple[int, int] | None = None
+    waiting: list[tuple[float, np.ndarray]] = []   # (stamp [s], red image) before any model
+    first: float | None = None
+    index = 0
     for recorded, msg in decoded_messages(path):
         name = recorded.type_name
         if name == "sds_msgs/msg/CameraModel":
             offset = (int(msg.roi.x_offset), int(msg.roi.y_offset))
         elif name == "sensor_msgs/msg/Image":
-            if offset is None:
-                raise RecordingError(f"{path}: a camera frame before any camera model "
-                                     "(the region offset is unknown)")
-            stamp = stamp_s(msg)
-            first = stamp if first is None else first
             image = msg_to_image(msg)
-            yield RedFrame(index, stamp - first, image[..., 2] if image.ndim == 3 else image,
-                           offset)
-            index += 1
+            waiting.append((stamp_s(msg), image[..., 2] if image.ndim == 3 else image))
+            if offset is None and len(waiting) > FRAMES_BEFORE_MODEL:
+                raise RecordingError(f"{path}: {len(waiting)} camera frames before any camera "
+                                     "model (the region offset is unknown)")
+        if offset is not None:
+            for stamp, red in waiting:
+                first = stamp if first is None else first
+                yield RedFrame(index, stamp - first, red, offset)
+                index += 1
+            waiting.clear()
+    if waiting:
+        raise RecordingError(f"{path}: camera frames but no camera model (the region offset "
+                             "is unknown)")
 
 
 def calibrate_from_images(rig: Rig, paths: list[Path], surfaces: Path, out: Path
