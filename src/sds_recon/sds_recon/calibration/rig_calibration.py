@@ -97,9 +97,10 @@ class _Spots:
                       self.frame[keep], self.blob[keep], self.pixels[keep],
                       self.covariance[keep])
 
-    def used(self) -> set[tuple[int, int]]:
-        """The (frame, blob index) pairs of these spots."""
-        return set(zip(self.frame.tolist(), self.blob.tolist(), strict=True))
+    def unused(self, blobs: list[np.ndarray]) -> list[list[int]]:
+        """Per frame, the indices of the blobs these spots do not use."""
+        used = set(zip(self.frame.tolist(), self.blob.tolist(), strict=True))
+        return [[j for j in range(len(b)) if (f, j) not in used] for f, b in enumerate(blobs)]
 
     def assigned(self) -> dict[int, dict[int, int]]:
         """Laser id → frame → blob index."""
@@ -151,16 +152,14 @@ def _fit_without_outliers(rig: Rig, surfaces: list[KnownSurface], spots: _Spots,
 
 def _identify_again(fitted: Rig, nominal: Rig, laser_ids: list[int],
                     surfaces: list[KnownSurface], blobs: list[np.ndarray],
-                    taken: set[tuple[int, int]], settings: IdentificationSettings
+                    free: list[list[int]], settings: IdentificationSettings
                     ) -> dict[int, dict[int, int]]:
     """The diodes `laser_ids` identified through the fitted camera from the rig file's beams,
-    among the blobs not `taken` ((frame, blob) pairs): laser id → frame → blob index (the
+    among the `free` blobs (per frame, blob indices): laser id → frame → blob index (the
     frames' own indices)."""
     beams = [d for d in nominal.diodes if d.laser_id in laser_ids]
     if not beams:
         return {}
-    free = [np.array([j for j in range(len(b)) if (f, j) not in taken], int)
-            for f, b in enumerate(blobs)]
     found = identify_spots(replace(fitted, diodes=tuple(beams)), surfaces,
                            [b[index] for b, index in zip(blobs, free, strict=True)], settings)
     return {i: {f: int(free[f][b]) for f, b in support.items()}
@@ -188,8 +187,8 @@ def calibrate_rig(rig: Rig, surfaces: list[KnownSurface], blobs: list[np.ndarray
     outliers: list[tuple[int, int, float]] = []
     spots = _observations(identification.assigned, blobs, blob_covariance_px2)
     fit, spots = _fit_without_outliers(rig, surfaces, spots, s, unidentified, outliers)
-    again = _identify_again(fit.rig, rig, sorted(unidentified), surfaces, blobs, spots.used(),
-                            narrow)
+    again = _identify_again(fit.rig, rig, sorted(unidentified), surfaces, blobs,
+                            spots.unused(blobs), narrow)
     if again:
         retry_unidentified = {i: why for i, why in unidentified.items()
                               if i not in again}
@@ -203,10 +202,7 @@ def calibrate_rig(rig: Rig, surfaces: list[KnownSurface], blobs: list[np.ndarray
         if set(spots.ids) <= set(retry_spots.ids):
             fit, spots, unidentified, outliers = (retry_fit, retry_spots, retry_unidentified,
                                                   retry_outliers)
-    claimed = spots.used()
-    identification = Identification(
-        spots.assigned(), unidentified,
-        [[j for j in range(len(b)) if (f, j) not in claimed] for f, b in enumerate(blobs)])
+    identification = Identification(spots.assigned(), unidentified, spots.unused(blobs))
     ids, diode, frame, blob, pixels, covariance = (spots.ids, spots.diode, spots.frame,
                                                    spots.blob, spots.pixels, spots.covariance)
     plane, used = None, None
