@@ -16,11 +16,11 @@ from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
-from sds_bringup.graph import apply_overrides, composed, load_graph
 from sds_bringup.launcher import Launcher
 from sds_bringup.ros_env import graph_environment, pick_domain_id
 from sds_camera.frame_source import Region, VideoFileSource, select
 from sds_camera.video_writer import VideoWriter
+from sds_ros.graph_file import apply_overrides, composed, load_graph
 
 REPO = Path(__file__).resolve().parents[1]
 GRAPH = REPO / "config" / "graphs" / "camera_monitor.yaml"

@@ -69,14 +69,12 @@ def stage_times(video: Path, rig) -> dict[str, float]:
     from builtin_interfaces.msg import Time
     from rclpy.serialization import serialize_message
     from sds_camera.frame_source import Region, open_source
-    from sds_recon.reconstruction import reconstruct_frame, reconstruct_line
     from sds_record.mcap_files import McapRecorder
     from sds_ros.image_msg import image_to_msg
-    from sds_tracker.spots import LOST
-    from sds_tracker.tracker import FrameTracker
+    from sds_workflows.pipeline import FramePipeline, RedFrame
 
     region = Region(*rig.container_region_px(rig.camera))
-    tracker = FrameTracker(rig)
+    pipeline = FramePipeline(rig)
     recorder = McapRecorder(video.with_name("stages.mcap"), overwrite=True)
     recorder.add_topic("/camera/image", "sensor_msgs/msg/Image")
     times: dict[str, list[float]] = {k: [] for k in ("decode", "transport", "tracking",
@@ -94,13 +92,11 @@ def stage_times(video: Path, rig) -> dict[str, float]:
         data = serialize_message(image_to_msg(red, Time(sec=frame.index), "camera"))
         times["transport"].append(time.perf_counter() - start)
         start = time.perf_counter()
-        ready, line = tracker.process(frame.index, red, (region.x, region.y))
+        tracked = pipeline.track(RedFrame(frame.index, frame.time_ns * 1e-9, red,
+                                          (region.x, region.y)))
         times["tracking"].append(time.perf_counter() - start)
         start = time.perf_counter()
-        for _, spots in ready:
-            reconstruct_frame(rig, [s.laser_id for s in spots], [[s.x_px, s.y_px] for s in spots],
-                              [s.sigma_px for s in spots], [bool(s.flags & LOST) for s in spots])
-        reconstruct_line(rig, np.column_stack([line.x_px, line.y_px]), line.sigma_px)
+        pipeline.reconstruct(tracked)
         times["triangulation"].append(time.perf_counter() - start)
         start = time.perf_counter()
         recorder.write("/camera/image", data, frame.time_ns, frame.time_ns)
@@ -144,9 +140,9 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
     cloud."""
     from dataclasses import replace
 
-    from sds_bringup.graph import apply_overrides, load_graph
     from sds_bringup.launcher import Launcher
     from sds_bringup.ros_env import graph_environment, pick_domain_id
+    from sds_ros.graph_file import apply_overrides, load_graph
 
     domain = pick_domain_id()
     environment = graph_environment(domain)

@@ -8,8 +8,8 @@ diodes (a hexagonal head) and without the line laser. The longer recordings are 
 repeated (FFmpeg's concat, no re-encoding). Each measurement runs in a new process:
 - offline: `sds process --video` (tracking, reconstruction, result files, analysis, report),
   wall time and peak resident memory; decoding the same video alone for the ratio;
-- live: the tracker's and the reconstruction's per-frame code (FrameTracker.process,
-  reconstruct_frame, reconstruct_line, with drop.yaml's parameters) on each decoded frame,
+- live: the per-frame pipeline the nodes' code forms (sds_workflows.pipeline.FramePipeline:
+  tracker, reconstruct_frame, reconstruct_line, with drop.yaml's parameters) on each decoded frame,
   ms per frame (median, p95) and the process's peak resident memory.
 Then it fits how each dimension's cost grows above its smallest case, cost − cost₀ ∝
 (x − x₀)^b (b = 1: linear), and prints the table.
@@ -55,28 +55,16 @@ LIVE = """
 import json, sys, time
 from pathlib import Path
 import numpy as np
-from sds_bringup.graph import node_parameters
-from sds_bringup.offline import GRAPH, video_frames
 from sds_model.rig import load_rig
-from sds_recon.reconstruction import reconstruct_frame, reconstruct_line
-from sds_tracker.spots import LOST
-from sds_tracker.tracker import FrameTracker, parse_seeds, tracker_config
+from sds_workflows.pipeline import FramePipeline, video_frames
 rig = load_rig(sys.argv[2])
-values = node_parameters(GRAPH, "tracker")
-recon = node_parameters(GRAPH, "recon")
-weight, sigma = float(recon["beam_weight"]), float(recon["default_sigma_px"])
-tracker = FrameTracker(rig, tracker_config(values), parse_seeds(values["seeds"]))
+pipeline = FramePipeline(rig)
 times, rows = [], []
 for frame in video_frames(Path(sys.argv[1]), rig):
     start = time.perf_counter()
-    ready, line = tracker.process(frame.index, frame.red, frame.offset)
-    for _, spots in ready:
-        reconstruct_frame(rig, [s.laser_id for s in spots], [[s.x_px, s.y_px] for s in spots],
-                          [s.sigma_px for s in spots], [bool(s.flags & LOST) for s in spots],
-                          weight, sigma)
-    reconstruct_line(rig, np.column_stack([line.x_px, line.y_px]), line.sigma_px, sigma)
+    step = pipeline.process(frame)
     times.append(time.perf_counter() - start)
-    rows.append(int(np.isfinite(line.x_px).sum()))
+    rows.append(int(np.isfinite(step.line.line.x_px).sum()))
 times = np.array(times[10:]) * 1e3
 print(json.dumps({"median_ms": float(np.median(times)), "p95_ms": float(np.percentile(times, 95)),
                   "frames": len(times) + 10, "line_rows": float(np.median(rows))}))

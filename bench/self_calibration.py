@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from sds_bringup.calibration_trial import SECOND_AXIS, GeometryErrors, trial
+from sds_workflows.calibration_trial import SECOND_AXIS, GeometryErrors, trial
 
 RIG = Path(__file__).resolve().parents[1] / "config" / "rigs" / "stelium.yaml"
 

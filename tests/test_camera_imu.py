@@ -13,7 +13,6 @@ import numpy as np
 import pytest
 from sds_arduino.clock import align_by_acceleration
 from sds_arduino.protocol import format_record, unwrap_time_s
-from sds_bringup.camera_imu_mcap import write_imu_mcap
 from sds_camera.camera_imu import (
     HERO5_TO_OPTICAL,
     CameraImu,
@@ -30,6 +29,7 @@ from sds_sim.arduino import CATAPULT_DURATION_S, STANDARD_GRAVITY, arduino_recor
 from sds_sim.camera_imu import camera_imu
 from sds_sim.scenario import Scenario, load_scenario
 from sds_sloshing.gravity import free_fall, gravity_regime
+from sds_workflows.camera_imu_mcap import write_imu_mcap
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "config" / "scenarios"
 

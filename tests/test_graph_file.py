@@ -10,14 +10,14 @@ import pytest
 import rclpy
 import yaml
 from rclpy.node import Node
-from sds_bringup.graph import (
+from sds_bringup.launcher import group_processes
+from sds_ros.graph_file import (
     MOVED_PLUGINS,
     GraphFileError,
     apply_overrides,
     composed,
     load_graph,
 )
-from sds_bringup.launcher import group_processes
 from sds_ros.node_host import load_plugin
 
 

@@ -1,4 +1,5 @@
-"""The import picture: algorithm packages → ROS layer → nodes → launcher and CLI, no arrow up.
+"""The import picture: algorithm packages → ROS layer → nodes → launcher | workflows → CLI, no
+arrow up, and none between the launcher and the workflows.
 
 Every `import` in every module counts, also those inside functions (lazy imports).
 """
@@ -17,10 +18,16 @@ LAYERS = {
     "sds_sloshing": 0, "sds_tracker": 0,
     "sds_ros": 1, "sds_record": 1, "sds_viz": 1,
     "sds_nodes": 2,
-    "sds_bringup": 3,
+    "sds_bringup": 3, "sds_workflows": 3,
+    "sds_cli": 4,
 }
 """0: pure algorithms (numpy, SciPy, OpenCV); 1: the ROS layer (node host, QoS, message codecs,
-recordings, the Rerun scene of messages); 2: the graph's nodes; 3: launcher and `sds`."""
+graph files, recordings, the Rerun scene of messages); 2: the graph's nodes; 3: the launcher
+(`sds_bringup`) and the workflows (`sds_workflows`, what the commands do), side by side; 4: the
+`sds` command (`sds_cli`)."""
+APART = ("sds_bringup", "sds_workflows")
+"""Neither imports the other: the launcher runs graphs, the workflows run jobs; the CLI (or a
+notebook) joins them."""
 ROS_MODULES = ("rclpy", "sds_msgs", "sensor_msgs", "std_msgs", "builtin_interfaces",
                "geometry_msgs", "tf2_msgs", "rosgraph_msgs", "rosidl_runtime_py", "mcap_ros2",
                "rosbags")
@@ -52,6 +59,14 @@ def test_no_import_runs_up_and_no_algorithm_package_imports_ros(package: str) ->
                 wrong.append(f"{module.relative_to(SRC)} imports {name} (layer {LAYERS[name]})")
             if layer == 0 and name in ROS_MODULES:
                 wrong.append(f"{module.relative_to(SRC)} imports {name}")
+    assert not wrong, "\n".join(wrong)
+
+
+def test_launcher_and_workflows_import_each_other_nowhere() -> None:
+    wrong = [f"{module.relative_to(SRC)} imports {other}"
+             for package in APART for other in APART if other != package
+             for module in sorted((SRC / package / package).rglob("*.py"))
+             if other in imported_modules(module)]
     assert not wrong, "\n".join(wrong)
 
 

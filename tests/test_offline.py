@@ -13,7 +13,6 @@ import yaml
 from builtin_interfaces.msg import Time
 from rclpy.serialization import serialize_message
 from sds_arduino.protocol import unwrap_time_s
-from sds_bringup.offline import FRAMES_BEFORE_MODEL, RecordingError, mcap_frames
 from sds_camera.camera_imu import read_camera_imu
 from sds_model.rig import LaserDiode, Rig, load_rig, save_rig
 from sds_recon.reconstruction import SurfacePoints
@@ -26,6 +25,7 @@ from sds_sim.arduino import arduino_records
 from sds_sim.optics import ray_surface_points
 from sds_sim.scenario import load_scenario
 from sds_sim.simulate import simulate
+from sds_workflows.pipeline import FRAMES_BEFORE_MODEL, RecordingError, mcap_frames
 from sensor_msgs.msg import RegionOfInterest
 from std_msgs.msg import Header
 

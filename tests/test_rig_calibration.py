@@ -11,7 +11,6 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from sds_bringup.calibration_trial import ANGLES, trial
 from sds_model.rig import load_rig, save_rig
 from sds_recon.calibration.identification import IdentificationSettings, identify_spots
 from sds_recon.calibration.lasers import KnownSurface
@@ -26,6 +25,7 @@ from sds_sim.tilt_series import render_tilt_series
 from sds_sim.true_rig import RigErrors, random_layout, true_rig
 from sds_tracker.plateaus import find_plateaus
 from sds_tracker.tracker import FrameTracker
+from sds_workflows.calibration_trial import ANGLES, trial
 
 ROOT = Path(__file__).resolve().parents[1]
 STELIUM = ROOT / "config" / "rigs" / "stelium.yaml"

@@ -15,7 +15,7 @@ setup(
     zip_safe=True,
     maintainer="SDS developers",
     maintainer_email="sds@example.org",
-    description="Launcher, node host, `sds` command line and demo of the SDS graph.",
+    description="Launcher of the SDS graph: processes of a graph file, their environment, "
+                "the measuring chain with its progress bar.",
     license="MIT",
-    entry_points={"console_scripts": ["sds = sds_bringup.cli:main"]},
 )

@@ -22,7 +22,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import IO
 
-from sds_bringup.graph import NodeEntry
+from sds_ros.graph_file import NodeEntry
 
 _PR_SET_PDEATHSIG = 1
 GRACE_PERIOD_S = 10.0

@@ -6,13 +6,14 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
+from sds_model.paths import CONFIG
 from sds_model.rig import Rig
 from sds_recon.calibration.lasers import KnownSurface
 
 from sds_sim.render import FrameRenderer, FrameTruth
 from sds_sim.scenario import load_scenario
 
-TILT_TABLE = Path(__file__).resolve().parents[3] / "config" / "scenarios" / "tilt_table.yaml"
+TILT_TABLE = CONFIG / "scenarios" / "tilt_table.yaml"
 """The scenario whose optics, sensor and wall reflections the series are drawn with."""
 
 

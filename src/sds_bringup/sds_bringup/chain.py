@@ -1,0 +1,170 @@
+"""The measuring chain as real node processes, with a progress bar (`sds demo`, `sds run`).
+
+The graph is config/graphs/drop.yaml (frame source → tracker → reconstruction, recorder) plus
+arduino.yaml (the serial bridge), and view.yaml (a live Rerun viewer) where there is a display.
+`run_chain` starts it, counts the tracked frames, feeds a stand-in Arduino through a
+pseudo-terminal when given its lines, and stops the graph once every frame is in.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import threading
+import time
+import tty
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from sds_arduino.replay import paced
+from sds_model.paths import CONFIG
+from sds_ros.graph_file import NodeEntry, apply_overrides, load_graph
+from tqdm import tqdm
+
+from sds_bringup.launcher import Launcher
+from sds_bringup.ros_env import graph_domain_id, graph_environment
+
+GRAPHS = ("drop.yaml", "arduino.yaml", "view.yaml")
+IDLE_TIMEOUT_S = 60.0
+BRIDGE_OPEN_S = 0.5
+"""The bridge opens its port within this of publishing (it reads from its start)."""
+
+
+@dataclass(frozen=True)
+class RunOutputs:
+    """Where a run put its files, and how its graph ended."""
+
+    recording: Path
+    rerun: Path
+    log: Path
+    exit_code: int = 0
+    failure: str | None = None
+    """The needed node that failed and why (None if none did)."""
+
+
+def live_view() -> bool:
+    """Whether a live viewer can be shown (a display)."""
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+def graph_entries(overrides: list[str], viewer: bool) -> list[NodeEntry]:
+    """The chain: drop.yaml and arduino.yaml, with view.yaml if `viewer`, with overrides (the
+    viewer's are left out without it)."""
+    graphs = GRAPHS if viewer else tuple(g for g in GRAPHS if g != "view.yaml")
+    entries = [e for name in graphs for e in load_graph(CONFIG / "graphs" / name)]
+    return apply_overrides(entries, [o for o in overrides
+                                     if viewer or not o.startswith("viewer.")])
+
+
+def run_chain(overrides: list[str], out: Path, expected_frames: int | None,
+              serial_lines: list[bytes] | None = None, port: Path | None = None) -> RunOutputs:
+    """Run the chain until `expected_frames` fits were made (or Ctrl-C for a live camera),
+    with a progress bar; node logs go to out/graph.log. The recorder refuses an existing
+    recording unless the overrides say `recorder.overwrite=true`."""
+    outputs = RunOutputs(out / "recording.mcap", out / "recording.rrd", out / "graph.log")
+    domain_id = graph_domain_id(None)
+    environment = graph_environment(domain_id)
+    os.environ.update(environment)
+    # The camera waits for tracker and recorder; the tracker for reconstruction, recorder and
+    # the progress bar; the reconstruction and the running sloshing estimates for the
+    # recorder (the fits also for the sloshing node); each for the live viewer too if any.
+    viewer = live_view()
+    extra = int(viewer)
+    entries = graph_entries([*overrides, f"recorder.output={outputs.recording.resolve()}",
+                             "viewer.spawn=true", f"camera.wait_for_subscribers={2 + extra}",
+                             f"tracker.wait_for_consumers={3 + extra}",
+                             f"recon.wait_for_consumers={1 + extra}",
+                             f"recon.wait_for_fit_consumers={2 + extra}",
+                             f"sloshing.wait_for_consumers={1 + extra}"], viewer)
+    cable = plug_in(port) if serial_lines is not None and port is not None else None
+    with outputs.log.open("w") as log:
+        launcher = Launcher(entries, environment, output=log, console=sys.stderr)
+        unplug, feeding = threading.Event(), threading.Event()
+        watcher = threading.Thread(target=_watch, args=(launcher, expected_frames, serial_lines,
+                                                        cable, unplug, feeding), daemon=True)
+        print(f"running the graph on ROS_DOMAIN_ID={domain_id}: "
+              + ", ".join(e.name for e in entries) + f" (log: {outputs.log})")
+        exit_code = launcher.run(on_started=watcher.start)
+        unplug.set()   # the stand-in Arduino leaves after the bridge
+        watcher.join(timeout=5.0)
+    if cable is not None and not feeding.is_set():
+        for fd in cable:
+            os.close(fd)
+    if port is not None:
+        port.unlink(missing_ok=True)   # the stand-in cable's link dangles once it is gone
+    return replace(outputs, exit_code=exit_code, failure=launcher.failure)
+
+
+def _watch(launcher: Launcher, expected_frames: int | None, serial_lines: list[bytes] | None,
+           cable: tuple[int, int] | None, unplug: threading.Event,
+           feeding: threading.Event) -> None:
+    """Count the tracked frames (progress bar), feed the Arduino stream, stop the graph."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from sds_ros.qos import stream_qos
+
+    from sds_msgs.msg import LaserSpotArray
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    executor = SingleThreadedExecutor(context=context)
+    node = Node("demo_progress", context=context)
+    executor.add_node(node)
+    tracked: list[int] = []   # frames tracked (the tracker waits for this subscriber too)
+    node.create_subscription(LaserSpotArray, "/tracker/spots",
+                             lambda msg: tracked.append(msg.frame_index), stream_qos(100))
+    bar = tqdm(total=expected_frames, desc="frames", unit="frame")
+    written = threading.Event()
+    try:
+        if cable is not None and serial_lines is not None:
+            # The stand-in Arduino starts with the video, as on the rig: once the bridge has
+            # opened the port (opening discards what waited in it) and the first frame is in.
+            while not launcher.stopping and not (node.count_publishers("/arduino/imu")
+                                                 and tracked):
+                executor.spin_once(timeout_sec=0.05)
+            time.sleep(BRIDGE_OPEN_S)
+            feeding.set()
+            threading.Thread(target=feed_serial, args=(cable, serial_lines, written, unplug),
+                             daemon=True).start()
+        last, last_change = 0, time.monotonic()
+        while not launcher.stopping:
+            executor.spin_once(timeout_sec=0.1)
+            if len(tracked) != last:
+                bar.update(len(tracked) - last)
+                last, last_change = len(tracked), time.monotonic()
+            done = expected_frames is not None and last >= expected_frames and (
+                not feeding.is_set() or written.is_set())
+            stalled = expected_frames is not None and \
+                time.monotonic() - last_change > IDLE_TIMEOUT_S
+            if done or stalled:
+                time.sleep(2.0)   # reconstruction, recorder and viewer finish the last frames
+                break
+    finally:
+        bar.close()
+        executor.shutdown(timeout_sec=1.0)
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+        launcher.request_stop()
+
+
+def plug_in(port: Path) -> tuple[int, int]:
+    """A pseudo-terminal (raw) whose slave is linked at `port`: the stand-in Arduino's cable."""
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    port.unlink(missing_ok=True)
+    port.symlink_to(os.ttyname(slave))
+    return master, slave
+
+
+def feed_serial(cable: tuple[int, int], lines: list[bytes], written: threading.Event,
+                unplug: threading.Event) -> None:
+    """A stand-in Arduino: the lines on the pseudo-terminal, in device time; `written` is set
+    after the last, and it stays plugged in until `unplug` is set."""
+    master, slave = cable
+    for line in paced(lines):
+        os.write(master, line)
+    written.set()
+    unplug.wait()
+    os.close(master)
+    os.close(slave)

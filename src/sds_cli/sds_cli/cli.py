@@ -1,0 +1,69 @@
+"""The `sds` command: one entry point, one subcommand per module of `sds_cli.commands`."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import os
+import sys
+
+from sds_cli.commands import COMMANDS, CommandError
+
+# FFmpeg and OpenCV print their own lines for a corrupt video; the commands say it in one.
+os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
+os.environ.setdefault("OPENCV_LOG_LEVEL", "ERROR")
+
+
+class VersionAction(argparse.Action):
+    """`--version`: the installed version, looked up only when asked (importing
+    importlib.metadata would cost every `sds` call a quarter of its start-up)."""
+
+    def __init__(self, option_strings: list[str], dest: str, help: str | None = None) -> None:
+        super().__init__(option_strings, dest, nargs=0, help=help)
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
+                 values: object, option_string: str | None = None) -> None:
+        import importlib.metadata
+
+        parser.exit(message=f"sds {importlib.metadata.version('sds_cli')}\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of `sds` with every subcommand."""
+    parser = argparse.ArgumentParser(
+        prog="sds",
+        description="Sloshing Detection Subsystem: laser-based free-surface measurement.",
+    )
+    parser.add_argument("--version", action=VersionAction,
+                        help="show the program's version number and exit")
+    commands = parser.add_subparsers(title="commands", required=True, metavar="COMMAND")
+    for name in COMMANDS:
+        importlib.import_module(f"sds_cli.commands.{name}").add_parser(commands)
+    return parser
+
+
+def input_errors() -> tuple[type[BaseException], ...]:
+    """What bad input raises: a command's own CommandError and the workflows' input errors;
+    imported once such an error has happened."""
+    from sds_workflows.errors import input_errors as workflow_input_errors
+
+    return CommandError, *workflow_input_errors()
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Entry point of the `sds` command: bad input is one line and exit code 2."""
+    # The libraries' warnings (e.g. an unfinished recording read up to its last chunk).
+    logging.basicConfig(format="sds: %(message)s", level=logging.WARNING)
+    try:
+        args = build_parser().parse_args(argv)
+        code = args.run(args)
+    except KeyboardInterrupt:   # Ctrl-C outside a graph (a graph stops on its own signal)
+        print("sds: interrupted", file=sys.stderr)
+        code = 130
+    except Exception as error:
+        if not isinstance(error, input_errors()):
+            raise
+        print(f"sds {args.command}: {error}", file=sys.stderr)
+        code = 2
+    raise SystemExit(code)

@@ -1,0 +1,71 @@
+"""`sds analyze`: sloshing frequencies, damping ratios, tilts and meniscus, with a report."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from sds_cli.commands import CommandError, add_overwrite, refuse_existing
+
+
+def add_parser(commands: argparse._SubParsersAction) -> None:
+    """Register `sds analyze`."""
+    parser = commands.add_parser(
+        "analyze", help="sloshing frequencies, damping ratios, tilts and meniscus, with a report",
+        description="Analyse a recording: an MCAP with the reconstruction's points, a points CSV "
+                    "(frame,t_s,laser_id,X_mm,Y_mm,Z_mm), a time-series CSV (t_s, then one "
+                    "column per series, e.g. one spot's pixel position) or an Arduino log "
+                    "(serial capture or SD card: the ToF quick estimate). Writes analysis.json, "
+                    "report.html and figures.")
+    parser.add_argument("recording", type=Path,
+                        help="MCAP, points CSV, time-series CSV or Arduino log")
+    parser.add_argument("--rig", type=Path,
+                        help="the rig file: container, liquid, gravity for the theory (default: "
+                             "an MCAP's own rig; for tables and logs config/rigs/stelium.yaml)")
+    parser.add_argument("--out", type=Path, default=Path("analysis"),
+                        help="folder for analysis.json, report.html and figures")
+    parser.add_argument("--start-s", type=float, help="free decay starts here [s]")
+    parser.add_argument("--end-s", type=float, help="analysis window ends here [s]")
+    parser.add_argument("--forcing-s", type=float,
+                        help="the free decay starts this long after the excitation's onset [s]")
+    parser.add_argument("--gravity", type=float, help="gravity for the theory [m/s²] "
+                        "(default: the rig's; 0 for a drop: capillary theory, see README)")
+    parser.add_argument("--expected", action="append", default=[], metavar="MODE=HZ",
+                        help="expected frequency of a mode, e.g. lateral_1=1.9 (repeatable)")
+    parser.add_argument("--truth", type=Path,
+                        help="a simulation's truth/run.json: the report gives each error")
+    add_overwrite(parser, "replace the report of an earlier analysis in --out")
+    parser.set_defaults(run=run, command="analyze")
+
+
+def expected_frequencies(items: list[str]) -> dict[str, float]:
+    """--expected MODE=HZ items as {mode: Hz}."""
+    expected = {}
+    for item in items:
+        name, _, value = item.partition("=")
+        try:
+            expected[name.strip()] = float(value)
+        except ValueError:
+            raise CommandError(f"--expected {item!r}: give MODE=HZ, e.g. lateral_1=1.9") from None
+    return expected
+
+
+def run(args: argparse.Namespace) -> int:
+    """Analyse, write the report, print the summary."""
+    from sds_sloshing.analysis import AnalysisOptions
+    from sds_sloshing.report import summary_lines, truth_from_run, write_report
+    from sds_workflows.analyze import analyse_recording
+
+    refuse_existing(args.out / "analysis.json", args.overwrite,
+                    "exists: the folder holds an analysis already")
+    options = AnalysisOptions(args.start_s, args.end_s, args.forcing_s, args.gravity,
+                              expected_frequencies(args.expected))
+    analysis = analyse_recording(args.recording, args.rig, options)
+    truth = truth_from_run(args.truth) if args.truth else None
+    files = write_report(analysis, args.out, truth)
+    print(f"sds analyze: {analysis.source}, free decay {analysis.window_s[0]:.3f}–"
+          f"{analysis.window_s[1]:.3f} s")
+    for line in summary_lines(files.results):
+        print(f"  {line}")
+    print(f"wrote {files.json}, {files.html}")
+    return 0

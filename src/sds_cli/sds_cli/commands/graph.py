@@ -1,0 +1,44 @@
+"""`sds graph`: start the nodes of a graph file as processes."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def add_parser(commands: argparse._SubParsersAction) -> None:
+    """Register `sds graph`."""
+    parser = commands.add_parser(
+        "graph", help="start the nodes of a graph file as processes",
+        description="Start a graph (config/graphs/*.yaml); Ctrl-C or SIGTERM stops every node.",
+    )
+    parser.add_argument("graph_file", type=Path, help="a graph file, e.g. config/graphs/drop.yaml")
+    parser.add_argument("--set", dest="overrides", action="append", default=[],
+                        metavar="NODE.PARAM=VALUE", help="override a node parameter (YAML value)")
+    parser.add_argument("--compose", action="store_true",
+                        help="host every node in one process instead of one process each")
+    parser.add_argument("--domain-id", type=int, default=None,
+                        help="ROS_DOMAIN_ID for the graph (default: the environment's, else a "
+                             "random one in 1..101)")
+    parser.add_argument("--network", action="store_true",
+                        help="part of a graph across machines: discover this machine and the "
+                             "peers in ROS_STATIC_PEERS, one domain (--domain-id) on all")
+    parser.set_defaults(run=run, command="graph")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the graph until it ends; its exit code."""
+    from sds_bringup.launcher import Launcher
+    from sds_bringup.ros_env import graph_domain_id, graph_environment
+    from sds_ros.graph_file import apply_overrides, composed, load_graph
+
+    entries = apply_overrides(load_graph(args.graph_file), args.overrides)
+    if args.compose:
+        entries = composed(entries)
+    domain_id = graph_domain_id(args.domain_id, args.network)
+    environment = graph_environment(domain_id, network=args.network)
+    peers = environment.get("ROS_STATIC_PEERS", "")
+    print(f"sds graph: {args.graph_file} on ROS_DOMAIN_ID={domain_id}, discovery "
+          f"{environment['ROS_AUTOMATIC_DISCOVERY_RANGE']}" + (f" + peers {peers}" if peers
+                                                              else ""))
+    return Launcher(entries, environment).run()

@@ -1,0 +1,34 @@
+"""`sds import-sd`: an Arduino SD-card log as an MCAP recording."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from sds_cli.commands import add_overwrite
+
+
+def add_parser(commands: argparse._SubParsersAction) -> None:
+    """Register `sds import-sd`."""
+    parser = commands.add_parser(
+        "import-sd", help="an Arduino SD-card log as an MCAP recording",
+        description="Turn the Arduino's SD-card log (protocol v1) into /arduino/imu, "
+                    "/arduino/tof and /arduino/events messages in an MCAP file, stamped with "
+                    "the device clock (seconds since the first record, plus --start-s).")
+    parser.add_argument("log", type=Path)
+    parser.add_argument("--out", type=Path, help="MCAP to write (default: beside the log)")
+    parser.add_argument("--start-s", type=float, default=0.0,
+                        help="time of the log's first record on the recording's clock [s]")
+    add_overwrite(parser)
+    parser.set_defaults(run=run, command="import-sd")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Import and count records, rejected lines and gaps."""
+    from sds_record.import_sd import import_sd
+
+    output = args.out or args.log.with_suffix(".mcap")
+    result = import_sd(args.log, output, start_s=args.start_s, overwrite=args.overwrite)
+    print(f"sds import-sd: {result.records} records to {output} ({result.rejected_lines} "
+          f"lines rejected, {result.missing_records} records missing by sequence number)")
+    return 0

@@ -1,0 +1,101 @@
+"""`sds process`: the graph's tracker, reconstruction and analysis in one process, no graph.
+
+Several videos or recordings (or a folder of them) are processed in parallel, one process per
+core, one result folder each under --out, with one progress bar; a file that fails is named with
+its reason and the others go on (exit code 2 if any failed).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+
+from sds_cli.commands import CommandError, add_overwrite
+
+VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv", ".m4v")
+
+
+def add_parser(commands: argparse._SubParsersAction) -> None:
+    """Register `sds process`."""
+    parser = commands.add_parser(
+        "process", help="track, reconstruct and analyse videos or recordings, no ROS graph",
+        description="Run the graph's tracker, reconstruction and analysis in one process (the "
+                    "parameters of config/graphs/drop.yaml) and write the result files. "
+                    "Several inputs (or a folder of them) run in parallel, one result folder "
+                    "each (--out/<name>).")
+    inputs = parser.add_mutually_exclusive_group(required=True)
+    inputs.add_argument("--video", type=Path, nargs="+",
+                        help="video files, a folder of videos, or one image folder (with --fps)")
+    inputs.add_argument("--mcap", type=Path, nargs="+",
+                        help="recordings with camera frames, or a folder of them")
+    parser.add_argument("--rig", type=Path,
+                        help="the rig file (needed with --video; with --mcap, default: the one "
+                             "each recording carries)")
+    parser.add_argument("--out", type=Path, required=True,
+                        help="folder for the result files (refused if it holds results); with "
+                             "several inputs, one subfolder each")
+    add_overwrite(parser, "replace the results of an earlier run in --out")
+    parser.add_argument("--fps", type=float, default=0.0,
+                        help="frame rate of an image folder [1/s]")
+    parser.add_argument("--gravity", type=float, help="gravity for the theory [m/s²]")
+    parser.add_argument("--calibrate-lasers", type=Path, nargs="+", metavar="IMAGE",
+                        help="images of known surfaces, or one video of the tilt table (its "
+                             "still stretches in order): self-calibrate the rig first (needs "
+                             "--surfaces) and process with the calibrated rig")
+    parser.add_argument("--surfaces", type=Path,
+                        help="known surface per image: frame, tilt_x_deg, tilt_y_deg"
+                             "[, offset_mm] (frame k = k-th image)")
+    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
+                        help="inputs processed at once (default: one per core)")
+    parser.add_argument("--no-progress", action="store_true")
+    parser.set_defaults(run=run, command="process")
+
+
+def expand_inputs(paths: list[Path], suffixes: tuple[str, ...]) -> list[Path]:
+    """The inputs: files as given, folders replaced by the files of `suffixes` in them (a
+    folder without such files stays one input: an image folder)."""
+    inputs: list[Path] = []
+    for path in paths:
+        if not path.exists():
+            raise CommandError(f"{path}: no such file")
+        found = sorted(p for p in path.iterdir() if p.suffix.lower() in suffixes) \
+            if path.is_dir() else []
+        inputs += found or [path]
+    stems = [p.stem for p in inputs]
+    if len(inputs) > 1 and len(set(stems)) < len(stems):
+        raise CommandError("two inputs have the same name: their result folders would clash")
+    return inputs
+
+
+def run(args: argparse.Namespace) -> int:
+    """Result files and the analysis report of each video or recording."""
+    from sds_model.rig import load_rig
+    from sds_recon.results import refuse_results
+    from sds_record.recorded_series import recording_rig
+    from sds_workflows.process import calibrate_from_images, process_input, process_inputs
+
+    is_video = args.video is not None
+    inputs = expand_inputs(args.video or args.mcap, VIDEO_SUFFIXES if is_video else (".mcap",))
+    if is_video and args.rig is None:
+        raise CommandError("--video needs --rig (the rig the video was taken with)")
+    outs = [args.out] if len(inputs) == 1 else [args.out / source.stem for source in inputs]
+    if not args.overwrite:   # before any work: a refused folder is named at once
+        for out in outs:
+            refuse_results(out)
+    rig_file = args.rig
+    if args.calibrate_lasers:
+        if args.surfaces is None:
+            raise CommandError("--calibrate-lasers needs --surfaces")
+        designed = load_rig(args.rig) if args.rig else recording_rig(inputs[0], None)
+        calibration_out = args.out if len(inputs) == 1 else args.out / "calibration"
+        _, rig_file = calibrate_from_images(designed, args.calibrate_lasers, args.surfaces,
+                                            calibration_out)
+        print(f"sds process: calibrated rig written to {rig_file}")
+    if len(inputs) == 1:
+        print(process_input(inputs[0], is_video, rig_file, args.out, args.fps, args.gravity,
+                            args.overwrite, not args.no_progress).summary())
+        return 0
+    failed = process_inputs(inputs, is_video, rig_file, args.out, args.jobs, args.fps,
+                            args.gravity, args.overwrite, not args.no_progress)
+    return 2 if failed else 0

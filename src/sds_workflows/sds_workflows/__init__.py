@@ -1,0 +1,35 @@
+"""The jobs of SDS, for the `sds` command and for a script or notebook alike.
+
+    from pathlib import Path
+    from sds_model.rig import load_rig
+    from sds_workflows import process_video
+
+    run = process_video(Path("drop.mp4"), load_rig(Path("config/rigs/stelium.yaml")),
+                        Path("drop_results"))
+    print(run.summary(), run.analysis.results["modes"])
+
+The main entry points:
+- `process_video`, `process_recording`, `process_inputs` (`process.py`): result files and the
+  analysis report from videos or recordings, no ROS graph;
+- `FramePipeline`, `video_frames`, `mcap_frames` (`pipeline.py`): the one per-frame pipeline
+  (tracker → triangulation → fits) over an iterator of frames;
+- `export_results` (`export.py`): a recording of the graph as result files and a report;
+- `calibrate_rig` (`rig_calibration.py`): a rig self-calibrated from images of known surfaces;
+  `calibrate_line_plane` (`line_plane_calibration.py`): the line laser's plane from a checkerboard;
+- `analyse_recording` (`analyze.py`): frequencies and damping of a recording or a table;
+- `link_clocks` (`clock_link.py`): a camera's clock against the Arduino's;
+- `run_demo`, `run_live` (`demo.py`): the whole graph on a simulated drop or a video, given the
+  launcher's `sds_bringup.chain.run_chain` (the workflows start no graph themselves).
+"""
+
+from sds_workflows.analyze import analyse_recording
+from sds_workflows.clock_link import link_clocks
+from sds_workflows.export import export_results
+from sds_workflows.line_plane_calibration import calibrate_line_plane
+from sds_workflows.pipeline import FramePipeline, mcap_frames, video_frames
+from sds_workflows.process import process_inputs, process_recording, process_video
+from sds_workflows.rig_calibration import calibrate_rig
+
+__all__ = ["FramePipeline", "analyse_recording", "calibrate_line_plane", "calibrate_rig",
+           "export_results", "link_clocks", "mcap_frames", "process_inputs",
+           "process_recording", "process_video", "video_frames"]

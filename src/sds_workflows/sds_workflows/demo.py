@@ -1,0 +1,192 @@
+"""`sds demo` and `sds run`: the whole measuring chain on a simulated drop or a real video, then
+the result files, the Rerun file and the analysis.
+
+The chain itself runs as node processes through a `ChainRunner` the caller gives
+(`sds_bringup.chain.run_chain`: the workflows start no graph of their own). The Rerun file is
+written from the recording once the graph is done: complete, where the live viewer's
+best-effort subscriptions may skip frames. The demo simulates a drop, has the runner feed the
+simulator's Arduino stream through a pseudo-terminal, and compares the analysis with the
+simulator's truth.
+"""
+
+from __future__ import annotations
+
+import csv
+import sys
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+from sds_model.paths import CONFIG
+from sds_model.rig import Rig, load_rig
+from sds_recon.results import ResultsWriter, load_results
+from sds_sim.scenario import load_scenario
+from sds_sim.simulate import simulate
+from sds_sloshing.analysis import AnalysisOptions
+from sds_sloshing.report import summary_lines, truth_from_run
+from sds_sloshing.surface_series import RecordingError
+from sds_viz.from_mcap import mcap_to_rrd
+
+from sds_workflows.export import export_recording
+from sds_workflows.run_tables import RunTables, finish_analysis
+
+DEMO_SCENARIO = CONFIG / "scenarios" / "drop_4p7s.yaml"
+LED_ROI_HALF_PX = 12
+
+
+class ChainOutputs(Protocol):
+    """Where a chain's run put its files, and how its graph ended."""
+
+    @property
+    def recording(self) -> Path: ...
+    @property
+    def rerun(self) -> Path: ...
+    @property
+    def log(self) -> Path: ...
+    @property
+    def exit_code(self) -> int: ...
+    @property
+    def failure(self) -> str | None:
+        """The needed node that failed and why (None if none did)."""
+
+
+class ChainRunner(Protocol):
+    """Runs the measuring chain with graph overrides until `expected_frames` were tracked
+    (None: until Ctrl-C), feeding `serial_lines` to a stand-in Arduino at `port` if given."""
+
+    def __call__(self, overrides: list[str], out: Path, expected_frames: int | None,
+                 serial_lines: list[bytes] | None = None, port: Path | None = None
+                 ) -> ChainOutputs: ...
+
+
+def height_errors(truth_spots: Path, points: np.ndarray) -> np.ndarray:
+    """Measured minus true height [mm] of every spot point with a truth."""
+    truth = {}
+    with truth_spots.open() as file:
+        for row in csv.DictReader(file):
+            if row["visible"] == "1":
+                truth[(int(row["frame"]), int(row["laser_id"]))] = float(row["Z_mm"])
+    return np.array([p["Z_mm"] - truth[(int(p["frame"]), int(p["laser_id"]))]
+                     for p in points if (int(p["frame"]), int(p["laser_id"])) in truth])
+
+
+def analyse_run(recording: Path, rig: Rig, out: Path, options: AnalysisOptions,
+                truth_run: Path | None = None, overwrite: bool = True) -> dict[str, Any]:
+    """Result files, the Rerun file (from the recording: every frame), the analysis report
+    (`sds export`'s, in two reads of the recording); the results as a dictionary. The run's
+    own folder: an earlier run's results are replaced (the caller checked `overwrite`)."""
+    mcap_to_rrd(recording, recording.with_suffix(".rrd"), rig)
+    tables = RunTables(ResultsWriter(out / "results", overwrite), rig)
+    export_recording(recording, rig, tables)
+    truth = truth_from_run(truth_run) if truth_run else None
+    analysis = finish_analysis(tables, str(recording), out / "analysis", options, truth)
+    if analysis.results is None:
+        raise RecordingError(analysis.note)
+    if analysis.note:
+        print(f"sds: {analysis.note}")
+    return analysis.results
+
+
+def run_demo(out: Path, seconds: float | None, run_chain: ChainRunner) -> int:
+    """Simulate a drop, run the whole chain on it, analyse, print the summary."""
+    out.mkdir(parents=True, exist_ok=True)
+    overrides = {} if seconds is None else {"duration_s": seconds}
+    scenario = load_scenario(DEMO_SCENARIO, overrides)
+    print(f"simulating '{scenario.name}': {scenario.duration_s:g} s, {scenario.frame_count} "
+          f"frames at 3840x2160")
+    simulation = simulate(scenario, out / "simulation")
+    rig = scenario.rig
+    led_x, led_y = (int(v) for v in scenario.events.led_position_px)
+    half = LED_ROI_HALF_PX
+    port = (out / "ttyARDUINO").resolve()
+    serial_lines = simulation.serial.read_bytes().splitlines(keepends=True)
+    # The watcher ends the demo's graph once every frame and the Arduino's last line are in.
+    outputs = run_chain(["recorder.overwrite=true", "camera.linger_s=60.0",
+                         f"camera.source={simulation.video.resolve()}",
+                         f"camera.roi={list(rig.container_region_px(rig.camera))}",
+                         f"camera.camera_model={scenario.rig.camera_file}",
+                         f"camera.led_roi={[led_x - half, led_y - half, 2 * half, 2 * half]}",
+                         f"tracker.rig={scenario.rig_file.resolve()}",
+                         f"recon.rig={scenario.rig_file.resolve()}",
+                         f"viewer.rig={scenario.rig_file.resolve()}",
+                         f"arduino.port={port}"],
+                        out, scenario.frame_count, serial_lines, port)
+    if outputs.failure or not outputs.recording.is_file():
+        print(f"demo failed: {outputs.failure or 'no recording'} (see {outputs.log})",
+              file=sys.stderr)
+        return outputs.exit_code or 1
+    result = analyse_run(outputs.recording, rig, out,
+                         AnalysisOptions(gravity_m_s2=scenario.gravity), simulation.run)
+    return print_summary(out, scenario, simulation, outputs, result)
+
+
+def print_summary(out: Path, scenario, simulation, outputs: ChainOutputs, result: dict) -> int:
+    """The demo's summary: files, modes against the truth, heights, spots, the Arduino."""
+    results = load_results(out / "results")
+    spots, points = results.spots, results.points
+    if spots is None or points is None:
+        print(f"demo failed: no spots or points in {out / 'results'}", file=sys.stderr)
+        return 1
+    frames = len(set(spots["frame"].tolist()))
+    errors = height_errors(simulation.spots, points[points["laser_id"] != 65535])
+    log = outputs.log.read_text()
+    arduino = [line for line in log.splitlines() if "final: records" in line]
+    offset = [line.split("LED offset ")[1] for line in log.splitlines() if "LED offset" in line]
+    print(f"\nSDS demo: '{scenario.name}', {scenario.frame_count} frames "
+          f"({scenario.duration_s:g} s at {scenario.fps:g} fps, 3840x2160)")
+    print(f"  recording (MCAP)   {outputs.recording}")
+    print(f"  Rerun              {outputs.rerun}   (open: rerun {outputs.rerun.name})")
+    print(f"  report             {out / 'analysis' / 'report.html'}")
+    print(f"  result files       {out / 'results'}/ (spots, points, line, fits, imu, tof .csv)")
+    print(f"  frames processed   {frames} of {scenario.frame_count}")
+    print(f"  heights            RMSE {np.sqrt(np.mean(errors**2)):.3f} mm against the truth "
+          f"({len(errors)} points)")
+    flags = {name: int(np.sum(spots["flags"] & bit != 0)) for name, bit in (
+        ("lost", 1), ("saturated", 2), ("reflection suspected", 4), ("off path", 8),
+        ("Hampel-replaced", 16))}
+    print(f"  spots              {len(spots)} ({len(spots) // max(frames, 1)} per frame): "
+          + ", ".join(f"{count} {name}" for name, count in flags.items()))
+    if arduino:
+        print(f"  Arduino            {arduino[-1].split('final: ')[1]}")
+    if offset:
+        print(f"  clocks             camera vs Arduino, from the sync LED: {offset[-1]}")
+    print("  sloshing (the report has every method; errors against the simulator's truth):")
+    for line in summary_lines(result):
+        if any(key in line for key in ("matrix_pencil", " tof ", "no oscillation", "note:")):
+            print(f"    {line}")
+    complete = frames == scenario.frame_count
+    print("  result             " + ("every frame measured" if complete else "FRAMES MISSING"))
+    return 0 if complete else 1
+
+
+def run_live(source: str, rig_file: Path, out: Path, port: str | None,
+             gravity: float | None, run_chain: ChainRunner, overwrite: bool = False) -> int:
+    """`sds run`: a video file or a camera through the whole chain, then the analysis (the
+    caller checked `overwrite` against an earlier run in `out`)."""
+    out.mkdir(parents=True, exist_ok=True)
+    rig = load_rig(rig_file)
+    overrides = [f"recorder.overwrite={str(overwrite).lower()}", f"camera.source={source}",
+                 f"camera.roi={list(rig.container_region_px(rig.camera))}",
+                 f"tracker.rig={rig_file.resolve()}", f"recon.rig={rig_file.resolve()}",
+                 f"viewer.rig={rig_file.resolve()}"]
+    if rig.camera_file is not None:   # the recorded camera_model then carries the intrinsics
+        overrides.append(f"camera.camera_model={rig.camera_file}")
+    if port:
+        overrides.append(f"arduino.port={port}")
+    is_file = Path(source).is_file()
+    frames = None
+    if is_file:
+        from sds_camera.frame_source import VideoFileSource
+
+        frames = VideoFileSource(Path(source)).announced_frames
+    outputs = run_chain(overrides, out, frames)
+    if outputs.failure or not outputs.recording.is_file():
+        print(f"sds run: {outputs.failure or 'no recording'} (see {outputs.log})",
+              file=sys.stderr)
+        return outputs.exit_code or 1
+    result = analyse_run(outputs.recording, rig, out, AnalysisOptions(gravity_m_s2=gravity))
+    print(f"\nSDS run: {source}\n  recording {outputs.recording}\n  Rerun {outputs.rerun}\n"
+          f"  report {out / 'analysis' / 'report.html'}\n  results {out / 'results'}/")
+    for line in summary_lines(result):
+        print(f"    {line}")
+    return 0

@@ -1,0 +1,95 @@
+"""`sds export`: a recording of the graph as result files and an analysis report."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from sds_model.rig import Rig
+from sds_recon.reconstruction import SurfacePoints
+from sds_recon.results import ResultsWriter
+from sds_record.mcap_files import decoded_messages
+from sds_record.recorded_series import recording_rig
+from sds_ros.point_cloud import read_cloud, stamp_s
+from sds_sloshing.analysis import AnalysisOptions
+from sds_sloshing.surface_series import RecordingError
+
+from sds_workflows.run_tables import CAMERA_IMU_TOPIC, RunAnalysis, RunTables, finish_analysis
+
+
+def export_results(recording: Path, out: Path, rig_file: Path | None = None,
+                   gravity_m_s2: float | None = None, overwrite: bool = False
+                   ) -> tuple[int, RunAnalysis]:
+    """A recording's result files and analysis report in `out` (refused if it holds results,
+    unless `overwrite`); `rig_file` default: the rig the recording carries. Returns the
+    number of frames and the analysis."""
+    if not recording.is_file():
+        raise FileNotFoundError(f"{recording}: no such recording")
+    rig = recording_rig(recording, rig_file)
+    tables = RunTables(ResultsWriter(out, overwrite), rig)
+    frames = export_recording(recording, rig, tables)
+    return frames, finish_analysis(tables, str(recording), out,
+                                   AnalysisOptions(gravity_m_s2=gravity_m_s2))
+
+
+def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:
+    """The tables from a recording of the graph (spots, line, points, fits, IMU, ToF)."""
+    first: float | None = None
+    frames = 0
+    frame_of: dict[float, int] = {}   # header stamp [s] -> frame index (clouds carry none)
+    clouds: list[tuple[float, float, SurfacePoints, np.ndarray]] = []
+    camera_imu: list[tuple[float, object]] = []
+    sensors: list[tuple[float, str, Any]] = []   # the Arduino's IMU and ToF: stamp, topic
+    for recorded, msg in decoded_messages(path):
+        name = recorded.type_name
+        if not hasattr(msg, "header"):
+            continue
+        stamp = stamp_s(msg)
+        if first is None and name in ("sensor_msgs/msg/Image", "sds_msgs/msg/LaserSpotArray",
+                                      "sds_msgs/msg/LaserLineProfile"):
+            first = stamp
+        time_s = stamp - (first if first is not None else stamp)
+        if name in ("sds_msgs/msg/LaserSpotArray", "sds_msgs/msg/LaserLineProfile"):
+            frame_of[stamp] = msg.frame_index
+        if name == "sds_msgs/msg/LaserSpotArray":
+            tables.add_spots(msg.frame_index, time_s, [
+                (s.laser_id, s.x_px, s.y_px, s.x_raw_px, s.y_raw_px, s.sigma_px,
+                 s.peak_intensity, s.flags) for s in msg.spots])
+            frames += 1
+        elif name == "sds_msgs/msg/LaserLineProfile":
+            tables.add_line(msg.frame_index, time_s, msg.x_px, msg.y_px, msg.sigma_px,
+                            msg.peak_intensity, np.asarray(msg.flags, np.uint8))
+        elif name == "sensor_msgs/msg/PointCloud2":
+            cloud = read_cloud(msg)
+            if cloud is not None:   # its frame is known once every spots message is read
+                clouds.append((stamp, time_s, cloud.points, cloud.rejected))
+        elif name == "sds_msgs/msg/SurfaceFit":
+            _add_fit_message(tables, msg, time_s)
+        elif name == "sensor_msgs/msg/Imu" and recorded.topic == CAMERA_IMU_TOPIC:
+            camera_imu.append((stamp, msg))   # may come before the first frame: kept for later
+        elif name in ("sensor_msgs/msg/Imu", "sensor_msgs/msg/Range"):
+            sensors.append((stamp, recorded.topic, msg))   # the same
+    if frames == 0:
+        raise RecordingError(f"{path}: no laser spots (sds_msgs/LaserSpotArray) recorded")
+    for stamp, time_s, points, rejected in clouds:
+        tables.add_points(frame_of.get(stamp, -1), time_s, points, rejected)
+    origin = first if first is not None else 0.0
+    for stamp, msg in sorted(camera_imu, key=lambda item: item[0]):
+        tables.add_camera_imu_message(msg, stamp - origin)
+    for stamp, topic, msg in sensors:
+        if hasattr(msg, "range"):
+            tables.add_tof(stamp - origin, msg.range * 1e3)
+        else:
+            a = msg.linear_acceleration
+            tables.add_imu(topic, stamp - origin, (a.x, a.y, a.z))
+    return frames
+
+
+def _add_fit_message(tables: RunTables, msg, time_s: float) -> None:
+    """A recorded SurfaceFit as a fits row."""
+    tables.writer.add_fit((msg.frame_index, time_s, msg.p00_mm, msg.p10, msg.p01,
+                           np.degrees(msg.tilt_x_rad), np.degrees(msg.tilt_y_rad),
+                           msg.r_squared, msg.rmse_mm, msg.sse_mm2, msg.point_count,
+                           msg.rejected_count),
+                          tuple(msg.mode_names), list(msg.modal_amplitudes_mm))

@@ -1,0 +1,216 @@
+"""The one per-frame pipeline: camera frames in, tracked spots, surface points and fits out.
+
+`FramePipeline` runs the graph's own per-frame code in one process (FrameTracker, then
+reconstruct_frame for the Hampel-filtered spots and reconstruct_line for the line, Eqs. 9–12)
+with the tracker's and reconstruction's parameters of config/graphs/drop.yaml, so that `sds
+process`, the benches, the tests and a notebook get what the graph's nodes compute. The frames
+come from `video_frames` (a video or an image folder) or `mcap_frames` (a recording's images).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from sds_camera.frame_source import (
+    FrameSource,
+    FrameSourceError,
+    Region,
+    open_source,
+    read_ahead,
+)
+from sds_model.paths import CONFIG
+from sds_model.rig import Rig
+from sds_recon.reconstruction import (
+    SurfaceFits,
+    SurfacePoints,
+    reconstruct_frame,
+    reconstruct_line,
+)
+from sds_record.mcap_files import decoded_messages, recorded_topics
+from sds_ros.graph_file import node_parameters
+from sds_ros.image_msg import msg_to_image
+from sds_ros.point_cloud import stamp_s
+from sds_sloshing.surface_series import RecordingError
+from sds_tracker.line import LineProfile
+from sds_tracker.spots import LOST
+from sds_tracker.tracker import FrameTracker, TrackedSpot, parse_seeds, tracker_config
+
+GRAPH = CONFIG / "graphs" / "drop.yaml"
+"""The graph whose tracker and reconstruction parameters the pipeline uses by default."""
+FRAMES_BEFORE_MODEL = 90
+"""Camera frames a recording may hold before its first camera model (3 s at 30 fps; the
+recorder logs the latched model once it matches, about 3 frames late in the graph's tests)."""
+
+
+@dataclass(frozen=True)
+class RedFrame:
+    """A frame's red channel (the region only), its region offset [px] and time [s]."""
+
+    index: int
+    time_s: float
+    red: np.ndarray
+    offset: tuple[int, int]
+
+
+def video_frames(path: Path, rig: Rig, fps: float = 0.0) -> Iterator[RedFrame]:
+    """A video's frames, the container's region (Rig.container_region_px) in red; the video
+    is opened and checked here, before the first frame is asked for."""
+    source = open_source(str(path), fps=fps)
+    region = Region(*rig.container_region_px(rig.camera))
+    try:
+        region.check_inside(source.width, source.height)
+    except FrameSourceError:
+        source.close()
+        raise
+    return read_ahead(_red_frames(source, region))
+
+
+def _red_frames(source: FrameSource, region: Region) -> Iterator[RedFrame]:
+    """The region's red channel of each frame (a video converts only that region)."""
+    try:
+        for frame in source.frames(region, "red"):
+            yield RedFrame(frame.index, frame.time_ns * 1e-9, frame.image, (region.x, region.y))
+    finally:
+        source.close()
+
+
+def mcap_frames(path: Path) -> Iterator[RedFrame]:
+    """A recording's camera frames (sensor_msgs/Image) and the region its camera model gives;
+    a recording without frames is refused here, before the first frame is asked for."""
+    types = {type_name for type_name, _ in recorded_topics(path).values()}
+    if "sensor_msgs/msg/Image" not in types:
+        raise RecordingError(f"{path}: the recording has no camera frames (sensor_msgs/Image)")
+    return read_ahead(_recorded_frames(path))
+
+
+def _recorded_frames(path: Path) -> Iterator[RedFrame]:
+    """The frames in recorded order, each with the latest camera model's region offset; the
+    frames before the first model wait for it (a recorder may log the latched model after
+    the first frames), at most FRAMES_BEFORE_MODEL of them."""
+    offset: tuple[int, int] | None = None
+    waiting: list[tuple[float, np.ndarray]] = []   # (stamp [s], red image) before any model
+    first: float | None = None
+    index = 0
+    for recorded, msg in decoded_messages(path):
+        name = recorded.type_name
+        if name == "sds_msgs/msg/CameraModel":
+            offset = (int(msg.roi.x_offset), int(msg.roi.y_offset))
+        elif name == "sensor_msgs/msg/Image":
+            image = msg_to_image(msg)
+            waiting.append((stamp_s(msg), image[..., 2] if image.ndim == 3 else image))
+            if offset is None and len(waiting) > FRAMES_BEFORE_MODEL:
+                raise RecordingError(f"{path}: {len(waiting)} camera frames before any camera "
+                                     "model (the region offset is unknown)")
+        if offset is not None:
+            for stamp, red in waiting:
+                first = stamp if first is None else first
+                yield RedFrame(index, stamp - first, red, offset)
+                index += 1
+            waiting.clear()
+    if waiting:
+        raise RecordingError(f"{path}: camera frames but no camera model (the region offset "
+                             "is unknown)")
+
+
+
+
+@dataclass(frozen=True)
+class SpotFrame:
+    """One frame's spots once the Hampel window has released them, with their surface points
+    (Eq. 9) and the frame's fits (plane, Eq. 12, and modes)."""
+
+    index: int
+    time_s: float
+    spots: list[TrackedSpot]
+    points: SurfacePoints
+    fits: SurfaceFits
+
+
+@dataclass(frozen=True)
+class LineFrame:
+    """One frame's laser line (a sample per image row) and its surface points (Eqs. 10–11)."""
+
+    index: int
+    time_s: float
+    line: LineProfile
+    points: SurfacePoints
+
+
+@dataclass(frozen=True)
+class PipelineStep:
+    """What one frame in gives out: its line at once, and the spot frames the Hampel window
+    released (earlier frames; none while the window fills; `flush` gives the rest)."""
+
+    line: LineFrame | None
+    spot_frames: list[SpotFrame]
+
+
+@dataclass(frozen=True)
+class TrackedFrame:
+    """The tracker's output for one frame, before reconstruction."""
+
+    frame: RedFrame
+    released: list[tuple[int, list[TrackedSpot]]]
+    line: LineProfile
+
+
+class FramePipeline:
+    """Track, triangulate and fit frame after frame, as the tracker and reconstruction nodes
+    do; `run` takes an iterable of frames and yields a PipelineStep per frame, then the
+    frames the Hampel window still held."""
+
+    def __init__(self, rig: Rig, tracker_values: Mapping[str, Any] | None = None,
+                 recon_values: Mapping[str, Any] | None = None) -> None:
+        """`tracker_values` and `recon_values`: the nodes' parameters (default: drop.yaml's)."""
+        tracker_values = node_parameters(GRAPH, "tracker") if tracker_values is None \
+            else tracker_values
+        recon_values = node_parameters(GRAPH, "recon") if recon_values is None else recon_values
+        self.rig = rig
+        self.tracker = FrameTracker(rig, tracker_config(tracker_values),
+                                    parse_seeds(tracker_values.get("seeds", [0.0])))
+        self.beam_weight = float(recon_values["beam_weight"])
+        self.default_sigma_px = float(recon_values["default_sigma_px"])
+        self._times_s: dict[int, float] = {}   # frames the Hampel window holds: their times
+
+    def track(self, frame: RedFrame) -> TrackedFrame:
+        """The tracker's step: spots of the frames the Hampel window releases, the line now."""
+        self._times_s[frame.index] = frame.time_s
+        released, line = self.tracker.process(frame.index, frame.red, frame.offset)
+        return TrackedFrame(frame, released, line)
+
+    def reconstruct(self, tracked: TrackedFrame) -> PipelineStep:
+        """The reconstruction's step: points and fits of the released spots, the line's points."""
+        frame, line = tracked.frame, tracked.line
+        line_points = reconstruct_line(self.rig, np.column_stack([line.x_px, line.y_px]),
+                                       line.sigma_px, self.default_sigma_px)
+        return PipelineStep(LineFrame(frame.index, frame.time_s, line, line_points),
+                            self._spot_frames(tracked.released))
+
+    def process(self, frame: RedFrame) -> PipelineStep:
+        """One frame through tracker and reconstruction."""
+        return self.reconstruct(self.track(frame))
+
+    def flush(self) -> PipelineStep:
+        """The frames the Hampel window still holds (at the end of the frames)."""
+        return PipelineStep(None, self._spot_frames(self.tracker.flush()))
+
+    def run(self, frames: Iterable[RedFrame]) -> Iterator[PipelineStep]:
+        """Every frame's step, then the flush."""
+        for frame in frames:
+            yield self.process(frame)
+        yield self.flush()
+
+    def _spot_frames(self, released: list[tuple[int, list[TrackedSpot]]]) -> list[SpotFrame]:
+        """Triangulate and fit each released frame's spots (Eq. 9, Eq. 12)."""
+        spot_frames = []
+        for index, spots in released:
+            points, fits = reconstruct_frame(
+                self.rig, [s.laser_id for s in spots], [[s.x_px, s.y_px] for s in spots],
+                [s.sigma_px for s in spots], [bool(s.flags & LOST) for s in spots],
+                self.beam_weight, self.default_sigma_px)
+            spot_frames.append(SpotFrame(index, self._times_s.pop(index), spots, points, fits))
+        return spot_frames

@@ -1,0 +1,143 @@
+"""`sds process`: videos and recordings measured in one process, no ROS graph.
+
+`process_video` and `process_recording` run the one per-frame pipeline (`pipeline.FramePipeline`,
+the graph's own code and parameters) over a video's or a recording's frames and write the result
+files and the analysis report; `process_inputs` does so for several inputs in parallel, one
+result folder each; `calibrate_from_images` self-calibrates the rig first (`--calibrate-lasers`).
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+from collections.abc import Iterable
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+
+from sds_camera.camera_imu import read_camera_imu
+from sds_model.rig import Rig, load_rig
+from sds_recon.results import ResultsWriter
+from sds_record.recorded_series import read_accelerations, recording_rig
+from sds_sloshing.analysis import AnalysisOptions
+from tqdm import tqdm
+
+from sds_workflows.errors import input_errors
+from sds_workflows.pipeline import FramePipeline, RedFrame, mcap_frames, video_frames
+from sds_workflows.rig_calibration import calibrate_rig
+from sds_workflows.run_tables import RunAnalysis, RunTables, finish_analysis
+
+
+def process_frames(frames: Iterable[RedFrame], rig: Rig, tables: RunTables,
+                   progress: bool = True) -> int:
+    """Every frame through the pipeline into `tables`; the number of frames."""
+    pipeline = FramePipeline(rig)
+    count = 0
+    for step in pipeline.run(tqdm(frames, desc="frames", unit="frame", disable=not progress)):
+        tables.add_step(step)
+        count += step.line is not None
+    return count
+
+
+@dataclass(frozen=True)
+class ProcessedRun:
+    """What processing one input gave: its frames, the result folder and the analysis."""
+
+    source: Path
+    out: Path
+    frames: int
+    analysis: RunAnalysis
+
+    def summary(self) -> str:
+        """One line for the console."""
+        note = self.analysis.note
+        return (f"sds process: {self.frames} frames of {self.source} -> {self.out}"
+                + (f" ({note})" if note else ""))
+
+
+def process_video(video: Path, rig: Rig, out: Path, fps: float = 0.0,
+                  gravity_m_s2: float | None = None, overwrite: bool = False,
+                  progress: bool = True) -> ProcessedRun:
+    """A video (or an image folder at `fps`) taken with `rig`: result files, the camera's own
+    IMU where the video has one, the analysis report, all in `out` (refused if it holds
+    results, unless `overwrite`)."""
+    tables = RunTables(ResultsWriter(out, overwrite), rig)
+    count = process_frames(video_frames(video, rig, fps), rig, tables, progress)
+    imu = read_camera_imu(video)
+    if imu is not None:
+        tables.add_camera_imu(imu)
+    return ProcessedRun(video, out, count, finish_analysis(
+        tables, str(video), out, AnalysisOptions(gravity_m_s2=gravity_m_s2)))
+
+
+def process_recording(recording: Path, out: Path, rig: Rig | None = None,
+                      gravity_m_s2: float | None = None, overwrite: bool = False,
+                      progress: bool = True) -> ProcessedRun:
+    """A recording's camera frames tracked again (`rig` default: the one it carries), its
+    accelerometers for the gravity regime: result files and the analysis report in `out`."""
+    rig = rig if rig is not None else recording_rig(recording, None)
+    tables = RunTables(ResultsWriter(out, overwrite), rig)
+    count = process_frames(mcap_frames(recording), rig, tables, progress)
+    for topic, (time_s, accel_m_s2) in read_accelerations(recording).items():
+        tables.add_accelerations(topic, time_s, accel_m_s2)
+    return ProcessedRun(recording, out, count, finish_analysis(
+        tables, str(recording), out, AnalysisOptions(gravity_m_s2=gravity_m_s2)))
+
+
+def process_input(source: Path, is_video: bool, rig_file: Path | None, out: Path,
+                  fps: float = 0.0, gravity_m_s2: float | None = None,
+                  overwrite: bool = False, progress: bool = True) -> ProcessedRun:
+    """One video (needs `rig_file`) or recording (`rig_file` default: the one it carries)."""
+    if is_video:
+        if rig_file is None:
+            raise ValueError(f"{source}: a video needs a rig file (the rig it was taken with)")
+        return process_video(source, load_rig(rig_file), out, fps, gravity_m_s2, overwrite,
+                             progress)
+    return process_recording(source, out, recording_rig(source, rig_file), gravity_m_s2,
+                             overwrite, progress)
+
+
+def _process_in_worker(source: Path, is_video: bool, rig_file: Path | None, out: Path,
+                       fps: float, gravity_m_s2: float | None, overwrite: bool
+                       ) -> tuple[bool, str]:
+    """One input in a worker process: (done, summary line or the failure's one line)."""
+    try:
+        return True, process_input(source, is_video, rig_file, out, fps, gravity_m_s2,
+                                   overwrite, progress=False).summary()
+    except Exception as error:
+        if not isinstance(error, input_errors()):
+            raise
+        return False, f"sds process: {source}: {error}"
+
+
+def process_inputs(inputs: list[Path], is_video: bool, rig_file: Path | None, out: Path,
+                   jobs: int, fps: float = 0.0, gravity_m_s2: float | None = None,
+                   overwrite: bool = False, progress: bool = True) -> int:
+    """The inputs in parallel (`jobs` worker processes), one result folder each under `out`
+    (out/<name>), one progress bar; every failure is reported, the others finish. Returns how
+    many failed."""
+    jobs = max(1, min(jobs, len(inputs)))
+    failed = 0
+    # spawn: a fresh interpreter per worker (no forked threads of this one)
+    with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+        futures = [pool.submit(_process_in_worker, source, is_video, rig_file,
+                               out / source.stem, fps, gravity_m_s2, overwrite)
+                   for source in inputs]
+        with tqdm(total=len(inputs), desc="inputs", unit="file", disable=not progress) as bar:
+            for future in as_completed(futures):
+                done, line = future.result()
+                failed += not done
+                bar.write(line)
+                bar.update()
+    print(f"sds process: {len(inputs) - failed} of {len(inputs)} inputs processed into "
+          f"{out}" + (f", {failed} failed (above)" if failed else ""))
+    return failed
+
+
+def calibrate_from_images(rig: Rig, paths: list[Path], surfaces: Path, out: Path
+                          ) -> tuple[Rig, Path]:
+    """Self-calibrate the rig from images of known surfaces or one tilt-table video, as `sds
+    calibrate rig` does, into out/rig_calibrated.yaml (with its report and overlays)."""
+    rig_path = out / "rig_calibrated.yaml"
+    calibrated, _ = calibrate_rig(rig, paths, surfaces, rig_path,
+                                  "`sds process --calibrate-lasers`")
+    return calibrated, rig_path

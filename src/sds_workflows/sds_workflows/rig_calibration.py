@@ -1,0 +1,253 @@
+"""`sds calibrate rig`: images of known surfaces → identified spots → the self-calibrated rig.
+
+Reads each image, finds every spot-like blob in the container's region (sds_tracker.discovery)
+and the line laser's centre per row, identifies and fits the rig (sds_recon.calibration.
+rig_calibration), and writes the calibrated rig file, its report (JSON, text, HTML) and one
+diagnostic overlay per image in the manner of seed Figs. 5/6.
+"""
+
+from __future__ import annotations
+
+import html
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+from sds_camera.frame_source import Region, VideoFileSource, open_source, select
+from sds_model.rig import Rig, save_rig
+from sds_recon.calibration.laser_files import read_surfaces
+from sds_recon.calibration.lasers import KnownSurface
+from sds_recon.calibration.rig_calibration import (
+    CalibrationSettings,
+    RigCalibration,
+)
+from sds_recon.calibration.rig_calibration import calibrate_rig as fit_rig
+from sds_recon.calibration.rig_model import LineObservations
+from sds_recon.calibration.rig_report import calibrated_rig, report_text, rig_report
+from sds_recon.triangulation import beam_image_path
+from sds_tracker.discovery import SpotCandidates, find_spots
+from sds_tracker.line import LineSettings, track_line
+from sds_tracker.plateaus import changed_pixels, find_plateaus
+from sds_tracker.tracker import flat_line_px
+
+REGION_MARGIN_MM = 8.0
+"""The search region reaches this far beyond the rim (a turned camera moves the image)."""
+LINE_BAND_4K_PX = 80
+"""Columns searched on each side of the rig file's line at 3840 px width (scaled with it)."""
+LINE_SAMPLES_PER_FRAME = 60
+"""Line rows per image that enter the joint fit (evenly spaced; more add time, not accuracy)."""
+OVERLAY_WIDTH_PX = 1200
+VIDEO_SUFFIXES = (".mp4", ".mov", ".mkv", ".avi", ".m4v")
+STILL_S = 0.5
+"""Shortest still stretch of a calibration video that counts as a plateau [s]."""
+STILL_PX = 4
+"""Most changed pixels (half resolution) between two frames of a still stretch."""
+
+
+@dataclass(frozen=True)
+class CalibrationImages:
+    """What was found in each calibration image: blobs and line pixels."""
+
+    spots: list[SpotCandidates]
+    line: LineObservations
+    region: Region
+
+
+def read_images(paths: list[Path]) -> list[np.ndarray]:
+    """BGR images from files; a one-line error (ValueError) for one that cannot be read."""
+    images = []
+    for path in paths:
+        image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+        if image is None:
+            raise ValueError(f"{path}: not a readable image")
+        images.append(image)
+    return images
+
+
+def known_surfaces(path: Path) -> list[KnownSurface]:
+    """The surfaces CSV's surfaces in frame order; its frames must run 0, 1, … without gaps."""
+    known = read_surfaces(path)
+    if sorted(known) != list(range(len(known))):
+        raise ValueError(f"{path}: frames must run 0, 1, 2, … (got {sorted(known)[:8]})")
+    if not known:
+        raise ValueError(f"{path}: no known surface")
+    return [known[k] for k in range(len(known))]
+
+
+def calibration_frames(paths: list[Path], rig: Rig, count: int
+                       ) -> tuple[list[np.ndarray], list[str]]:
+    """Images of the known surfaces (one per surface) from image files, or from the still
+    stretches of one video file (VIDEO_SUFFIXES)."""
+    if len(paths) == 1 and paths[0].suffix.lower() in VIDEO_SUFFIXES:
+        return read_video_plateaus(paths[0], rig, count)
+    if len(paths) != count:
+        raise ValueError(f"{len(paths)} images but {count} known surfaces")
+    return read_images(paths), [str(p) for p in paths]
+
+
+def read_video_plateaus(path: Path, rig: Rig, count: int, min_still_s: float = STILL_S
+                        ) -> tuple[list[np.ndarray], list[str]]:
+    """The middle frame (BGR) of each of the `count` still stretches of a tilt-table video,
+    and a name for each; a one-line error (ValueError) when it has another number of them.
+
+    Two passes: the first measures each frame's change inside the container's region (red
+    channel, half resolution), the second keeps only the plateaus' middle frames.
+    """
+    region = Region(*rig.container_region_px(rig.camera))
+    source = open_source(str(path))
+    try:
+        fps = source.nominal_fps if isinstance(source, VideoFileSource) else 0.0
+        if not fps > 0:
+            raise ValueError(f"{path}: a video file with a frame rate is needed")
+        changes, previous = [], None
+        region.check_inside(source.width, source.height)
+        for frame in source.frames(region, "red"):
+            red = cv2.resize(frame.image, None, fx=0.5, fy=0.5, interpolation=cv2.INTER_AREA)
+            changes.append(0 if previous is None else changed_pixels(previous, red))
+            previous = red
+    finally:
+        source.close()
+    plateaus = find_plateaus(np.array(changes), max(2, round(min_still_s * fps)),
+                             STILL_PX)
+    if len(plateaus) != count:
+        found = ", ".join(f"{p.first / fps:.1f}–{p.last / fps:.1f} s" for p in plateaus[:12])
+        raise ValueError(f"{path}: {len(plateaus)} still stretches of {min_still_s:g} s or more "
+                         f"({found or 'none'}), but {count} known surfaces")
+    wanted = {p.middle: p for p in plateaus}
+    images, names = [], []
+    source = open_source(str(path))
+    try:
+        for frame in source.frames():
+            if frame.index in wanted:
+                images.append(frame.image)
+                p = wanted[frame.index]
+                names.append(f"{path.name} frame {frame.index} (still {p.first / fps:.2f}–"
+                             f"{p.last / fps:.2f} s)")
+            if len(images) == len(wanted):
+                break
+    finally:
+        source.close()
+    return images, names
+
+
+def observe(rig: Rig, images: list[np.ndarray]) -> CalibrationImages:
+    """Blobs and line centres in each image (BGR, full frame), inside the container region."""
+    scale_px = rig.camera.width_px / 3840
+    margin = int(np.ceil(REGION_MARGIN_MM * rig.surface_px_per_mm()))
+    region = Region(*rig.container_region_px(rig.camera, margin))
+    rows, expected = flat_line_px(rig)
+    settings = LineSettings(band_px=max(10, round(LINE_BAND_4K_PX * scale_px)))
+    spots, line_frame, line_pixels, line_sigma = [], [], [], []
+    for index, image in enumerate(images):
+        region.check_inside(image.shape[1], image.shape[0])
+        red = select(image, region, "red")
+        profile = track_line(red, (region.x, region.y), expected, rows, settings) \
+            if len(rows) else None
+        line_px = (profile.y_px, profile.x_px) if profile is not None and \
+            len(profile.y_px) > len(rows) // 4 else None
+        spots.append(find_spots(red, (region.x, region.y), line=line_px))
+        if profile is not None:
+            keep = np.linspace(0, len(profile.x_px) - 1,
+                               min(LINE_SAMPLES_PER_FRAME, len(profile.x_px))).astype(int)
+            line_frame += [index] * len(keep)
+            line_pixels += list(zip(profile.x_px[keep], profile.y_px[keep], strict=True))
+            line_sigma += list(profile.sigma_px[keep])
+    line = LineObservations(np.array(line_frame, int), np.array(line_pixels).reshape(-1, 2),
+                            np.array(line_sigma, float))
+    return CalibrationImages(spots, line, region)
+
+
+def calibrate_images(rig: Rig, images: list[np.ndarray], surfaces: list[KnownSurface],
+                     settings: CalibrationSettings | None = None
+                     ) -> tuple[RigCalibration, CalibrationImages]:
+    """Self-calibrate the rig from images of the known surfaces (one surface per image)."""
+    if len(images) != len(surfaces):
+        raise ValueError(f"{len(images)} images but {len(surfaces)} known surfaces")
+    found = observe(rig, images)
+    line = found.line if len(found.line.frame) else None
+    result = fit_rig(rig, surfaces, [s.pixels for s in found.spots],
+                     [s.covariance_px2 for s in found.spots], line, settings)
+    return result, found
+
+
+def calibrate_rig(rig: Rig, paths: list[Path], surfaces_csv: Path, rig_path: Path,
+                  source: str, settings: CalibrationSettings | None = None
+                  ) -> tuple[Rig, RigCalibration]:
+    """Self-calibrate `rig` from images of known surfaces (image k is frame k of the surfaces
+    CSV) or one tilt-table video (its still stretches in order); write the calibrated rig to
+    `rig_path` with its report and overlays beside it (`source`: the command, for the rig
+    file's header)."""
+    surfaces = known_surfaces(surfaces_csv)
+    images, names = calibration_frames(paths, rig, len(surfaces))
+    result, found = calibrate_images(rig, images, surfaces, settings)
+    rig_path.parent.mkdir(parents=True, exist_ok=True)
+    return write_calibration(rig, result, found, images, names, rig_path, source), result
+
+
+def write_calibration(nominal: Rig, result: RigCalibration, found: CalibrationImages,
+                      images: list[np.ndarray], names: list[str], rig_path: Path,
+                      source: str) -> Rig:
+    """Write the calibrated rig, `<rig>.report.json`/`.txt`/`.html` and overlays beside it."""
+    rig = calibrated_rig(nominal, result)
+    report = rig_report(nominal, result)
+    text = report_text(report)
+    save_rig(rig, rig_path, comment=f"Self-calibrated by {source} ({len(images)} images):\n"
+                                    f"{text}")
+    stem = rig_path.with_suffix("")
+    Path(f"{stem}.report.json").write_text(json.dumps(report, indent=2) + "\n")
+    Path(f"{stem}.report.txt").write_text(text + "\n")
+    overlays = []
+    for index, image in enumerate(images):
+        path = Path(f"{stem}.overlay_{index:02d}.png")
+        cv2.imwrite(str(path), overlay(nominal, rig, result, found, index, image))
+        overlays.append(path)
+    figures = "".join(f"<figure><img src='{p.name}' width='900'><figcaption>{html.escape(n)}"
+                      "</figcaption></figure>" for p, n in zip(overlays, names, strict=True))
+    Path(f"{stem}.report.html").write_text(
+        "<html><head><meta charset='utf-8'><title>SDS rig calibration</title></head><body>"
+        f"<h1>Rig calibration</h1><pre>{html.escape(text)}</pre>"
+        "<p>Overlays: green crosses, the rig file's spot positions; red circles, spots "
+        "identified (with ids); red lines, the calibrated beams' image paths (surface heights "
+        "−30…40 mm); yellow circles, blobs no diode claimed (wall reflections, noise).</p>"
+        f"{figures}</body></html>\n")
+    return rig
+
+
+def overlay(nominal: Rig, calibrated: Rig, result: RigCalibration, found: CalibrationImages,
+            index: int, image: np.ndarray) -> np.ndarray:
+    """One calibration image's region with what the calibration saw and decided."""
+    r = found.region
+    crop = image[r.y:r.y + r.height, r.x:r.x + r.width].copy()
+    factor = min(1.0, OVERLAY_WIDTH_PX / r.width)
+    picture = cv2.resize(crop, None, fx=factor, fy=factor, interpolation=cv2.INTER_AREA)
+
+    def point(pixel: np.ndarray) -> tuple[int, int]:
+        return round((pixel[0] - r.x) * factor), round((pixel[1] - r.y) * factor)
+
+    surface = result.fit.model.surfaces[index]
+    for diode in nominal.diodes:
+        hit = surface.intersect(diode.emitter_mm, diode.direction[None])
+        pixel = nominal.project(hit)[0]
+        if np.isfinite(pixel).all():
+            cv2.drawMarker(picture, point(pixel), (0, 255, 0), cv2.MARKER_CROSS, 14, 1)
+    heights = np.linspace(-30.0, 40.0, 15)
+    for laser_id in result.laser_ids:
+        path = beam_image_path(calibrated, laser_id, heights)
+        path = path[np.isfinite(path).all(axis=1)]
+        if len(path) > 1:
+            cv2.polylines(picture, [np.array([point(p) for p in path], np.int32)], False,
+                          (0, 0, 200), 1, cv2.LINE_AA)
+    blobs = found.spots[index].pixels
+    for k in np.flatnonzero(result.frame == index):
+        pixel = blobs[result.blob[k]]
+        cv2.circle(picture, point(pixel), 9, (0, 0, 255), 2, cv2.LINE_AA)
+        cv2.putText(picture, str(result.laser_ids[result.diode[k]]),
+                    (point(pixel)[0] + 10, point(pixel)[1] - 10), cv2.FONT_HERSHEY_SIMPLEX, 0.5,
+                    (255, 255, 255), 1, cv2.LINE_AA)
+    used = set(result.blob[result.frame == index].tolist())
+    for j, pixel in enumerate(blobs):
+        if j not in used:
+            cv2.circle(picture, point(pixel), 9, (0, 255, 255), 1, cv2.LINE_AA)
+    return picture

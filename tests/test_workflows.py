@@ -1,0 +1,57 @@
+"""The workflows as a notebook calls them: the public entry points and the one per-frame
+pipeline give what the `sds` command gives."""
+
+from __future__ import annotations
+
+import filecmp
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from sds_model.rig import load_rig
+from sds_sim.scenario import load_scenario
+from sds_sim.simulate import SimulationOutput, simulate
+from sds_workflows import FramePipeline, process_video, video_frames
+from sds_workflows.pipeline import PipelineStep
+
+RESULT_FILES = ("spots.csv", "points.csv", "line.csv", "fits.csv", "analysis.json")
+
+
+@pytest.fixture(scope="module")
+def kick(repo: Path, tmp_path_factory: pytest.TempPathFactory) -> SimulationOutput:
+    """Half a second of the 1 g ground kick at 4K (15 frames)."""
+    scenario = load_scenario(repo / "config" / "scenarios" / "ground_kick.yaml",
+                             {"duration_s": 0.5})
+    return simulate(scenario, tmp_path_factory.mktemp("kick") / "sim", progress=False)
+
+
+def test_process_video_writes_what_sds_process_writes(repo: Path, kick: SimulationOutput,
+                                                      tmp_path: Path) -> None:
+    rig_file = repo / "config" / "rigs" / "stelium.yaml"
+    run = process_video(kick.video, load_rig(rig_file), tmp_path / "api", progress=False)
+    done = subprocess.run([str(Path(sys.executable).with_name("sds")), "process", "--video",
+                           str(kick.video), "--rig", str(rig_file), "--out",
+                           str(tmp_path / "cli"), "--no-progress"],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert run.frames == 15 and done.stdout.startswith(f"sds process: 15 frames of {kick.video}")
+    match, mismatch, errors = filecmp.cmpfiles(tmp_path / "api", tmp_path / "cli",
+                                               RESULT_FILES, shallow=False)
+    assert sorted(match) == sorted(RESULT_FILES), (mismatch, errors)
+
+
+def test_the_pipeline_gives_every_frame_once_in_order(repo: Path, kick: SimulationOutput
+                                                      ) -> None:
+    rig = load_rig(repo / "config" / "rigs" / "stelium.yaml")
+    steps: list[PipelineStep] = list(FramePipeline(rig).run(video_frames(kick.video, rig)))
+    lines = [step.line.index for step in steps if step.line is not None]
+    spot_frames = [frame for step in steps for frame in step.spot_frames]
+    assert lines == list(range(15))
+    assert [frame.index for frame in spot_frames] == list(range(15))
+    assert steps[-1].line is None   # the flush: what the Hampel window held
+    # the window holds back the last frames until the flush, the first until it has filled
+    assert steps[0].spot_frames == [] and steps[-1].spot_frames
+    for frame in spot_frames:
+        assert len(frame.spots) == len(rig.diodes) == len(frame.points.laser_ids)
+        assert frame.fits.plane is not None and abs(frame.fits.plane.p00_mm) < 5.0
