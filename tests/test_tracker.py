@@ -130,6 +130,45 @@ def test_hampel_keeps_a_fast_spot_and_replaces_a_reflection() -> None:
         HampelBank(window=4)
 
 
+def test_hampel_keeps_a_deviation_within_the_spots_own_sigma() -> None:
+    """A 3 px jump is a reflection for a spot measured to 0.05 px, and within the noise of
+    one measured to 1.5 px: only the first is replaced."""
+    t = np.arange(20.0)
+    track = np.column_stack([0.5 * t, np.zeros_like(t)])
+    track[10] += [3.0, 0.0]
+    for sigma_px, replaced in ((0.05, True), (1.5, False)):
+        hampel = HampelBank(window=5)
+        outputs = [o for i, p in enumerate(track)
+                   if (o := hampel.push(i, p[None], np.array([sigma_px]))) is not None]
+        assert {o.frame for o in outputs if o.replaced[0]} == ({10} if replaced else set())
+
+
+def test_stills_of_different_surfaces_are_tracked_each_on_its_own(repo: Path) -> None:
+    """Tilt-table images are no video: with `stills` every image's spots come out with it,
+    none replaced by a temporal filter, each where its image shows it."""
+    from sds_model.rig import load_rig
+    from sds_sim.tilt_series import render_tilt_series
+    from sds_tracker.tracker import TrackerConfig
+
+    rig = load_rig(repo / "config" / "rigs" / "stelium.yaml")
+    series = render_tilt_series(rig, [0.0, 35.0, 0.0, 35.0, 0.0, 35.0], "x", seed=4)
+    x, y, w, h = rig.container_region_px(rig.camera, 60)
+    tracker = FrameTracker(rig, TrackerConfig(stills=True))
+    errors = []
+    for index, (image, truth) in enumerate(zip(series.images, series.truths, strict=True)):
+        ready, _ = tracker.process(index, image[y:y + h, x:x + w, 2], (x, y))
+        assert [frame for frame, _ in ready] == [index]     # no latency
+        for spot in ready[0][1]:
+            assert not spot.flags & HAMPEL_REPLACED
+            np.testing.assert_equal((spot.x_px, spot.y_px), (spot.x_raw_px, spot.y_raw_px))
+            k = [d.laser_id for d in rig.diodes].index(spot.laser_id)
+            if truth.visible[k] and not is_lost(spot):
+                errors.append(np.hypot(spot.x_px - truth.spot_exposure_px[k, 0],
+                                       spot.y_px - truth.spot_exposure_px[k, 1]))
+    assert tracker.flush() == []
+    assert len(errors) >= 100 and np.percentile(errors, 95) < 0.3
+
+
 def test_manual_seeds_start_the_spots_and_bad_seeds_are_refused(repo: Path) -> None:
     scenario = load_scenario(repo / "config" / "scenarios" / "ground_kick.yaml",
                              {"duration_s": 0.2})

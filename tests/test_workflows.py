@@ -12,8 +12,9 @@ import pytest
 from sds_model.rig import load_rig
 from sds_sim.scenario import load_scenario
 from sds_sim.simulate import SimulationOutput, simulate
-from sds_workflows import FramePipeline, process_video, video_frames
 from sds_workflows.pipeline import PipelineStep
+
+from sds_workflows import FramePipeline, process_video, video_frames
 
 RESULT_FILES = ("spots.csv", "points.csv", "line.csv", "fits.csv", "analysis.json")
 

@@ -52,10 +52,13 @@ class RigidTransform:
 
 
 def ray_plane_points(origin: np.ndarray, rays: np.ndarray, normal: np.ndarray,
-                     offset: float) -> np.ndarray:
-    """Where rays (N×3) from `origin` meet the plane normal · X = offset (N×3, the rays'
-    units); NaN for rays that meet it behind the origin or never."""
+                     offset: float | np.ndarray) -> np.ndarray:
+    """Where rays (N×3) from `origin` (3, or one per ray N×3) meet the plane normal · X =
+    offset (one plane, or one per ray: normals N×3, offsets N) (N×3, the rays' units); NaN for
+    rays that meet it behind the origin or never. Every ray–plane intersection of the
+    project is this one."""
     with np.errstate(divide="ignore", invalid="ignore"):
-        distance = (offset - origin @ normal) / (rays @ normal)
+        distance = np.asarray((offset - np.sum(origin * normal, axis=-1))
+                              / np.sum(rays * normal, axis=-1), dtype=float).reshape(-1)
     distance[~(distance > 0)] = np.nan
     return origin + distance[:, None] * rays

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field, fields
 from functools import cached_property
 from pathlib import Path
 from typing import Any
@@ -28,8 +28,9 @@ class RigError(ValueError):
 @dataclass(frozen=True)
 class LaserDiode:
     """One laser diode: emitter position [mm, world], unit beam direction (to the liquid),
-    the direction's one-sigma uncertainty [deg] once calibrated, and whether it is tracked
-    (a diode that calibration could not identify is kept in the file but not tracked)."""
+    the direction's one-sigma uncertainty [deg] once calibrated, whether it is tracked
+    (a diode that calibration could not identify is kept in the file but not tracked), and
+    its emitter's own position tolerance [mm, σ per axis] where it differs from the rig's."""
 
     laser_id: int
     ring: int
@@ -37,6 +38,7 @@ class LaserDiode:
     direction: np.ndarray
     direction_sigma_deg: float | None = None
     tracked: bool = True
+    emitter_sigma_mm: float | None = None
 
     def point_at(self, distance_mm: ArrayLike) -> np.ndarray:
         """Points on the beam `distance_mm` from the emitter (N×3, mm)."""
@@ -69,6 +71,23 @@ class Fluid:
 
 
 @dataclass(frozen=True)
+class Tolerances:
+    """How far the rig as built may depart from its file: one σ per axis of each quantity
+    (None: exact as drawn, or, for the camera pose and the beams' directions, unknown and
+    fitted freely where the calibration's data determine it)."""
+
+    emitter_mm: float | None = None           # each emitter's position (a 3D-printed holder)
+    camera_position_mm: float | None = None   # the camera centre
+    camera_angle_deg: float | None = None     # the camera's rotation about each world axis
+    beam_lean_deg: float | None = None        # each beam's direction, about each axis across it
+    line_plane_deg: float | None = None       # the line laser plane's normal
+    line_plane_mm: float | None = None        # the line laser plane along its normal
+
+
+TOLERANCE_KEYS = tuple(f.name for f in fields(Tolerances))
+
+
+@dataclass(frozen=True)
 class Rig:
     """Everything geometric about one rig, in the world frame (WORLD_FRAME)."""
 
@@ -81,6 +100,7 @@ class Rig:
     gravity_m_s2: float
     camera_file: Path | None   # None: the camera model came inline (a recording's rig)
     calibration: dict[str, Any] | None = None   # what `sds calibrate rig` found (uncertainties)
+    tolerances: Tolerances = field(default_factory=Tolerances)
 
     @property
     def tracked_diodes(self) -> tuple[LaserDiode, ...]:
@@ -132,6 +152,14 @@ class Rig:
     def _diodes_by_id(self) -> dict[int, LaserDiode]:
         """Laser id → diode (built once: every triangulated spot looks its diode up)."""
         return {diode.laser_id: diode for diode in self.diodes}
+
+    def emitter_sigma_mm(self, laser_id: int) -> float:
+        """The σ per axis of a diode's emitter position [mm]: its own, else the rig's, else 0
+        (exact as drawn)."""
+        own = self.diode(laser_id).emitter_sigma_mm
+        if own is not None:
+            return own
+        return self.tolerances.emitter_mm or 0.0
 
     def diode(self, laser_id: int) -> LaserDiode:
         """The diode with this id."""
@@ -213,12 +241,15 @@ def rig_from_dict(content: Any, base: Path) -> Rig:
         if not isinstance(entry, dict) or "id" not in entry:
             raise RigError(f"{where} must be a mapping with an id")
         sigma = entry.get("direction_sigma_deg")
+        emitter_sigma = entry.get("emitter_sigma_mm")
         diodes.append(LaserDiode(int(entry["id"]), int(entry.get("ring", 0)),
                                  _vector(entry, "emitter_mm", where),
                                  _vector(entry, "direction", where, unit=True),
                                  None if sigma is None else _number(entry, "direction_sigma_deg",
                                                                     where, positive=False),
-                                 bool(entry.get("tracked", True))))
+                                 bool(entry.get("tracked", True)),
+                                 None if emitter_sigma is None else _number(
+                                     entry, "emitter_sigma_mm", where, positive=False)))
     ids = [d.laser_id for d in diodes]
     if len(set(ids)) != len(ids):
         raise RigError(f"diode ids must be unique, got {ids}")
@@ -241,7 +272,22 @@ def rig_from_dict(content: Any, base: Path) -> Rig:
         gravity_m_s2=_number(content, "gravity_m_s2", "rig", positive=False),
         camera_file=camera_file,
         calibration=_calibration(content),
+        tolerances=_tolerances(content),
     )
+
+
+def _tolerances(content: dict[str, Any]) -> Tolerances:
+    """The `tolerances:` section (absent: every quantity as drawn or freely fitted)."""
+    section = content.get("tolerances")
+    if section is None:
+        return Tolerances()
+    if not isinstance(section, dict):
+        raise RigError("tolerances must be a mapping")
+    unknown = sorted(set(section) - set(TOLERANCE_KEYS))
+    if unknown:
+        raise RigError(f"tolerances: unknown keys {unknown} (known: {list(TOLERANCE_KEYS)})")
+    return Tolerances(**{key: _number(section, key, "tolerances", positive=False)
+                         for key in section if section[key] is not None})
 
 
 def _calibration(content: dict[str, Any]) -> dict[str, Any] | None:
@@ -300,6 +346,10 @@ def rig_to_dict(rig: Rig, directory: Path | None) -> dict[str, Any]:
         content["line_laser"] = {"emitter_mm": _numbers(rig.line_laser.emitter_mm),
                                  "normal": _numbers(rig.line_laser.normal)}
     content["diodes"] = [_diode_entry(d) for d in rig.diodes]
+    declared = {key: getattr(rig.tolerances, key) for key in TOLERANCE_KEYS
+                if getattr(rig.tolerances, key) is not None}
+    if declared:
+        content["tolerances"] = declared
     if rig.calibration is not None:
         content["calibration"] = rig.calibration
     return content
@@ -313,6 +363,8 @@ def _diode_entry(diode: LaserDiode) -> dict[str, Any]:
         entry["direction_sigma_deg"] = float(f"{diode.direction_sigma_deg:.3g}")
     if not diode.tracked:
         entry["tracked"] = False
+    if diode.emitter_sigma_mm is not None:
+        entry["emitter_sigma_mm"] = diode.emitter_sigma_mm
     return entry
 
 

@@ -42,3 +42,71 @@ def render_tilt_series(rig: Rig, angles_deg: list[float], axis: str = "x", scale
         surfaces.append(KnownSurface(series.offset_mm, tilt_x, tilt_y))
         truths.append(truth)
     return TiltSeries(images, surfaces, truths)
+
+
+@dataclass(frozen=True)
+class ReadingErrors:
+    """How a user's readings of the known surfaces depart from the liquid's true pose (each
+    drawn at random, seeded; 0: read exactly)."""
+
+    about_axis_deg: float = 0.0    # a tilted frame's angle about its axis, uniform ± (the
+                                   # seed's table: "0.5 deg accuracy")
+    across_deg: float = 0.0        # the other angle of a tilted frame, normal σ
+    level_deg: float = 0.0         # both angles of a level frame, normal σ (a spirit level)
+    offset_mm: float = 0.0         # every fill level, normal σ (a measured volume)
+
+    @property
+    def tilt_sigma_deg(self) -> float:
+        """The σ a user declares for a tilted frame's angles (the larger of the two)."""
+        return max(self.about_axis_deg / np.sqrt(3.0), self.across_deg)
+
+
+def true_surfaces(readings: list[KnownSurface], errors: ReadingErrors,
+                  rng: np.random.Generator) -> list[KnownSurface]:
+    """The surfaces the liquid really takes when the user reads `readings` (a reading with
+    both angles 0 is a level frame; one at offset 0 is at the first fill level, the world's
+    Z = 0 by definition)."""
+    truths = []
+    for reading in readings:
+        level = reading.tilt_x_rad == 0.0 and reading.tilt_y_rad == 0.0
+        if level:
+            tilt = rng.normal(0.0, errors.level_deg, 2)
+        else:
+            about_x = abs(reading.tilt_x_rad) >= abs(reading.tilt_y_rad)
+            about = rng.uniform(-1.0, 1.0) * errors.about_axis_deg
+            across = rng.normal(0.0, errors.across_deg)
+            tilt = np.array([about, across]) if about_x else np.array([across, about])
+        tilt_x, tilt_y = np.radians(tilt)
+        # the first fill level is the world's Z = 0, and a tilt keeps the liquid's volume
+        offset = rng.normal(0.0, errors.offset_mm) if reading.offset_mm != 0.0 else 0.0
+        truths.append(KnownSurface(reading.offset_mm + offset, reading.tilt_x_rad + tilt_x,
+                                   reading.tilt_y_rad + tilt_y))
+    return truths
+
+
+def declared(readings: list[KnownSurface], errors: ReadingErrors, factor: float = 1.0
+             ) -> list[KnownSurface]:
+    """The readings with the σ a user declares for them (`factor` × the true accuracy: 0.1
+    declares it ten times too tight)."""
+    return [replace(r, tilt_sigma_rad=float(np.radians(
+                        factor * (errors.level_deg if r.tilt_x_rad == r.tilt_y_rad == 0.0
+                                  else errors.tilt_sigma_deg))),
+                    offset_sigma_mm=factor * errors.offset_mm if r.offset_mm != 0.0 else 0.0)
+            for r in readings]
+
+
+def render_surfaces(rig: Rig, surfaces: list[KnownSurface], scale: float = 1.0, seed: int = 0,
+                    scenario: Path = TILT_TABLE) -> TiltSeries:
+    """One still image of the rig's flat liquid on each surface (its true pose), with the
+    scenario's wall reflections and noise."""
+    base = load_scenario(scenario, {"scale": scale})
+    images, truths = [], []
+    for index, surface in enumerate(surfaces):
+        still = replace(base, rig=rig, seed=seed + index, tilt_series_deg=(),
+                        tilt_deg=(float(np.degrees(surface.tilt_x_rad)),
+                                  float(np.degrees(surface.tilt_y_rad))),
+                        offset_mm=surface.offset_mm, duration_s=1.0, fps=30.0)
+        image, truth = FrameRenderer(still).render(0)
+        images.append(image)
+        truths.append(truth)
+    return TiltSeries(images, list(surfaces), truths)

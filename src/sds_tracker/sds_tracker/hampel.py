@@ -32,9 +32,11 @@ class HampelBank:
     samples, each predicted without itself and without the centre (with a floor, `floor_px`,
     as quantised or very smooth tracks give a MAD of 0). An outlier is replaced by its
     prediction. The one motion this model misses is a kink (a hard kick from rest): there a
-    good sample can be replaced, flagged as such, with its raw position kept. Missing samples
-    (NaN) stay missing; a sample without `half` valid samples on each side (stream ends, next
-    to an occlusion) is passed on unchanged.
+    good sample can be replaced, flagged as such, with its raw position kept. A sample is never
+    replaced while its residual is within `k` of its own measurement σ (the σ each push may
+    give per track, propagated through the prediction): a spot measured poorly moves within
+    its σ. Missing samples (NaN) stay missing; a sample without `half` valid samples on each
+    side (stream ends, next to an occlusion) is passed on unchanged.
     """
 
     def __init__(self, window: int = 5, k: float = 3.0, floor_px: float = 0.5) -> None:
@@ -43,11 +45,17 @@ class HampelBank:
         self.half, self.k, self.floor_px = window // 2, k, floor_px
         self._frames: deque[int] = deque(maxlen=window)
         self._values: deque[np.ndarray] = deque(maxlen=window)
+        self._sigmas: deque[np.ndarray] = deque(maxlen=window)
 
-    def push(self, frame: int, positions: np.ndarray) -> BankOutput | None:
-        """Add this frame's N×2 positions; return the frame `half` back, once known."""
+    def push(self, frame: int, positions: np.ndarray, sigma_px: np.ndarray | None = None
+             ) -> BankOutput | None:
+        """Add this frame's N×2 positions (and their N measurement σ [px], default 0); return
+        the frame `half` back, once known."""
         self._frames.append(frame)
-        self._values.append(np.asarray(positions, dtype=float))
+        values = np.asarray(positions, dtype=float)
+        self._values.append(values)
+        self._sigmas.append(np.zeros(len(values)) if sigma_px is None
+                            else np.nan_to_num(np.asarray(sigma_px, dtype=float)))
         if len(self._frames) <= self.half:
             return None
         return self._filter(len(self._frames) - 1 - self.half)
@@ -58,6 +66,7 @@ class HampelBank:
         outputs = [self._filter(i) for i in range(start, len(self._frames))]
         self._frames.clear()
         self._values.clear()
+        self._sigmas.clear()
         return outputs
 
     def _filter(self, index: int) -> BankOutput:
@@ -71,8 +80,13 @@ class HampelBank:
         finite = np.isfinite(values).all(axis=2)               # window × N
         complete = finite.all(axis=0)
         if complete.any():
-            centre, scale = _residuals(times, values[:, complete], index)
-            outlier = np.any(np.abs(centre) > self.k * np.maximum(scale, self.floor_px), axis=1)
+            centre, scale, weights = _residuals(times, values[:, complete], index)
+            # the centre's residual σ from the samples' own: its own and the prediction's
+            sigmas = np.stack(self._sigmas)[:, complete]               # window × N
+            weights[index] = 1.0
+            measured = np.sqrt(np.tensordot(weights**2, sigmas**2, axes=1))[:, None]
+            outlier = np.any(np.abs(centre) > self.k * np.maximum(
+                np.maximum(scale, self.floor_px), measured), axis=1)
             rows = np.flatnonzero(complete)[outlier]
             filtered[rows] = raw[rows] - centre[outlier]
             replaced[rows] = True
@@ -80,13 +94,14 @@ class HampelBank:
 
 
 def _residuals(times: np.ndarray, values: np.ndarray, index: int
-               ) -> tuple[np.ndarray, np.ndarray]:
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For every track (values: samples × N × 2): the centre's residual from the quadratic
-    through the others, and the scaled MAD of the others' residuals without the centre."""
+    through the others, the scaled MAD of the others' residuals without the centre, and the
+    weights of the centre's prediction (a copy, one per sample)."""
     centre_weights, rest_weights = _window_weights(tuple(times - times[index]), index)
     centre = values[index] - np.tensordot(centre_weights, values, axes=1)
     rest = values[np.arange(len(times)) != index] - np.tensordot(rest_weights, values, axes=1)
-    return centre, MAD_TO_SIGMA * np.median(np.abs(rest), axis=0)
+    return centre, MAD_TO_SIGMA * np.median(np.abs(rest), axis=0), centre_weights.copy()
 
 
 @lru_cache(maxsize=64)

@@ -47,6 +47,7 @@ class TrackerConfig:
     hampel_k: float = 3.0
     hampel_floor_px: float = 0.5
     path_heights_mm: tuple[float, float] = (-30.0, 40.0)   # surface heights the paths span
+    stills: bool = False   # every frame a still of its own surface: no motion prior, no Hampel
 
 
 _DEFAULT = TrackerConfig()
@@ -54,7 +55,8 @@ TRACKING_PARAMETERS: dict[str, Any] = {
     "hampel_window": _DEFAULT.hampel_window, "window_px": _DEFAULT.spots.window_px,
     "threshold": _DEFAULT.spots.threshold, "prior_sigma_px": _DEFAULT.spots.prior_sigma_px,
     "path_tolerance_px": _DEFAULT.spots.path_tolerance_px, "line_band_px": _DEFAULT.line.band_px,
-    "path_heights_mm": list(_DEFAULT.path_heights_mm), "seeds": [0.0]}
+    "path_heights_mm": list(_DEFAULT.path_heights_mm), "seeds": [0.0],
+    "stills": _DEFAULT.stills}
 """The tracking parameters a node or `sds process` may set, with their defaults: those of
 TrackerConfig, SpotSettings and LineSettings (one source; config/params/tracker.yaml documents
 each, and a test holds it to these values)."""
@@ -70,7 +72,8 @@ def tracker_config(values: Mapping[str, Any]) -> TrackerConfig:
                            path_tolerance_px=float(p["path_tolerance_px"])),
         line=LineSettings(band_px=int(p["line_band_px"]), threshold=float(p["threshold"])),
         hampel_window=int(p["hampel_window"]),
-        path_heights_mm=(float(p["path_heights_mm"][0]), float(p["path_heights_mm"][1])))
+        path_heights_mm=(float(p["path_heights_mm"][0]), float(p["path_heights_mm"][1])),
+        stills=bool(p["stills"]))
 
 
 def parse_seeds(values: list[float]) -> dict[int, tuple[float, float]]:
@@ -95,7 +98,9 @@ def flat_line_px(rig: Rig) -> tuple[np.ndarray, np.ndarray]:
 
 
 class FrameTracker:
-    """Spots and line per frame; spots come out `hampel_window // 2` frames late, filtered."""
+    """Spots and line per frame; spots come out `hampel_window // 2` frames late, filtered.
+    With `stills` (images of different surfaces, not a video) every frame is tracked on its
+    own: no prior from the previous frame's positions, no temporal filter, no latency."""
 
     def __init__(self, rig: Rig, config: TrackerConfig | None = None,
                  seeds: dict[int, tuple[float, float]] | None = None) -> None:
@@ -110,8 +115,8 @@ class FrameTracker:
                 raise ValueError(f"seed for laser {laser_id}, which the rig does not have")
             self.spots.previous[laser_id] = np.asarray(position, dtype=float)
         self.ids = list(self.paths)
-        self.hampel = HampelBank(self.config.hampel_window, self.config.hampel_k,
-                                 self.config.hampel_floor_px)
+        self.hampel = None if self.config.stills else HampelBank(
+            self.config.hampel_window, self.config.hampel_k, self.config.hampel_floor_px)
         self._pending: dict[int, dict[int, SpotEstimate]] = {}
         self._line_rows, self._line_x = flat_line_px(rig)
         warm_up()
@@ -128,11 +133,16 @@ class FrameTracker:
         if len(line.x_px) > len(self._line_rows) // 4:
             # Follow the line: next frame looks around where it is now.
             self._line_x = np.interp(self._line_rows, line.y_px, line.x_px)
+        if self.hampel is None:   # a still: where the spots were says nothing of this image
+            self.spots.previous = dict.fromkeys(self.paths)
         # The line's light is kept out of the spots it passes (seen this frame, or expected).
         estimates = self.spots.update(red, offset, (self._line_rows, self._line_x))
         self._pending[frame] = {e.laser_id: e for e in estimates}
-        positions = np.array([[e.x_px, e.y_px] for e in estimates])
-        out = self.hampel.push(frame, positions)
+        positions = np.array([[e.x_px, e.y_px] for e in estimates]).reshape(-1, 2)
+        if self.hampel is None:
+            unfiltered = BankOutput(frame, positions, positions, np.zeros(len(positions), bool))
+            return [(frame, self._tracked(unfiltered))], line
+        out = self.hampel.push(frame, positions, np.array([e.sigma_px for e in estimates]))
         ready = [] if out is None else [(out.frame, self._tracked(out))]
         return ready, line
 
@@ -146,6 +156,8 @@ class FrameTracker:
 
     def flush(self) -> list[tuple[int, list[TrackedSpot]]]:
         """The last frames' spots at the end of a stream."""
+        if self.hampel is None:
+            return []
         return [(out.frame, self._tracked(out)) for out in self.hampel.flush()]
 
     def _tracked(self, out: BankOutput) -> list[TrackedSpot]:

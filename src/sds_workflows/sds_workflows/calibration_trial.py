@@ -8,7 +8,7 @@ against the renderer's truth, accuracy on a tilt series the calibration never sa
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -16,16 +16,23 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 from sds_camera.frame_source import Region, select
 from sds_model.paths import CONFIG
-from sds_model.rig import Rig, load_rig
-from sds_recon.calibration.lasers import calibrate_beams
+from sds_model.rig import Rig, Tolerances, load_rig
+from sds_recon.calibration.lasers import KnownSurface, calibrate_beams
+from sds_recon.calibration.parameters import LINE_PLANE
 from sds_recon.calibration.rig_calibration import RigCalibration
-from sds_recon.calibration.rig_model import LINE_PLANE
 from sds_recon.calibration.rig_report import beam_sigma_deg, calibrated_rig
 from sds_recon.reconstruction import fit_surface, reconstruct_spots
 from sds_sim.render import FrameRenderer
 from sds_sim.scenario import load_scenario
-from sds_sim.tilt_series import TiltSeries, render_tilt_series
-from sds_sim.true_rig import RigErrors, random_layout, true_rig
+from sds_sim.tilt_series import (
+    ReadingErrors,
+    TiltSeries,
+    declared,
+    render_surfaces,
+    render_tilt_series,
+    true_surfaces,
+)
+from sds_sim.true_rig import RigErrors, camera_as_calibrated, random_layout, true_rig
 from sds_tracker.spots import LOST
 from sds_tracker.tracker import FrameTracker
 
@@ -229,3 +236,142 @@ def trial(seed: int, rig_file: Path, scale: float = 1.0, errors: RigErrors | Non
             "drop": sloshing_drop(rig, replace(true, camera=base.camera.scaled(scale)), scale,
                                   seed) if drop else None,
             "not_determined": dict(result.fit.fixed), "weak": dict(result.fit.weak)}
+
+
+SEED_READINGS = ReadingErrors(about_axis_deg=0.5, across_deg=0.15, level_deg=0.05,
+                              offset_mm=0.05)
+"""The seed's tilt table ("0.5 deg accuracy" about its axis, the other "kept close to 0"), a
+spirit level on the level frames and a fill level changed by a measured volume."""
+FILL_LEVELS_MM = (-20.0,)
+"""The protocol's other fill levels: level surfaces this far from the first (a measured volume
+taken out; `sds calibrate plan` chooses it first for a rig with uncertain emitters: a level
+5 mm lower leaves the camera's height at σ 0.7 mm, 20 mm lower at 0.25 mm)."""
+
+
+@dataclass(frozen=True)
+class AsBuilt:
+    """A rig as built with the seed's tolerances, and what its user declares of them."""
+
+    rig: RigErrors = field(default_factory=lambda: RigErrors(emitter_sigma_mm=0.3))
+    readings: ReadingErrors = SEED_READINGS
+    camera_file_sigmas: float = 1.0     # the camera file off by this many Table 2 σ
+    declared_emitter_mm: float = 0.3    # the rig file's tolerances.emitter_mm
+
+
+def protocol_readings() -> list[KnownSurface]:
+    """The README's protocol as read: eight tilts about X (0 level), three about Y, level
+    surfaces at the other fill levels."""
+    return ([KnownSurface(0.0, np.radians(a), 0.0) for a in ANGLES]
+            + [KnownSurface(0.0, 0.0, np.radians(a)) for a in SECOND_AXIS]
+            + [KnownSurface(level, 0.0, 0.0) for level in FILL_LEVELS_MM])
+
+
+def diagonal_surfaces() -> list[KnownSurface]:
+    """The unseen series: ANGLES about the diagonal X = Y (an axis the protocol never used)."""
+    return [KnownSurface(0.0, float(np.arctan(np.tan(np.radians(a)) / np.sqrt(2))),
+                         float(np.arctan(np.tan(np.radians(a)) / np.sqrt(2)))) for a in ANGLES]
+
+
+@dataclass(frozen=True)
+class NormalisedErrors:
+    """RMS of error/σ of a calibration's parameters against the truth (about 1 when the
+    fit's σ are honest), by group."""
+
+    camera: float
+    beams: float
+    surfaces: float
+
+
+def _normalised_errors(result: RigCalibration, nominal: Rig, true: Rig,
+                       truths: list[KnownSurface]) -> NormalisedErrors:
+    """Each fitted parameter's error against the true rig and surfaces, in its σ."""
+    fit = result.fit
+    rig = fit.rig
+    turn = Rotation.from_matrix(rig.world_to_camera.rotation.T
+                                @ true.world_to_camera.rotation).as_rotvec()
+    camera = np.concatenate([turn / fit.sigmas[:3],
+                             (rig.camera_position_mm - true.camera_position_mm)
+                             / fit.sigmas[3:6]])
+    beams = []
+    for laser_id in result.laser_ids:
+        u, v = _beam_axes(nominal.diode(laser_id).direction)
+        error = true.diode(laser_id).direction - rig.diode(laser_id).direction
+        beams += [error @ u / fit.sigma_of(f"beam {laser_id} tilt a"),
+                  error @ v / fit.sigma_of(f"beam {laser_id} tilt b")]
+    surfaces = []
+    for index, (fitted, truth) in enumerate(zip(fit.surfaces, truths, strict=True)):
+        for axis, error in (("x", fitted.tilt_x_rad - truth.tilt_x_rad),
+                            ("y", fitted.tilt_y_rad - truth.tilt_y_rad)):
+            name = f"surface {index} tilt {axis}"
+            if name in fit.names:
+                surfaces.append(error / fit.sigma_of(name))
+        if f"surface {index} offset" in fit.names:
+            surfaces.append((fitted.offset_mm - truth.offset_mm)
+                            / fit.sigma_of(f"surface {index} offset"))
+
+    def rms(values: list[float] | np.ndarray) -> float:
+        finite = np.asarray(values, float)
+        finite = finite[np.isfinite(finite)]
+        return float(np.sqrt(np.mean(finite**2))) if len(finite) else float("nan")
+
+    return NormalisedErrors(rms(camera), rms(beams), rms(surfaces))
+
+
+def _beam_axes(direction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The two axes across a beam its tilt parameters turn it along (as the fit's model)."""
+    helper = np.array([0.0, 0.0, 1.0]) if abs(direction[2]) < 0.9 else np.array([1.0, 0, 0])
+    first = np.cross(helper, direction)
+    first /= np.linalg.norm(first)
+    return first, np.cross(direction, first)
+
+
+def as_built_trial(seed: int, rig_file: Path, scale: float = 1.0,
+                   as_built: AsBuilt | None = None, drop: bool = True) -> dict[str, Any]:
+    """Calibrate a random rig as built (seeded) by the README's protocol, with its tolerances
+    declared, with them declared ten times too tight, and as today's model (emitters and the
+    table exact); check each on an unseen series about the diagonal and (with `drop`) the
+    declared one on a 1 g sloshing drop."""
+    as_built = as_built or AsBuilt()
+    rng = np.random.default_rng(seed)
+    base = load_rig(rig_file)
+    designed = random_layout(base, rng)
+    true = true_rig(designed, as_built.rig, rng)
+    true = replace(true, camera=camera_as_calibrated(base.camera, as_built.camera_file_sigmas,
+                                                     rng))
+    readings = protocol_readings()
+    truths = true_surfaces(readings, as_built.readings, rng)
+    series = render_surfaces(true, truths, scale, seed)
+    camera = base.camera.scaled(scale)
+    nominal = replace(designed, camera=camera,
+                      tolerances=Tolerances(emitter_mm=as_built.declared_emitter_mm))
+    result, found = calibrate_images(nominal, series.images, declared(readings,
+                                                                     as_built.readings))
+    tight, _ = calibrate_images(nominal, series.images,
+                                declared(readings, as_built.readings, factor=0.1))
+    today, _ = calibrate_images(replace(nominal, tolerances=Tolerances()), series.images,
+                                readings)
+    wrong = 0
+    for d, f, b in zip(result.diode, result.frame, result.blob, strict=True):
+        truth = series.truths[f]
+        blob = found.spots[f].pixels[b]
+        to_spots = np.linalg.norm(truth.spot_exposure_px - blob, axis=1)
+        to_reflections = np.linalg.norm(truth.reflection_px - blob, axis=1)
+        if np.nanargmin(to_spots) != result.laser_ids[d] or \
+                np.nanmin(to_spots) > np.nanmin(np.append(to_reflections, np.inf)):
+            wrong += 1
+    visible = [i for i in range(len(true.diodes))
+               if sum(t.visible[i] for t in series.truths) >= 3]
+    other = render_surfaces(true, diagonal_surfaces(), scale, seed + 1000)
+    scaled_true = replace(true, camera=true.camera.scaled(scale))
+    rigs = {name: replace(calibrated_rig(nominal, r), camera=camera)
+            for name, r in (("declared", result), ("today", today))}
+    return {"seed": seed, "wrong": wrong, "spots": len(result.diode),
+            "calibrated": list(result.laser_ids), "unidentified": dict(result.unidentified),
+            "visible": visible, "check": result.check, "tight_check": tight.check,
+            "today_check": today.check,
+            "geometry": geometry_errors(rigs["declared"], scaled_true, result),
+            "normalised": _normalised_errors(result, nominal, scaled_true, truths),
+            "unseen": unseen(rigs["declared"], other),
+            "today_unseen": unseen(rigs["today"], other),
+            "drop": sloshing_drop(rigs["declared"], true, scale, seed) if drop
+            else None}

@@ -164,10 +164,14 @@ class FramePipeline:
     frames the Hampel window still held."""
 
     def __init__(self, rig: Rig, tracker_values: Mapping[str, Any] | None = None,
-                 recon_values: Mapping[str, Any] | None = None) -> None:
-        """`tracker_values` and `recon_values`: the nodes' parameters (default: drop.yaml's)."""
+                 recon_values: Mapping[str, Any] | None = None, stills: bool = False) -> None:
+        """`tracker_values` and `recon_values`: the nodes' parameters (default: drop.yaml's);
+        `stills`: every frame an image of its own surface (no motion prior, no temporal
+        filter: each frame's spots come out with it)."""
         tracker_values = node_parameters(GRAPH, "tracker") if tracker_values is None \
             else tracker_values
+        if stills:
+            tracker_values = {**tracker_values, "stills": True}
         recon_values = node_parameters(GRAPH, "recon") if recon_values is None else recon_values
         self.rig = rig
         self.tracker = FrameTracker(rig, tracker_config(tracker_values),

@@ -16,6 +16,7 @@ from pathlib import Path
 
 from sds_camera.camera_imu import read_camera_imu
 from sds_model.rig import Rig, load_rig
+from sds_recon.calibration.rig_calibration import RigCalibration
 from sds_recon.results import ResultsWriter
 from sds_record.recorded_series import read_accelerations, recording_rig
 from sds_sloshing.analysis import AnalysisOptions
@@ -28,9 +29,10 @@ from sds_workflows.run_tables import RunAnalysis, RunTables, finish_analysis
 
 
 def process_frames(frames: Iterable[RedFrame], rig: Rig, tables: RunTables,
-                   progress: bool = True) -> int:
-    """Every frame through the pipeline into `tables`; the number of frames."""
-    pipeline = FramePipeline(rig)
+                   progress: bool = True, stills: bool = False) -> int:
+    """Every frame through the pipeline into `tables` (`stills`: each frame on its own, no
+    temporal filter); the number of frames."""
+    pipeline = FramePipeline(rig, stills=stills)
     count = 0
     for step in pipeline.run(tqdm(frames, desc="frames", unit="frame", disable=not progress)):
         tables.add_step(step)
@@ -56,12 +58,15 @@ class ProcessedRun:
 
 def process_video(video: Path, rig: Rig, out: Path, fps: float = 0.0,
                   gravity_m_s2: float | None = None, overwrite: bool = False,
-                  progress: bool = True) -> ProcessedRun:
+                  progress: bool = True, stills: bool | None = None) -> ProcessedRun:
     """A video (or an image folder at `fps`) taken with `rig`: result files, the camera's own
     IMU where the video has one, the analysis report, all in `out` (refused if it holds
-    results, unless `overwrite`)."""
+    results, unless `overwrite`). `stills` (default: for an image folder) tracks each image on
+    its own: images of different surfaces are no video, and a temporal filter across them
+    would replace right spots."""
+    stills = video.is_dir() if stills is None else stills
     tables = RunTables(ResultsWriter(out, overwrite), rig)
-    count = process_frames(video_frames(video, rig, fps), rig, tables, progress)
+    count = process_frames(video_frames(video, rig, fps), rig, tables, progress, stills)
     imu = read_camera_imu(video)
     if imu is not None:
         tables.add_camera_imu(imu)
@@ -85,24 +90,26 @@ def process_recording(recording: Path, out: Path, rig: Rig | None = None,
 
 def process_input(source: Path, is_video: bool, rig_file: Path | None, out: Path,
                   fps: float = 0.0, gravity_m_s2: float | None = None,
-                  overwrite: bool = False, progress: bool = True) -> ProcessedRun:
-    """One video (needs `rig_file`) or recording (`rig_file` default: the one it carries)."""
+                  overwrite: bool = False, progress: bool = True, sequence: bool = False
+                  ) -> ProcessedRun:
+    """One video (needs `rig_file`) or recording (`rig_file` default: the one it carries);
+    an image folder is stills unless `sequence` (a video's frames)."""
     if is_video:
         if rig_file is None:
             raise ValueError(f"{source}: a video needs a rig file (the rig it was taken with)")
         return process_video(source, load_rig(rig_file), out, fps, gravity_m_s2, overwrite,
-                             progress)
+                             progress, stills=source.is_dir() and not sequence)
     return process_recording(source, out, recording_rig(source, rig_file), gravity_m_s2,
                              overwrite, progress)
 
 
 def _process_in_worker(source: Path, is_video: bool, rig_file: Path | None, out: Path,
-                       fps: float, gravity_m_s2: float | None, overwrite: bool
-                       ) -> tuple[bool, str]:
+                       fps: float, gravity_m_s2: float | None, overwrite: bool,
+                       sequence: bool) -> tuple[bool, str]:
     """One input in a worker process: (done, summary line or the failure's one line)."""
     try:
         return True, process_input(source, is_video, rig_file, out, fps, gravity_m_s2,
-                                   overwrite, progress=False).summary()
+                                   overwrite, False, sequence).summary()
     except Exception as error:
         if not isinstance(error, input_errors()):
             raise
@@ -111,7 +118,8 @@ def _process_in_worker(source: Path, is_video: bool, rig_file: Path | None, out:
 
 def process_inputs(inputs: list[Path], is_video: bool, rig_file: Path | None, out: Path,
                    jobs: int, fps: float = 0.0, gravity_m_s2: float | None = None,
-                   overwrite: bool = False, progress: bool = True) -> int:
+                   overwrite: bool = False, progress: bool = True, sequence: bool = False
+                   ) -> int:
     """The inputs in parallel (`jobs` worker processes), one result folder each under `out`
     (out/<name>), one progress bar; every failure is reported, the others finish. Returns how
     many failed."""
@@ -120,7 +128,7 @@ def process_inputs(inputs: list[Path], is_video: bool, rig_file: Path | None, ou
     # spawn: a fresh interpreter per worker (no forked threads of this one)
     with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
         futures = [pool.submit(_process_in_worker, source, is_video, rig_file,
-                               out / source.stem, fps, gravity_m_s2, overwrite)
+                               out / source.stem, fps, gravity_m_s2, overwrite, sequence)
                    for source in inputs]
         with tqdm(total=len(inputs), desc="inputs", unit="file", disable=not progress) as bar:
             for future in as_completed(futures):
@@ -134,10 +142,10 @@ def process_inputs(inputs: list[Path], is_video: bool, rig_file: Path | None, ou
 
 
 def calibrate_from_images(rig: Rig, paths: list[Path], surfaces: Path, out: Path
-                          ) -> tuple[Rig, Path]:
+                          ) -> tuple[Rig, Path, RigCalibration]:
     """Self-calibrate the rig from images of known surfaces or one tilt-table video, as `sds
     calibrate rig` does, into out/rig_calibrated.yaml (with its report and overlays)."""
     rig_path = out / "rig_calibrated.yaml"
-    calibrated, _ = calibrate_rig(rig, paths, surfaces, rig_path,
-                                  "`sds process --calibrate-lasers`")
-    return calibrated, rig_path
+    calibrated, result = calibrate_rig(rig, paths, surfaces, rig_path,
+                                       "`sds process --calibrate-lasers`")
+    return calibrated, rig_path, result

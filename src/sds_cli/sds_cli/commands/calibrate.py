@@ -1,12 +1,12 @@
-"""`sds calibrate camera|rig|line-plane|lasers`: the camera, the whole rig, the line laser's
-plane, or the beams alone."""
+"""`sds calibrate camera|rig|plan|line-plane|lasers`: the camera, the whole rig, its protocol,
+the line laser's plane, or the beams alone."""
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
-from sds_cli.commands import add_overwrite, refuse_existing
+from sds_cli.commands import CommandError, add_overwrite, refuse_existing
 
 
 def add_board_arguments(parser: argparse.ArgumentParser) -> None:
@@ -78,6 +78,28 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
                      help="also fit each emitter's position across its beam")
     add_overwrite(rig)
     rig.set_defaults(run=run_rig, command="calibrate rig")
+    planned = targets.add_parser(
+        "plan", help="which known surfaces to record for `sds calibrate rig`, and what they "
+                     "will give",
+        description="From the rig file (its tolerances as priors) and how well each surface "
+                    "is read, predict every parameter's σ and the tilt and height σ of unseen "
+                    "surfaces for the seed's tilt series, then add the candidate surfaces "
+                    "(tilts about Y, other fill levels) that lower them most.")
+    planned.add_argument("--rig", type=Path, required=True,
+                         help="the rig file as designed, with its tolerances")
+    planned.add_argument("--candidates", type=Path,
+                         help="surfaces CSV of candidate surfaces (default: tilts about Y of "
+                              "12.5, 22.5, 32.5 deg and fill levels -5, -10, -20, +10 mm)")
+    planned.add_argument("--table-sigma-deg", type=float, default=0.5 / 3**0.5,
+                         help="σ of a tilt table reading [deg] (default: ±0.5 deg, uniform)")
+    planned.add_argument("--level-sigma-deg", type=float, default=0.05,
+                         help="σ of a level frame's angles [deg] (a spirit level)")
+    planned.add_argument("--fill-sigma-mm", type=float, default=0.05,
+                         help="σ of a fill level [mm] (a measured volume)")
+    planned.add_argument("--out", type=Path,
+                         help="write the planned protocol as a surfaces CSV")
+    add_overwrite(planned)
+    planned.set_defaults(run=run_plan, command="calibrate plan")
     plane = targets.add_parser(
         "line-plane", help="camera and line laser plane from a checkerboard crossed by the line",
         description="Calibrate the camera on the board, find the red line's centre per row "
@@ -129,6 +151,26 @@ def run_rig(args: argparse.Namespace) -> int:
                               f"`sds calibrate rig` from {args.rig}", settings)
     print(report_text(rig_report(rig, result)))
     print(f"wrote {args.out} and its report, {args.out.with_suffix('')}.report.html")
+    return 0
+
+
+def run_plan(args: argparse.Namespace) -> int:
+    """The planned protocol: a table of predicted σ, and its surfaces CSV with --out."""
+    from sds_model.rig import load_rig
+    from sds_workflows.calibration_plan import Accuracy, plan_protocol, plan_text, write_protocol
+
+    if args.out is not None:
+        refuse_existing(args.out, args.overwrite)
+    for name in ("table_sigma_deg", "level_sigma_deg", "fill_sigma_mm"):
+        if not getattr(args, name) > 0:
+            raise CommandError(f"--{name.replace('_', '-')} must be positive")
+    steps = plan_protocol(load_rig(args.rig), Accuracy(args.table_sigma_deg,
+                                                       args.level_sigma_deg,
+                                                       args.fill_sigma_mm), args.candidates)
+    print(plan_text(steps))
+    if args.out is not None:
+        write_protocol(steps[-1], args.out)
+        print(f"wrote {args.out} ({len(steps[-1].surfaces)} surfaces)")
     return 0
 
 

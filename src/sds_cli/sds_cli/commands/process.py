@@ -38,6 +38,9 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
     add_overwrite(parser, "replace the results of an earlier run in --out")
     parser.add_argument("--fps", type=float, default=0.0,
                         help="frame rate of an image folder [1/s]")
+    parser.add_argument("--sequence", action="store_true",
+                        help="an image folder is a video's frames (motion prior and Hampel "
+                             "filter across them); default: still images, each on its own")
     parser.add_argument("--gravity", type=float, help="gravity for the theory [m/s²]")
     parser.add_argument("--calibrate-lasers", type=Path, nargs="+", metavar="IMAGE",
                         help="images of known surfaces, or one video of the tilt table (its "
@@ -89,13 +92,14 @@ def run(args: argparse.Namespace) -> int:
             raise CommandError("--calibrate-lasers needs --surfaces")
         designed = load_rig(args.rig) if args.rig else recording_rig(inputs[0], None)
         calibration_out = args.out if len(inputs) == 1 else args.out / "calibration"
-        _, rig_file = calibrate_from_images(designed, args.calibrate_lasers, args.surfaces,
-                                            calibration_out)
-        print(f"sds process: calibrated rig written to {rig_file}")
+        _, rig_file, calibration = calibrate_from_images(designed, args.calibrate_lasers,
+                                                         args.surfaces, calibration_out)
+        print(f"sds process: calibrated rig written to {rig_file}; "
+              f"{calibration.check.summary()}")
     if len(inputs) == 1:
         print(process_input(inputs[0], is_video, rig_file, args.out, args.fps, args.gravity,
-                            args.overwrite, not args.no_progress).summary())
+                            args.overwrite, not args.no_progress, args.sequence).summary())
         return 0
     failed = process_inputs(inputs, is_video, rig_file, args.out, args.jobs, args.fps,
-                            args.gravity, args.overwrite, not args.no_progress)
+                            args.gravity, args.overwrite, not args.no_progress, args.sequence)
     return 2 if failed else 0

@@ -14,20 +14,29 @@ from sds_recon.calibration.lasers import KnownSurface, calibrate_beams, calibrat
 
 
 def read_surfaces(path: Path) -> dict[int, KnownSurface]:
-    """Known surface per frame from a CSV: frame, tilt_x_deg, tilt_y_deg[, offset_mm].
+    """Known surface per frame from a CSV: frame, tilt_x_deg, tilt_y_deg[, offset_mm]
+    [, tilt_sigma_deg (σ of each of the two angles), offset_sigma_mm] (absent or empty σ:
+    exact).
 
-    The simulator's truth/frames.csv has these columns.
+    The simulator's truth/frames.csv has the first four columns.
     """
     surfaces = {}
     with path.open() as file:
-        for row in csv.DictReader(file):
+        for line, row in enumerate(csv.DictReader(file), start=2):
             try:
-                surfaces[int(row["frame"])] = KnownSurface(
+                frame = int(row["frame"])
+                surface = KnownSurface(
                     float(row.get("offset_mm") or 0.0), np.radians(float(row["tilt_x_deg"])),
-                    np.radians(float(row["tilt_y_deg"])))
-            except (KeyError, ValueError) as error:
-                raise ValueError(f"{path}: needs frame, tilt_x_deg, tilt_y_deg: {error!r}") \
-                    from error
+                    np.radians(float(row["tilt_y_deg"])),
+                    np.radians(float(row.get("tilt_sigma_deg") or 0.0)),
+                    float(row.get("offset_sigma_mm") or 0.0))
+            except (KeyError, TypeError, ValueError) as error:
+                raise ValueError(f"{path}: line {line} needs frame, tilt_x_deg, tilt_y_deg "
+                                 f"(numbers): {error!r}") from error
+            if not (surface.tilt_sigma_rad >= 0 and surface.offset_sigma_mm >= 0):
+                raise ValueError(f"{path}: line {line}: tilt_sigma_deg and offset_sigma_mm "
+                                 "must not be negative")
+            surfaces[frame] = surface
     return surfaces
 
 

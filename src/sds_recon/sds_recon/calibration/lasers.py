@@ -24,11 +24,14 @@ CONSENSUS_POINTS = 2000
 
 @dataclass(frozen=True)
 class KnownSurface:
-    """A flat liquid surface of known pose: Z = offset − X tan γx − Y tan γy (world, mm)."""
+    """A flat liquid surface of known pose: Z = offset − X tan γx − Y tan γy (world, mm), and
+    how well it is known: σ of each of its two angles [rad] and of its offset [mm] (0: exact)."""
 
     offset_mm: float = 0.0
     tilt_x_rad: float = 0.0
     tilt_y_rad: float = 0.0
+    tilt_sigma_rad: float = 0.0
+    offset_sigma_mm: float = 0.0
 
     def intersect(self, origin: np.ndarray, rays: np.ndarray) -> np.ndarray:
         """Where rays from `origin` meet this surface (N×3 mm); NaN for rays that miss it."""

@@ -39,6 +39,7 @@ from sds_recon.calibration.lasers import (
     fit_plane_robust,
     points_on_surfaces,
 )
+from sds_recon.calibration.model_check import ModelCheck, check_model
 from sds_recon.calibration.rig_model import LineObservations
 from sds_recon.calibration.self_calibration import SelfCalibration, self_calibrate
 
@@ -74,6 +75,7 @@ class RigCalibration:
     outliers: list[tuple[int, int, float]]   # (laser id, frame, residual in σ)
     unidentified: dict[int, str]
     line_plane: PlaneFitResult | None        # the line laser's plane, through the fitted camera
+    check: ModelCheck                        # does the model explain the data (χ²/dof)?
     line: LineObservations | None = None     # the line pixels the joint fit used
 
 
@@ -225,7 +227,7 @@ def calibrate_rig(rig: Rig, surfaces: list[KnownSurface], blobs: list[np.ndarray
                                     used.sigma_px[keep] * rms)
         plane = _plane_result(fit, surfaces, used, len(line.frame))
     return RigCalibration(fit, identification, ids, diode, frame, blob, outliers, unidentified,
-                          plane, used)
+                          plane, check_model(fit, ids, diode, frame), used)
 
 
 def _line_plane(rig: Rig, surfaces: list[KnownSurface], line: LineObservations,

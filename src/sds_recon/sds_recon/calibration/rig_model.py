@@ -1,13 +1,17 @@
-"""The rig's calibratable geometry as one parameter vector, and its pixel residuals.
+"""The rig's calibratable geometry as one parameter vector, and its residuals.
 
-Parameters (natural units, each a small change from the rig file's value):
-camera rotation about the world X, Y, Z axes [rad] and centre shift [mm]; per beam two tilts
-of its direction [rad] and (optionally) two shifts of its emitter across the beam [mm] (along
-the beam an emitter shift changes nothing); with line observations, two tilts of the line
-laser's plane about a point on it [rad] and its shift along its normal [mm]. Spots are
-predicted as the beam's hit on the frame's known surface (Eq. 9 with Z = g(X, Y) known),
-projected through the camera (Eq. 1 and the camera model). A line pixel's residual is the
-shift along its image row [px] that puts its ray's hit on the known surface into the plane.
+Parameters (`parameters.py`: one table with their priors; each a small change from the rig
+file's or the surfaces CSV's value): camera rotation about the world X, Y, Z axes [rad] and
+centre shift [mm]; per beam two tilts of its direction [rad] and, where the emitter's position
+is uncertain (a tolerance, or `fit_emitters`), two shifts of its emitter across the beam [mm]
+(along the beam an emitter shift changes nothing); per known surface whose reading is
+uncertain, its two angles [rad] and its fill level [mm]; with line observations, two tilts of
+the line laser's plane about a point on it [rad] and its shift along its normal [mm].
+
+Residuals: spots are predicted as the beam's hit on the frame's surface (Eq. 9 with Z = g(X, Y)
+known), projected through the camera (Eq. 1 and the camera model); a line pixel's residual is
+the shift along its image row [px] that puts its ray's hit on the surface into the plane; a
+parameter with a declared tolerance adds value / σ_prior.
 """
 
 from __future__ import annotations
@@ -16,15 +20,26 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
-from sds_model.geometry import RigidTransform
+from sds_model.geometry import RigidTransform, ray_plane_points
 from sds_model.rig import LineLaser, Rig
 
 from sds_recon.calibration.lasers import KnownSurface
-
-CAMERA_ROTATION = ("camera rotation about X", "camera rotation about Y",
-                   "camera rotation about Z")
-CAMERA_SHIFT = ("camera X", "camera Y", "camera Z")
-LINE_PLANE = ("line plane tilt a", "line plane tilt b", "line plane offset")
+from sds_recon.calibration.parameters import (
+    BEAM_KIND,
+    CAMERA_POSITION_KIND,
+    CAMERA_ROTATION,
+    CAMERA_ROTATION_KIND,
+    CAMERA_SHIFT,
+    CAMERA_Z_DETERMINED_BY,
+    EMITTER_KIND,
+    LINE_OFFSET_KIND,
+    LINE_PLANE,
+    LINE_PLANE_KIND,
+    SURFACE_OFFSET_KIND,
+    SURFACE_TILT_KIND,
+    Parameter,
+    ParameterTable,
+)
 
 
 @dataclass(frozen=True)
@@ -49,8 +64,48 @@ def _across(direction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return first, np.cross(direction, first)
 
 
+def _prior(value: float | None, in_degrees: bool = False) -> float:
+    """A declared tolerance as a prior σ [rad or mm]; inf where none was declared."""
+    if value is None:
+        return np.inf
+    return float(np.radians(value)) if in_degrees else float(value)
+
+
+def _parameters(rig: Rig, laser_ids: list[int], surfaces: list[KnownSurface],
+                fit_emitters: bool, line: bool) -> ParameterTable:
+    """The table of every parameter of a fit of these diodes on these surfaces."""
+    tolerances = rig.tolerances
+    angle, shift = _prior(tolerances.camera_angle_deg, True), _prior(tolerances.camera_position_mm)
+    table = [Parameter(n, CAMERA_ROTATION_KIND, angle) for n in CAMERA_ROTATION]
+    table += [Parameter(n, CAMERA_POSITION_KIND, shift,
+                        CAMERA_Z_DETERMINED_BY if n == "camera Z" else "")
+              for n in CAMERA_SHIFT]
+    lean = _prior(tolerances.beam_lean_deg, True)
+    for laser_id in laser_ids:
+        table += [Parameter(f"beam {laser_id} tilt {axis}", BEAM_KIND, lean) for axis in "ab"]
+        emitter_sigma = rig.emitter_sigma_mm(laser_id)
+        if fit_emitters or emitter_sigma > 0:
+            prior = emitter_sigma if emitter_sigma > 0 else np.inf
+            table += [Parameter(f"emitter {laser_id} {axis}", EMITTER_KIND, prior)
+                      for axis in "ab"]
+    for index, surface in enumerate(surfaces):
+        if surface.tilt_sigma_rad > 0:
+            table += [Parameter(f"surface {index} tilt {axis}", SURFACE_TILT_KIND,
+                                surface.tilt_sigma_rad) for axis in "xy"]
+        if surface.offset_sigma_mm > 0:
+            table.append(Parameter(f"surface {index} offset", SURFACE_OFFSET_KIND,
+                                   surface.offset_sigma_mm))
+    if line:
+        plane = _prior(tolerances.line_plane_deg, True)
+        table += [Parameter(LINE_PLANE[0], LINE_PLANE_KIND, plane),
+                  Parameter(LINE_PLANE[1], LINE_PLANE_KIND, plane),
+                  Parameter(LINE_PLANE[2], LINE_OFFSET_KIND, _prior(tolerances.line_plane_mm))]
+    return ParameterTable(tuple(table))
+
+
 class RigModel:
-    """Maps a parameter vector to a rig and to the weighted residuals of observations."""
+    """Maps a parameter vector to a rig, to the known surfaces and to the residuals of
+    observations."""
 
     def __init__(self, rig: Rig, laser_ids: list[int], surfaces: list[KnownSurface],
                  fit_emitters: bool = False, line: LineObservations | None = None,
@@ -61,20 +116,24 @@ class RigModel:
         self.laser_ids = laser_ids
         self.diodes = [rig.diode(i) for i in laser_ids]
         self.surfaces = surfaces
-        self.fit_emitters = fit_emitters
+        self.table = _parameters(rig, laser_ids, surfaces, fit_emitters, line is not None)
+        names = self.table.names
         self._axes = [_across(d.direction) for d in self.diodes]
-        normals = np.array([[np.tan(s.tilt_x_rad), np.tan(s.tilt_y_rad), 1.0] for s in surfaces])
-        self._normals = normals.reshape(-1, 3)
-        self._offsets = np.array([s.offset_mm for s in surfaces])
-        self.names: list[str] = [*CAMERA_ROTATION, *CAMERA_SHIFT]
-        self.scales: list[float] = [np.radians(1.0)] * 3 + [1.0] * 3
-        for i in laser_ids:
-            self.names += [f"beam {i} tilt a", f"beam {i} tilt b"]
-            self.scales += [np.radians(1.0)] * 2
-            if fit_emitters:
-                self.names += [f"emitter {i} a", f"emitter {i} b"]
-                self.scales += [1.0, 1.0]
-        self._per_beam = 4 if fit_emitters else 2
+        self._beam_index = np.array([names.index(f"beam {i} tilt a") for i in laser_ids], int)
+        self._emitter_index = np.array([names.index(f"emitter {i} a")
+                                        if f"emitter {i} a" in names else -1
+                                        for i in laser_ids], int)
+        self._tilt_index = np.array([names.index(f"surface {k} tilt x")
+                                     if f"surface {k} tilt x" in names else -1
+                                     for k in range(len(surfaces))], int)
+        self._offset_index = np.array([names.index(f"surface {k} offset")
+                                       if f"surface {k} offset" in names else -1
+                                       for k in range(len(surfaces))], int)
+        self._tilts = np.array([[s.tilt_x_rad, s.tilt_y_rad] for s in surfaces]).reshape(-1, 2)
+        self._offsets = np.array([s.offset_mm for s in surfaces], float)
+        prior = self.table.prior_sigmas
+        self._prior_index = np.flatnonzero(np.isfinite(prior))
+        self._prior_sigma = prior[self._prior_index]
         self.line = line
         if line is not None:
             if line_plane is None:
@@ -86,13 +145,16 @@ class RigModel:
             # fixed, since the intrinsics are not fitted.
             self._line_rays = camera.pixel_to_ray(line.pixels)
             self._next_rays = camera.pixel_to_ray(line.pixels + np.array([1.0, 0.0]))
-            self.names += list(LINE_PLANE)
-            self.scales += [np.radians(1.0)] * 2 + [1.0]
 
     @property
     def size(self) -> int:
         """Number of parameters."""
-        return len(self.names)
+        return len(self.table)
+
+    @property
+    def prior_count(self) -> int:
+        """Number of parameters with a declared tolerance (each adds one residual)."""
+        return len(self._prior_index)
 
     def camera(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Camera-to-world rotation and camera centre [mm] for parameters `x`."""
@@ -102,22 +164,42 @@ class RigModel:
 
     def beams(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Emitters (N×3 mm) and unit directions (N×3) for parameters `x`."""
-        values = x[6:6 + self._per_beam * len(self.diodes)].reshape(len(self.diodes), -1)
-        emitters, directions = [], []
-        for diode, (u, v), row in zip(self.diodes, self._axes, values, strict=True):
-            direction = diode.direction + row[0] * u + row[1] * v
-            directions.append(direction / np.linalg.norm(direction))
-            emitter = diode.emitter_mm + (row[2] * u + row[3] * v if self.fit_emitters else 0)
-            emitters.append(emitter)
-        return np.array(emitters).reshape(-1, 3), np.array(directions).reshape(-1, 3)
+        u = np.array([a for a, _ in self._axes]).reshape(-1, 3)
+        v = np.array([b for _, b in self._axes]).reshape(-1, 3)
+        base = np.array([d.direction for d in self.diodes]).reshape(-1, 3)
+        tilt = x[self._beam_index[:, None] + np.arange(2)].reshape(-1, 2)
+        directions = base + tilt[:, :1] * u + tilt[:, 1:] * v
+        directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+        emitters = np.array([d.emitter_mm for d in self.diodes], float).reshape(-1, 3)
+        moved = self._emitter_index >= 0
+        shift = x[self._emitter_index[moved][:, None] + np.arange(2)].reshape(-1, 2)
+        emitters[moved] += shift[:, :1] * u[moved] + shift[:, 1:] * v[moved]
+        return emitters, directions
+
+    def surface_planes(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Each known surface for parameters `x`: normals (F×3, (tan γx, tan γy, 1)) and
+        offsets [mm], Z = offset − X tan γx − Y tan γy."""
+        tilts = self._tilts.copy()
+        read = self._tilt_index >= 0
+        tilts[read] += x[self._tilt_index[read][:, None] + np.arange(2)].reshape(-1, 2)
+        offsets = self._offsets.copy()
+        level = self._offset_index >= 0
+        offsets[level] += x[self._offset_index[level]]
+        return np.column_stack([np.tan(tilts), np.ones(len(tilts))]), offsets
+
+    def surfaces_at(self, x: np.ndarray) -> list[KnownSurface]:
+        """The known surfaces for parameters `x` (their σ as read)."""
+        normals, offsets = self.surface_planes(x)
+        tilts = np.arctan(normals[:, :2])
+        return [replace(s, offset_mm=float(o), tilt_x_rad=float(t[0]), tilt_y_rad=float(t[1]))
+                for s, t, o in zip(self.surfaces, tilts, offsets, strict=True)]
 
     def hits(self, x: np.ndarray, diode: np.ndarray, frame: np.ndarray) -> np.ndarray:
         """Where each (diode, frame) beam meets that frame's known surface (N×3 mm)."""
         emitters, directions = self.beams(x)
-        start, d = emitters[diode], directions[diode]
-        m, offset = self._normals[frame], self._offsets[frame]
-        s = (offset - np.sum(start * m, axis=1)) / np.sum(d * m, axis=1)
-        return start + s[:, None] * d
+        normals, offsets = self.surface_planes(x)
+        return ray_plane_points(emitters[diode], directions[diode], normals[frame],
+                                offsets[frame])
 
     def line_plane(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The line laser's plane for parameters `x`: unit normal and a point on it [mm]."""
@@ -132,16 +214,25 @@ class RigModel:
         assert self.line is not None
         rotation, centre = self.camera(x)
         normal, point = self.line_plane(x)
+        normals, offsets = self.surface_planes(x)
         frame = self.line.frame
-        m, offset = self._normals[frame], self._offsets[frame]
+        here = self._distance_mm(self._line_rays @ rotation.T, centre, normals[frame],
+                                 offsets[frame], normal, point)
+        beside = self._distance_mm(self._next_rays @ rotation.T, centre, normals[frame],
+                                   offsets[frame], normal, point)
+        return here / (here - beside)
 
-        def distance_mm(rays: np.ndarray) -> np.ndarray:
-            world = rays @ rotation.T
-            s = (offset - centre @ m.T) / np.sum(world * m, axis=1)
-            return (centre + s[:, None] * world - point) @ normal
+    @staticmethod
+    def _distance_mm(rays: np.ndarray, centre: np.ndarray, surface_normals: np.ndarray,
+                     surface_offsets: np.ndarray, normal: np.ndarray, point: np.ndarray
+                     ) -> np.ndarray:
+        """Signed distance [mm] from the plane (normal, point) of each ray's surface point."""
+        hits = ray_plane_points(centre, rays, surface_normals, surface_offsets)
+        return (hits - point) @ normal
 
-        here = distance_mm(self._line_rays)
-        return here / (here - distance_mm(self._next_rays))
+    def prior_residuals(self, x: np.ndarray) -> np.ndarray:
+        """Each declared tolerance's residual: the parameter's change in its own σ."""
+        return x[self._prior_index] / self._prior_sigma
 
     def predict(self, x: np.ndarray, diode: np.ndarray, frame: np.ndarray) -> np.ndarray:
         """Predicted pixels (N×2) of each (diode, frame) spot."""
@@ -167,4 +258,3 @@ class RigModel:
             emitter = line_laser.emitter_mm - ((line_laser.emitter_mm - point) @ normal) * normal
             line_laser = LineLaser(emitter, normal)
         return replace(self.rig, world_to_camera=pose, diodes=diodes, line_laser=line_laser)
-

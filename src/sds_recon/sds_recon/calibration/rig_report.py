@@ -9,8 +9,13 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 from sds_model.rig import Rig
 
+from sds_recon.calibration.parameters import (
+    CAMERA_ROTATION,
+    CAMERA_SHIFT,
+    LINE_PLANE,
+)
 from sds_recon.calibration.rig_calibration import RigCalibration
-from sds_recon.calibration.rig_model import CAMERA_ROTATION, CAMERA_SHIFT, LINE_PLANE
+from sds_recon.calibration.self_calibration import SelfCalibration
 
 
 def _deg(value: float) -> float:
@@ -48,8 +53,8 @@ def calibrated_rig(nominal: Rig, result: RigCalibration) -> Rig:
         if d.laser_id in result.laser_ids else replace(nominal.diode(d.laser_id), tracked=False)
         for d in fitted.diodes)
     report = rig_report(nominal, result)
-    record = {key: report[key] for key in ("method", "frames", "spots", "rms_px",
-                                           "camera", "line_laser", "unidentified",
+    record = {key: report[key] for key in ("model_check", "method", "frames", "spots",
+                                           "rms_px", "camera", "line_laser", "unidentified",
                                            "not_determined", "weakly_determined")}
     return replace(fitted, diodes=diodes, calibration=record)
 
@@ -97,8 +102,14 @@ def rig_report(nominal: Rig, result: RigCalibration) -> dict[str, Any]:
                 "points": plane.point_count, "left_out": plane.rejected,
                 "rms_mm": _mm(plane.rms_mm),
                 "rms_px": float(f"{np.sqrt(np.mean(fit.line_residuals_px**2)):.3g}")}
+    check = result.check
     return {
-        "method": "joint least squares of camera pose, beams and the line laser's plane "
+        "model_check": {"explained": check.explained, "summary": check.summary(),
+                        "chi2_per_dof": float(f"{check.chi2_per_dof:.4g}"), "dof": check.dof,
+                        "expected": [float(f"{v:.4g}") for v in check.expected],
+                        "likely_cause": check.likely_cause},
+        "method": "joint least squares of camera pose, beams, uncertain emitters and known "
+                  "surfaces and the line laser's plane, each declared tolerance a prior "
                   "(sds calibrate rig)",
         "frames": len(result.fit.model.surfaces), "spots": len(result.diode),
         "rms_px": float(f"{fit.rms_px:.3g}"), "chi2_per_dof": float(f"{fit.chi2_per_dof:.3g}"),
@@ -109,8 +120,48 @@ def rig_report(nominal: Rig, result: RigCalibration) -> dict[str, Any]:
                      for i, f, s in result.outliers],
         "not_determined": dict(fit.fixed),
         "weakly_determined": _weak(fit.weak, sigma,
-                                   dict(zip(fit.names, fit.model.scales, strict=True))),
+                                   dict(zip(fit.names, fit.table.scales, strict=True))),
+        "surfaces": _surfaces(fit),
+        "parameters": parameter_rows(fit),
     }
+
+
+def parameter_rows(fit: SelfCalibration) -> list[dict[str, Any]]:
+    """Every parameter of the fit: its kind, unit, declared prior σ, fitted change and σ, the
+    change in σ of the prior (the pull), and what data determine it (degrees for angles)."""
+    rows = []
+    pulls = fit.pulls()
+    for parameter, value, sigma, pull in zip(fit.table.parameters, fit.values, fit.sigmas,
+                                             pulls, strict=True):
+        angle = parameter.kind.unit == "rad"
+        show = _deg if angle else _mm
+        rows.append({"name": parameter.name, "kind": parameter.kind.name,
+                     "unit": "deg" if angle else "mm",
+                     "prior_sigma": show(parameter.prior_sigma) if parameter.has_prior else None,
+                     "change": show(value), "sigma": _sigma(sigma, angle),
+                     "pull": None if np.isnan(pull) else float(f"{pull:.3g}"),
+                     "determined_by": parameter.advice})
+    return rows
+
+
+def _surfaces(fit: SelfCalibration) -> list[dict[str, Any]]:
+    """Each known surface as read and as fitted (angles [deg], offset [mm]), with σ."""
+    sigma = dict(zip(fit.names, fit.sigmas, strict=True))
+    rows = []
+    for index, (read, fitted) in enumerate(zip(fit.model.surfaces, fit.surfaces, strict=True)):
+        row: dict[str, Any] = {
+            "frame": index,
+            "read_tilt_deg": [_deg(read.tilt_x_rad), _deg(read.tilt_y_rad)],
+            "read_offset_mm": _mm(read.offset_mm),
+            "declared_tilt_sigma_deg": _deg(read.tilt_sigma_rad),
+            "declared_offset_sigma_mm": _mm(read.offset_sigma_mm),
+            "fitted_tilt_deg": [_deg(fitted.tilt_x_rad), _deg(fitted.tilt_y_rad)],
+            "fitted_offset_mm": _mm(fitted.offset_mm)}
+        tilt = [sigma.get(f"surface {index} tilt {axis}", np.nan) for axis in "xy"]
+        row["tilt_sigma_deg"] = [_sigma(t, True) for t in tilt]
+        row["offset_sigma_mm"] = _sigma(sigma.get(f"surface {index} offset", np.nan), False)
+        rows.append(row)
+    return rows
 
 
 def _weak(weak: dict[str, str], sigma: dict[str, float], scale: dict[str, float]
@@ -127,7 +178,8 @@ def _weak(weak: dict[str, str], sigma: dict[str, float], scale: dict[str, float]
 def report_text(report: dict[str, Any]) -> str:
     """The report as a few tables for the terminal and the rig file's header."""
     camera = report["camera"]
-    lines = [f"{report['spots']} spots on {report['frames']} known surfaces: RMS "
+    lines = [report["model_check"]["summary"],
+             f"{report['spots']} spots on {report['frames']} known surfaces: RMS "
              f"{report['rms_px']} px, chi2/dof {report['chi2_per_dof']}, condition number "
              f"{report['condition_number']:.3g}",
              "camera position [mm] " + ", ".join(
@@ -150,6 +202,18 @@ def report_text(report: dict[str, Any]) -> str:
                      f"RMS {line['rms_px']} px / {line['rms_mm']} mm, normal "
                      f"{_plus_minus(line['normal_sigma_deg'], 4)} deg, offset "
                      f"{_plus_minus(line['offset_sigma_mm'])} mm")
+    fitted_surfaces = [row for row in report["surfaces"]
+                       if row["declared_tilt_sigma_deg"] or row["declared_offset_sigma_mm"]]
+    if fitted_surfaces:
+        lines.append("surface  read tilt x, y [deg] +- sigma   fitted tilt x, y [deg]   "
+                     "read offset +- sigma   fitted offset [mm]")
+        for row in fitted_surfaces:
+            read, fitted = row["read_tilt_deg"], row["fitted_tilt_deg"]
+            lines.append(
+                f"{row['frame']:>7}  {read[0]:+8.3f} {read[1]:+8.3f}"
+                f" +- {row['declared_tilt_sigma_deg']:<6.3g}   {fitted[0]:+8.3f} "
+                f"{fitted[1]:+8.3f}   {row['read_offset_mm']:+7.3f} +- "
+                f"{row['declared_offset_sigma_mm']:<6.3g} {row['fitted_offset_mm']:+8.3f}")
     for laser_id, why in report["unidentified"].items():
         lines.append(f"diode {laser_id} not identified, not calibrated, not tracked: {why}")
     for name, advice in report["not_determined"].items():

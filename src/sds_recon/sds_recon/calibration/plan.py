@@ -1,0 +1,148 @@
+"""Plan the calibration protocol from the joint fit's own model: which known surfaces bring the
+rig's parameters, and the tilts and heights it will measure, under their goal σ.
+
+For a candidate set of known surfaces the planner predicts every spot of the rig file's rig
+(each with the spot σ of discovery), linearises the joint fit there (`self_calibration`: the
+same parameter table, priors and residuals) and takes the posterior covariance. It propagates
+that to the reconstruction of unseen surfaces (a tilt series about the diagonal, an axis no
+protocol uses): how far each tilt and height moves when the calibrated rig is off by one
+posterior σ in any direction. Starting from a base protocol it adds, one at a time, the
+candidate surface that lowers the worst predicted tilt σ most, until the goals are met.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from sds_model.rig import Rig
+
+from sds_recon.calibration.lasers import KnownSurface
+from sds_recon.calibration.rig_model import RigModel
+from sds_recon.calibration.self_calibration import Observations, jacobian, spot_whitening
+from sds_recon.reconstruction import reconstruct_spots
+from sds_recon.surface_fit import fit_plane
+
+SPOT_SIGMA_PX = 0.1
+"""A spot's σ in each direction [px] for the prediction (discovery's, off the laser line)."""
+TILT_GOAL_DEG = 0.033
+"""Predicted one-σ tilt of an unseen surface the plan aims at (a third of 0.1°)."""
+HEIGHT_GOAL_MM = 0.033
+"""Predicted one-σ height error of an unseen surface's points the plan aims at."""
+UNSEEN_TILTS_DEG = (10.0, 20.0, 35.0)
+"""Tilts about the diagonal X = Y of the unseen surfaces the prediction is made for."""
+LEAST_GAIN = 0.1
+"""A surface is added only if it lowers the worst predicted tilt σ by this share or more:
+past that, more images cost the user time and buy nothing (the emitters' and the readings'
+tolerances set the floor)."""
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """A protocol's predicted outcome: every parameter's posterior σ (natural units) and the
+    one-σ tilt [deg] and height RMS [mm] errors on each unseen surface."""
+
+    surfaces: list[KnownSurface]
+    names: list[str]
+    sigmas: np.ndarray
+    tilt_sigma_deg: np.ndarray
+    height_sigma_mm: np.ndarray
+
+    @property
+    def worst_tilt_deg(self) -> float:
+        """The largest predicted tilt σ over the unseen surfaces [deg]."""
+        return float(np.max(self.tilt_sigma_deg))
+
+    @property
+    def worst_height_mm(self) -> float:
+        """The largest predicted height σ over the unseen surfaces [mm]."""
+        return float(np.max(self.height_sigma_mm))
+
+    def meets_goals(self) -> bool:
+        """Whether tilts and heights of unseen surfaces are predicted within their goals."""
+        return self.worst_tilt_deg <= TILT_GOAL_DEG and self.worst_height_mm <= HEIGHT_GOAL_MM
+
+
+def diagonal(tilt_deg: float) -> KnownSurface:
+    """A surface tilted by `tilt_deg` about the diagonal X = Y."""
+    slope = float(np.arctan(np.tan(np.radians(tilt_deg)) / np.sqrt(2.0)))
+    return KnownSurface(0.0, slope, slope)
+
+
+def _visible_spots(rig: Rig, surfaces: list[KnownSurface]
+                   ) -> tuple[list[int], np.ndarray, np.ndarray, np.ndarray]:
+    """Every tracked diode's predicted spot on each surface inside the container: laser ids,
+    diode and frame indices, pixels."""
+    ids = [d.laser_id for d in rig.tracked_diodes]
+    model = RigModel(rig, ids, surfaces)
+    diode, frame = (a.ravel() for a in np.meshgrid(np.arange(len(ids)),
+                                                   np.arange(len(surfaces)), indexing="ij"))
+    x = np.zeros(model.size)
+    pixels = model.predict(x, diode, frame)
+    hits = model.hits(x, diode, frame)
+    inside = np.isfinite(pixels).all(axis=1) & (np.hypot(hits[:, 0], hits[:, 1])
+                                                < rig.container.radius_mm)
+    return ids, diode[inside], frame[inside], pixels[inside]
+
+
+def _surface_of(rig: Rig, ids: list[int], pixels: np.ndarray) -> tuple[float, float, np.ndarray]:
+    """The plane through the spots at `pixels` reconstructed with `rig`: tilts [rad], heights."""
+    points = reconstruct_spots(rig, ids, pixels, np.full(len(ids), SPOT_SIGMA_PX), 1.0)
+    plane = fit_plane(points.points_mm)
+    return plane.tilt_x_rad, plane.tilt_y_rad, points.points_mm[:, 2]
+
+
+def predict(rig: Rig, surfaces: list[KnownSurface]) -> Prediction:
+    """The posterior σ of every parameter after calibrating `rig` (its tolerances as priors)
+    on `surfaces`, and the σ of tilt and heights it gives unseen diagonal surfaces."""
+    ids, diode, frame, pixels = _visible_spots(rig, surfaces)
+    model = RigModel(rig, ids, surfaces)
+    covariance = np.full((len(pixels), 1, 1), SPOT_SIGMA_PX**2) * np.eye(2)
+    observations = Observations(diode, frame, pixels, spot_whitening(covariance), np.empty(0))
+    free = np.ones(model.size, bool)
+    x = np.zeros(model.size)
+    design = jacobian(model, observations, x, free)
+    scales = model.table.scales
+    information = (design * scales).T @ (design * scales)
+    posterior = np.linalg.pinv(information, rcond=1e-12) * np.outer(scales, scales)
+    sigmas = np.sqrt(np.clip(np.diag(posterior), 0.0, None))
+    unseen = [diagonal(t) for t in UNSEEN_TILTS_DEG]
+    tilt_sigma, height_sigma = [], []
+    for surface in unseen:
+        seen_ids, _, _, seen_px = _visible_spots(rig, [surface])
+        base = np.array(_surface_of(rig, seen_ids, seen_px)[:2])
+        base_heights = _surface_of(rig, seen_ids, seen_px)[2]
+        tilt_rows, height_rows = [], []
+        for k in range(model.size):
+            step = np.zeros(model.size)
+            step[k] = 1e-3 * scales[k]
+            tilt_x, tilt_y, heights = _surface_of(model.to_rig(step), seen_ids, seen_px)
+            tilt_rows.append((np.array([tilt_x, tilt_y]) - base) / step[k])
+            height_rows.append((heights - base_heights) / step[k])
+        tilt_gradient = np.array(tilt_rows)            # parameters × 2
+        height_gradient = np.array(height_rows)        # parameters × points
+        tilt_variance = np.einsum("ki,kl,li->i", tilt_gradient, posterior, tilt_gradient)
+        height_variance = np.einsum("ki,kl,li->i", height_gradient, posterior, height_gradient)
+        tilt_sigma.append(float(np.degrees(np.sqrt(np.max(tilt_variance)))))
+        height_sigma.append(float(np.sqrt(np.mean(height_variance))))
+    return Prediction(list(surfaces), model.table.names, sigmas, np.array(tilt_sigma),
+                      np.array(height_sigma))
+
+
+def plan(rig: Rig, base: list[KnownSurface], candidates: list[KnownSurface]
+         ) -> list[Prediction]:
+    """Greedy plan: the prediction for `base`, then for base plus each next candidate that
+    lowers the worst predicted tilt σ most, until the goals are met, the candidates run out,
+    or the best gains less than LEAST_GAIN. Returns every step's prediction, the last the
+    plan."""
+    chosen = list(base)
+    steps = [predict(rig, chosen)]
+    left = list(candidates)
+    while left and not steps[-1].meets_goals():
+        trials = [predict(rig, [*chosen, candidate]) for candidate in left]
+        best = int(np.argmin([t.worst_tilt_deg for t in trials]))
+        if trials[best].worst_tilt_deg > (1 - LEAST_GAIN) * steps[-1].worst_tilt_deg:
+            break
+        chosen.append(left.pop(best))
+        steps.append(trials[best])
+    return steps

@@ -1,0 +1,100 @@
+"""`sds calibrate plan`: which known surfaces to record, planned from the joint fit's model.
+
+The base is the seed's tilt table series (0–35° about X in 5° steps); the candidates are
+tilts about Y and level surfaces at other fill levels (or a CSV of the user's own). Each
+surface is declared with the accuracy the user can read it to: the table's angle, a spirit
+level's on level frames, the fill level's. `sds_recon.calibration.plan` adds the candidates
+that pay, and the planned protocol is written as the surfaces CSV `sds calibrate rig` reads.
+"""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+from sds_model.rig import Rig
+from sds_recon.calibration.laser_files import read_surfaces
+from sds_recon.calibration.lasers import KnownSurface
+from sds_recon.calibration.plan import Prediction, plan
+
+BASE_TILTS_DEG = (0.0, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0, 35.0)
+"""The seed's tilt table series about X (Table 3)."""
+CANDIDATE_TILTS_DEG = (12.5, 22.5, 32.5)
+"""Tilts about Y offered to the planner."""
+CANDIDATE_LEVELS_MM = (-5.0, -10.0, -20.0, 10.0)
+"""Other fill levels offered to the planner (level surfaces)."""
+
+
+@dataclass(frozen=True)
+class Accuracy:
+    """How well the user reads each kind of known surface (one σ)."""
+
+    table_deg: float = 0.5 / np.sqrt(3.0)   # a tilted frame's angles (the seed: ±0.5°)
+    level_deg: float = 0.05                  # a level frame's (a spirit level)
+    fill_mm: float = 0.05                    # a fill level (a measured volume)
+
+    def declare(self, surface: KnownSurface) -> KnownSurface:
+        """The surface with the σ its kind is read to. The first fill level is the world's
+        Z = 0 and a tilt keeps the liquid's volume: only another fill level is uncertain."""
+        level = surface.tilt_x_rad == 0.0 and surface.tilt_y_rad == 0.0
+        return replace(surface, tilt_sigma_rad=float(np.radians(
+            self.level_deg if level else self.table_deg)),
+            offset_sigma_mm=self.fill_mm if surface.offset_mm != 0.0 else 0.0)
+
+
+def default_surfaces(accuracy: Accuracy) -> tuple[list[KnownSurface], list[KnownSurface]]:
+    """The base series and the candidates, declared with `accuracy`."""
+    base = [KnownSurface(0.0, float(np.radians(a)), 0.0) for a in BASE_TILTS_DEG]
+    candidates = ([KnownSurface(0.0, 0.0, float(np.radians(a))) for a in CANDIDATE_TILTS_DEG]
+                  + [KnownSurface(level, 0.0, 0.0) for level in CANDIDATE_LEVELS_MM])
+    return [accuracy.declare(s) for s in base], [accuracy.declare(s) for s in candidates]
+
+
+def plan_protocol(rig: Rig, accuracy: Accuracy, candidates_csv: Path | None = None
+                  ) -> list[Prediction]:
+    """The planner's steps for `rig` (its tolerances as priors): the base series, then each
+    surface added; the last step is the plan. `candidates_csv` (a surfaces CSV; σ columns
+    absent: `accuracy`'s) replaces the default candidates."""
+    base, candidates = default_surfaces(accuracy)
+    if candidates_csv is not None:
+        candidates = [s if s.tilt_sigma_rad or s.offset_sigma_mm else accuracy.declare(s)
+                      for _, s in sorted(read_surfaces(candidates_csv).items())]
+    return plan(rig, base, candidates)
+
+
+def _describe(surface: KnownSurface) -> str:
+    """A surface in words: its tilts [deg] and fill level [mm]."""
+    return (f"tilt x {np.degrees(surface.tilt_x_rad):5.1f} deg, y "
+            f"{np.degrees(surface.tilt_y_rad):5.1f} deg, level {surface.offset_mm:+5.1f} mm")
+
+
+def plan_text(steps: list[Prediction]) -> str:
+    """The planner's steps as a table: what each added surface predicts for unseen surfaces."""
+    base = len(steps[0].surfaces)
+    lines = ["predicted one-sigma errors of unseen surfaces (tilts about the diagonal) and of "
+             "the camera height:",
+             f"{'protocol':<58} {'tilt deg':>9} {'height mm':>10} {'camera Z mm':>12}"]
+    for index, step in enumerate(steps):
+        what = f"the base series ({base} tilts about X)" if index == 0 else \
+            "+ " + _describe(step.surfaces[-1])
+        lines.append(f"{what:<58} {step.worst_tilt_deg:>9.3f} {step.worst_height_mm:>10.3f} "
+                     f"{step.sigmas[step.names.index('camera Z')]:>12.3f}")
+    last = steps[-1]
+    lines.append("goals met" if last.meets_goals() else
+                 "goals (0.033 deg, 0.033 mm) not met: no candidate gains 10 % more; the "
+                 "emitters' and the readings' tolerances set the floor")
+    return "\n".join(lines)
+
+
+def write_protocol(prediction: Prediction, path: Path) -> None:
+    """The planned surfaces as the surfaces CSV of `sds calibrate rig` (frame k = image k)."""
+    with path.open("w", newline="") as file:
+        writer = csv.writer(file)
+        writer.writerow(["frame", "tilt_x_deg", "tilt_y_deg", "offset_mm", "tilt_sigma_deg",
+                         "offset_sigma_mm"])
+        for frame, s in enumerate(prediction.surfaces):
+            writer.writerow([frame, f"{np.degrees(s.tilt_x_rad):.6g}",
+                             f"{np.degrees(s.tilt_y_rad):.6g}", f"{s.offset_mm:.6g}",
+                             f"{np.degrees(s.tilt_sigma_rad):.6g}", f"{s.offset_sigma_mm:.6g}"])

@@ -1,0 +1,179 @@
+"""Calibration that holds on the rig as built: every tolerance a parameter with its prior, the
+model checked against χ²'s spread (issue: the rig as built).
+
+The true rigs here differ from their files as the seed's did: emitters off their drawn places
+(σ 0.3 mm, a 3D-printed holder), a tilt table read to ±0.5° about its axis (σ 0.15° across
+it), level frames to 0.05°, fill levels to 0.05 mm, the camera turned and moved, beams leaning
+and, for the rendered rig, a camera file off by one Table 2 σ."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+from sds_model.rig import RigError, Tolerances, load_rig, save_rig
+from sds_recon.calibration.laser_files import read_surfaces
+from sds_recon.calibration.lasers import KnownSurface
+from sds_recon.calibration.model_check import check_model
+from sds_recon.calibration.plan import plan
+from sds_recon.calibration.rig_model import RigModel
+from sds_recon.calibration.self_calibration import SelfCalibration, self_calibrate
+from sds_sim.tilt_series import declared, true_surfaces
+from sds_sim.true_rig import RigErrors, random_layout, true_rig
+from sds_workflows.calibration_plan import Accuracy, default_surfaces
+from sds_workflows.calibration_trial import SEED_READINGS, as_built_trial, protocol_readings
+
+ROOT = Path(__file__).resolve().parents[1]
+STELIUM = ROOT / "config" / "rigs" / "stelium.yaml"
+SPOT_SIGMA_PX = 0.07
+SDS = str(Path(sys.executable).with_name("sds"))
+
+
+def _spots(true, surfaces: list[KnownSurface], rng: np.random.Generator,
+           sigma_px: float = SPOT_SIGMA_PX):
+    """Every diode's spot on every true surface with `sigma_px` of noise: ids, diode, frame,
+    pixels, covariances."""
+    ids = [d.laser_id for d in true.diodes]
+    model = RigModel(true, ids, surfaces)
+    diode, frame = (a.ravel() for a in np.meshgrid(np.arange(len(ids)),
+                                                   np.arange(len(surfaces)), indexing="ij"))
+    pixels = model.predict(np.zeros(model.size), diode, frame)
+    hits = model.hits(np.zeros(model.size), diode, frame)
+    seen = np.isfinite(pixels).all(axis=1) & (np.hypot(hits[:, 0], hits[:, 1]) < 55)
+    noisy = pixels[seen] + rng.normal(0.0, sigma_px, (int(seen.sum()), 2))
+    covariance = np.full((len(noisy), 1, 1), sigma_px**2) * np.eye(2)
+    return ids, diode[seen], frame[seen], noisy, covariance
+
+
+def _normalised_camera_and_surface_errors(fit: SelfCalibration, true,
+                                          truths: list[KnownSurface]) -> np.ndarray:
+    """The fit's camera and surface parameters' errors against the truth, each in its σ."""
+    turn = Rotation.from_matrix(fit.rig.world_to_camera.rotation.T
+                                @ true.world_to_camera.rotation).as_rotvec()
+    shift = fit.rig.camera_position_mm - true.camera_position_mm
+    errors = list(turn / fit.sigmas[:3]) + list(shift / fit.sigmas[3:6])
+    for index, (fitted, truth) in enumerate(zip(fit.surfaces, truths, strict=True)):
+        errors += [(fitted.tilt_x_rad - truth.tilt_x_rad) / fit.sigma_of(f"surface {index} tilt x"),
+                   (fitted.tilt_y_rad - truth.tilt_y_rad) / fit.sigma_of(f"surface {index} tilt y")]
+        if f"surface {index} offset" in fit.names:   # the other fill levels
+            errors.append((fitted.offset_mm - truth.offset_mm)
+                          / fit.sigma_of(f"surface {index} offset"))
+    return np.array(errors)
+
+
+@pytest.mark.parametrize("seed", [11, 12])
+def test_declared_tolerances_explain_the_data_and_their_sigma_hold_the_truth(seed: int) -> None:
+    """Spots with exactly known noise: with the tolerances declared, χ²/dof is within its
+    range and the σ hold the truth; declared ten times too tight, or left out (today's
+    model), the check says the model does not explain the data, and why."""
+    rng = np.random.default_rng(seed)
+    designed = random_layout(load_rig(STELIUM), rng)
+    true = true_rig(designed, RigErrors(emitter_sigma_mm=0.3), rng)
+    readings = protocol_readings()
+    truths = true_surfaces(readings, SEED_READINGS, rng)
+    ids, diode, frame, pixels, covariance = _spots(true, truths, rng)
+    nominal = replace(designed, tolerances=Tolerances(emitter_mm=0.3))
+
+    def fit(rig, surfaces):
+        result = self_calibrate(rig, ids, surfaces, diode, frame, pixels, covariance)
+        return result, check_model(result, ids, diode, frame)
+
+    right, right_check = fit(nominal, declared(readings, SEED_READINGS))
+    assert right_check.explained, right_check.summary()
+    assert not right.fixed
+    normalised = _normalised_camera_and_surface_errors(right, true, truths)
+    assert np.sqrt(np.mean(normalised**2)) < 1.5 and np.max(np.abs(normalised)) < 4.5
+    beams = [np.degrees(np.arccos(np.clip(right.rig.diode(i).direction
+                                          @ true.diode(i).direction, -1, 1))) for i in ids]
+    assert max(beams) < 0.1
+
+    _, tight_check = fit(nominal, declared(readings, SEED_READINGS, factor=0.1))
+    assert not tight_check.explained
+    assert "THE MODEL DOES NOT EXPLAIN THE DATA" in tight_check.summary()
+    assert "tilt table" in tight_check.likely_cause
+    assert any(name.startswith("surface") for name, _ in tight_check.pulled)
+
+    today, today_check = fit(replace(nominal, tolerances=Tolerances()), readings)
+    assert not today_check.explained and today.chi2_per_dof > 3 * right.chi2_per_dof
+
+
+def test_a_rendered_rig_as_built_meets_the_goals_by_the_readmes_protocol() -> None:
+    """A random rig as built, rendered in 4K (reflections, the camera file off by one Table 2
+    σ), calibrated from its tilt-table images: no wrong identity, the model explained, an
+    unseen series about the diagonal within 0.1° and 0.1 mm, honest σ; the same data with the
+    table's accuracy declared ten times too tight, or with today's model, are flagged."""
+    result = as_built_trial(9001, STELIUM, drop=False)
+    assert result["wrong"] == 0
+    assert set(result["visible"]) <= set(result["calibrated"]) | set(result["unidentified"])
+    assert result["check"].explained, result["check"].summary()
+    assert not result["tight_check"].explained
+    assert not result["today_check"].explained
+    assert result["unseen"].tilt_error_deg <= 0.1
+    assert result["unseen"].heights.rmse_mm <= 0.1
+    normalised = result["normalised"]
+    assert max(normalised.camera, normalised.beams, normalised.surfaces) <= 1.5, normalised
+    # today's model on the same data is worse on the unseen series
+    assert result["today_unseen"].tilt_error_deg > result["unseen"].tilt_error_deg
+
+
+def test_the_rig_file_carries_its_tolerances(tmp_path: Path) -> None:
+    rig = load_rig(STELIUM)
+    assert rig.tolerances == Tolerances() and rig.emitter_sigma_mm(0) == 0.0
+    diodes = (replace(rig.diodes[0], emitter_sigma_mm=1.0), *rig.diodes[1:])
+    built = replace(rig, diodes=diodes,
+                    tolerances=Tolerances(emitter_mm=0.3, camera_angle_deg=2.0))
+    loaded = load_rig(save_rig(built, tmp_path / "built.yaml"))
+    assert loaded.tolerances == built.tolerances
+    assert loaded.emitter_sigma_mm(rig.diodes[0].laser_id) == 1.0
+    assert loaded.emitter_sigma_mm(rig.diodes[1].laser_id) == 0.3
+    text = (tmp_path / "built.yaml").read_text().replace("emitter_mm: 0.3", "emiter_mm: 0.3")
+    (tmp_path / "typo.yaml").write_text(text)
+    with pytest.raises(RigError, match=r"typo.yaml: tolerances: unknown keys \['emiter_mm'\]"):
+        load_rig(tmp_path / "typo.yaml")
+
+
+def test_the_surfaces_csv_takes_declared_sigmas(tmp_path: Path) -> None:
+    path = tmp_path / "surfaces.csv"
+    path.write_text("frame,tilt_x_deg,tilt_y_deg,offset_mm,tilt_sigma_deg,offset_sigma_mm\n"
+                    "0,0,0,0,0.05,0.05\n1,10,0,0,0.3,\n2,0,0,-5,0.05,0.05\n")
+    surfaces = read_surfaces(path)
+    assert surfaces[1].tilt_sigma_rad == pytest.approx(np.radians(0.3))
+    assert surfaces[1].offset_sigma_mm == 0.0 and surfaces[2].offset_mm == -5.0
+    path.write_text("frame,tilt_x_deg,tilt_y_deg,tilt_sigma_deg\n0,0,0,-0.1\n")
+    with pytest.raises(ValueError, match="line 2: tilt_sigma_deg"):
+        read_surfaces(path)
+
+
+def test_the_planner_predicts_the_fits_sigma_and_asks_first_for_a_second_fill_level(
+        tmp_path: Path) -> None:
+    """The planner's prediction is the joint fit's own σ (same model, same priors); for a rig
+    with uncertain emitters its first addition is a second fill level (the camera's height),
+    and `sds calibrate plan` writes the plan as a surfaces CSV."""
+    rng = np.random.default_rng(31)
+    rig = replace(random_layout(load_rig(STELIUM), rng), tolerances=Tolerances(emitter_mm=0.3))
+    base, candidates = default_surfaces(Accuracy())
+    steps = plan(rig, base, candidates)
+    assert steps[1].surfaces[-1].offset_mm != 0.0
+    assert steps[-1].worst_tilt_deg < 0.5 * steps[0].worst_tilt_deg
+    planned = steps[-1]
+    ids, diode, frame, pixels, covariance = _spots(rig, planned.surfaces, rng, sigma_px=0.1)
+    fit = self_calibrate(rig, ids, planned.surfaces, diode, frame, pixels, covariance)
+    for name in ("camera rotation about X", "camera rotation about Z", "camera Z"):
+        predicted = planned.sigmas[planned.names.index(name)]
+        assert fit.sigma_of(name) == pytest.approx(predicted, rel=0.25), name
+
+    rig_file = save_rig(rig, tmp_path / "rig.yaml")
+    done = subprocess.run([SDS, "calibrate", "plan", "--rig", str(rig_file), "--out",
+                           str(tmp_path / "plan.csv")], capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert "camera Z mm" in done.stdout
+    written = read_surfaces(tmp_path / "plan.csv")
+    assert len(written) == len(planned.surfaces)
+    assert [s.offset_mm for _, s in sorted(written.items())] == \
+        [s.offset_mm for s in planned.surfaces]
