@@ -19,7 +19,7 @@ from sds_tracker.spots import (
     SpotTracker,
     spot_without_line,
 )
-from sds_tracker.tracker import TRACKING_PARAMETERS, FrameTracker, is_lost
+from sds_tracker.tracker import TRACKING_PARAMETERS, FrameTracker, TrackerConfig, is_lost
 
 
 def run_tracker(repo: Path, frames: int, overrides: dict) -> dict:
@@ -148,7 +148,6 @@ def test_stills_of_different_surfaces_are_tracked_each_on_its_own(repo: Path) ->
     none replaced by a temporal filter, each where its image shows it."""
     from sds_model.rig import load_rig
     from sds_sim.tilt_series import render_tilt_series
-    from sds_tracker.tracker import TrackerConfig
 
     rig = load_rig(repo / "config" / "rigs" / "stelium.yaml")
     series = render_tilt_series(rig, [0.0, 35.0, 0.0, 35.0, 0.0, 35.0], "x", seed=4)
@@ -346,3 +345,39 @@ def test_the_parameter_file_states_the_trackers_own_defaults(repo: Path) -> None
     documented = document["/**"]["ros__parameters"]
     for name, value in TRACKING_PARAMETERS.items():
         assert documented[name] == value, name
+
+
+def test_a_weakly_calibrated_beam_widens_its_own_path_gate_only(repo: Path) -> None:
+    """A beam whose direction the calibration left at σ 0.3° (tilts about one axis only) is
+    0.5° off; at 35° about the other axis its spot lies beyond the 4 px gate: with the σ in
+    the rig file the tracker widens that beam's gate and finds it, and no other gate moves."""
+    from dataclasses import replace
+
+    from scipy.spatial.transform import Rotation
+    from sds_model.rig import load_rig
+    from sds_sim.tilt_series import render_tilt_series
+    from sds_tracker.spots import OFF_PATH
+
+    rig = load_rig(repo / "config" / "rigs" / "stelium.yaml")
+    leaning = Rotation.from_euler("x", 0.5, degrees=True).apply(rig.diodes[0].direction)
+    true = replace(rig, diodes=(replace(rig.diodes[0], direction=leaning), *rig.diodes[1:]))
+    series = render_tilt_series(true, [35.0], "y", seed=6)
+    x, y, w, h = rig.container_region_px(rig.camera, 60)
+    red = series.images[0][y:y + h, x:x + w, 2]
+    truth_px = series.truths[0].spot_exposure_px[0]
+
+    def spot_zero(file_rig):
+        tracker = FrameTracker(file_rig, TrackerConfig(stills=True))
+        (_, spots), = tracker.process(0, red, (x, y))[0]
+        return tracker, next(s for s in spots if s.laser_id == rig.diodes[0].laser_id)
+
+    _, exact = spot_zero(rig)
+    assert exact.flags & LOST and exact.flags & OFF_PATH
+    weak = replace(rig, diodes=(replace(rig.diodes[0], direction_sigma_deg=0.3),
+                                *rig.diodes[1:]))
+    tracker, found = spot_zero(weak)
+    assert not found.flags & LOST
+    assert np.hypot(found.x_px - truth_px[0], found.y_px - truth_px[1]) < 0.3
+    gates = tracker.spots.tolerance_px
+    assert gates[rig.diodes[0].laser_id] > 8.0
+    assert all(gates[d.laser_id] == 4.0 for d in rig.diodes[1:])

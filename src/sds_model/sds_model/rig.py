@@ -13,7 +13,7 @@ import yaml
 from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
-from sds_model.camera.files import camera_from_dict, load_camera, read_yaml
+from sds_model.camera.files import camera_from_dict, camera_sigma, read_yaml
 from sds_model.camera.model import CameraModel, CameraModelError
 from sds_model.geometry import RigidTransform
 
@@ -101,6 +101,7 @@ class Rig:
     camera_file: Path | None   # None: the camera model came inline (a recording's rig)
     calibration: dict[str, Any] | None = None   # what `sds calibrate rig` found (uncertainties)
     tolerances: Tolerances = field(default_factory=Tolerances)
+    camera_sigma: dict[str, float] = field(default_factory=dict)   # the camera file's `sigma:`
 
     @property
     def tracked_diodes(self) -> tuple[LaserDiode, ...]:
@@ -227,9 +228,12 @@ def rig_from_dict(content: Any, base: Path) -> Rig:
     model = camera_section["model"]
     camera_file = None if isinstance(model, dict) else (base / str(model)).resolve()
     try:   # a mapping: the camera file's content inline (a recording's rig, `rig_document`)
-        camera = camera_from_dict(model) if camera_file is None else load_camera(camera_file)
+        content_of_camera = model if camera_file is None else read_yaml(camera_file)
+        camera = camera_from_dict(content_of_camera)
+        intrinsics_sigma = camera_sigma(content_of_camera, camera)
     except CameraModelError as error:
-        raise RigError(f"camera.model: {error}") from error
+        where = "camera.model" if camera_file is None else f"camera.model {camera_file}"
+        raise RigError(f"{where}: {error}") from error
     pose = camera_pose(_vector(camera_section, "position_mm", "camera"),
                        _vector(camera_section, "orientation_xyz_deg", "camera"))
     diodes = []
@@ -273,6 +277,7 @@ def rig_from_dict(content: Any, base: Path) -> Rig:
         camera_file=camera_file,
         calibration=_calibration(content),
         tolerances=_tolerances(content),
+        camera_sigma=intrinsics_sigma,
     )
 
 
@@ -319,7 +324,10 @@ def _camera_reference(rig: Rig, directory: Path | None) -> str | dict[str, Any]:
     """camera.model: the camera file relative to `directory`, or (no directory, or a rig
     whose camera came inline) the camera model's mapping itself."""
     if directory is None or rig.camera_file is None:
-        return rig.camera.to_dict()
+        inline = rig.camera.to_dict()
+        if rig.camera_sigma:
+            inline["sigma"] = dict(rig.camera_sigma)
+        return inline
     try:
         return str(rig.camera_file.relative_to(directory.resolve()))
     except ValueError:

@@ -14,7 +14,6 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 from sds_model.camera.model import CameraModel
-from sds_model.camera.scaramuzza import ScaramuzzaCamera
 from sds_model.geometry import RigidTransform
 from sds_model.rig import LaserDiode, LineLaser, Rig
 
@@ -86,23 +85,9 @@ def true_rig(rig: Rig, errors: RigErrors, rng: np.random.Generator) -> Rig:
     return replace(rig, diodes=diodes, world_to_camera=pose, line_laser=line)
 
 
-TABLE_2_SIGMA = {"a0": 0.9879, "x0_px": 0.9946, "y0_px": 1.2160, "c": 9.5856e-5, "e": 4.8446e-4,
-                 "m": 5.1676e-4}
-"""The seed's Table 2 one-sigma errors of the GoPro's a0, centre and stretch (at 3840 px).
-a2-a4 are left as calibrated: their errors are strongly correlated with a0's in a real
-calibration, and drawn independently they would bend the lens far beyond its 0.25 px."""
-
-
-def camera_as_calibrated(camera: CameraModel, sigmas: float, rng: np.random.Generator
-                         ) -> CameraModel:
-    """The true camera when a calibration with Table 2's errors gave `camera`: a0, the centre
-    and the stretch drawn off by `sigmas` × their σ (normal; lengths scaled with the image
-    width). Only the omnidirectional model has Table 2's errors; another is returned as is."""
-    if not isinstance(camera, ScaramuzzaCamera) or sigmas == 0:
-        return camera
-    scale = camera.width_px / 3840.0
-    draw = {key: sigmas * sigma * rng.normal() for key, sigma in TABLE_2_SIGMA.items()}
-    polynomial = (camera.polynomial[0] + draw["a0"] * scale, *camera.polynomial[1:])
-    return replace(camera, polynomial=polynomial, x0_px=camera.x0_px + draw["x0_px"] * scale,
-                   y0_px=camera.y0_px + draw["y0_px"] * scale, c=camera.c + draw["c"],
-                   e=camera.e + draw["e"], m=camera.m + draw["m"])
+def camera_as_calibrated(camera: CameraModel, sigma: dict[str, float], sigmas: float,
+                         rng: np.random.Generator) -> CameraModel:
+    """The true camera when a calibration with one-sigma errors `sigma` (a camera file's
+    `sigma:`) gave `camera`: each of those intrinsics drawn off by `sigmas` × its σ (normal)."""
+    return camera.with_intrinsics({name: sigmas * value * rng.normal()
+                                   for name, value in sorted(sigma.items())})

@@ -84,9 +84,14 @@ class SpotTracker:
     and searched for along its whole path in the next frame.
     """
 
-    def __init__(self, paths: dict[int, np.ndarray], settings: SpotSettings | None = None) -> None:
+    def __init__(self, paths: dict[int, np.ndarray], settings: SpotSettings | None = None,
+                 tolerances_px: dict[int, float] | None = None) -> None:
+        """`tolerances_px`: a path's own gate [px] where it is known less well than
+        `path_tolerance_px` (a weakly calibrated beam); the others use that."""
         self.settings = settings or SpotSettings()
         self.paths = {i: np.asarray(p, dtype=float) for i, p in paths.items()}
+        self.tolerance_px = {i: max(self.settings.path_tolerance_px,
+                                    (tolerances_px or {}).get(i, 0.0)) for i in self.paths}
         self.previous: dict[int, np.ndarray | None] = dict.fromkeys(self.paths)
         # All paths in one array for the batched pass; shorter ones repeat their last point
         # (a zero-length segment, which changes no distance).
@@ -158,7 +163,7 @@ class SpotTracker:
             s.clip_fraction, s.read_noise)
         full = centre + corner + origin
         paths = self._stacked_paths[[self._row[i] for i in ids]]
-        ok &= distances_to_paths(full, paths) <= s.path_tolerance_px
+        ok &= distances_to_paths(full, paths) <= np.array([self.tolerance_px[i] for i in ids])
         settled = {}
         for k, laser_id in enumerate(ids):
             if not ok[k]:
@@ -175,7 +180,7 @@ class SpotTracker:
         of the line, off its path or not there (the full search decides)."""
         s = self.settings
         if not np.isfinite(refined.centre).all() or refined.clearance_px >= 0 or \
-                distance_to_path(refined.centre, path) > s.path_tolerance_px:
+                distance_to_path(refined.centre, path) > self.tolerance_px[laser_id]:
             return None
         x, y = np.round(refined.centre - origin).astype(int)
         peak = float(image[max(y - 2, 0):y + 3, max(x - 2, 0):x + 3].max())
@@ -247,9 +252,9 @@ class SpotTracker:
         previous = self.previous[laser_id]
         priors = np.ones(count - 1) if previous is None else np.exp(
             -np.sum((centres - previous) ** 2, axis=1) / (2 * s.prior_sigma_px**2))
-        near_path = off_paths <= s.path_tolerance_px + 2 * np.sqrt(
-            stats[1:, cv2.CC_STAT_AREA] / np.pi)
-        candidates = [(bool(off_paths[k] <= s.path_tolerance_px), float(masses[k] * priors[k]),
+        tolerance = self.tolerance_px[laser_id]
+        near_path = off_paths <= tolerance + 2 * np.sqrt(stats[1:, cv2.CC_STAT_AREA] / np.pi)
+        candidates = [(bool(off_paths[k] <= tolerance), float(masses[k] * priors[k]),
                        float(masses[k]), k + 1, centres[k]) for k in np.flatnonzero(near_path)]
         if not candidates:
             return lost
@@ -286,7 +291,7 @@ class SpotTracker:
             centre = refined.centre
             if refined.clearance_px < 0:
                 sigma = max(sigma, ON_LINE_SIGMA_PX[1])
-        if distance_to_path(centre, path) > s.path_tolerance_px:
+        if distance_to_path(centre, path) > self.tolerance_px[laser_id]:
             return SpotEstimate(laser_id, np.nan, np.nan, np.nan, 0.0, LOST | OFF_PATH)
         if peak >= s.saturation_level:
             flags |= SATURATED

@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 from sds_model.rig import Rig
 from sds_recon.triangulation import beam_image_path, line_image_path
 
@@ -97,6 +98,32 @@ def flat_line_px(rig: Rig) -> tuple[np.ndarray, np.ndarray]:
     return rows, np.interp(rows, pixels[order, 1], pixels[order, 0])
 
 
+PATH_SIGMAS = 3.0
+"""A beam's image path is trusted to this many of its σ beyond `path_tolerance_px`."""
+
+
+def path_sigma_px(rig: Rig, laser_id: int, heights_mm: np.ndarray) -> float:
+    """How far [px] a diode's image path may be off where its beam's direction is uncertain:
+    the largest move of the path over `heights_mm` when the direction turns by its σ
+    (`direction_sigma_deg`, from `sds calibrate rig`) about either axis across it, about its
+    emitter; 0 for a beam without a σ."""
+    diode = rig.diode(laser_id)
+    if not diode.direction_sigma_deg:
+        return 0.0
+    path = beam_image_path(rig, laser_id, heights_mm)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(diode.direction[0]) < 0.9 else np.eye(3)[1]
+    first = np.cross(diode.direction, helper)
+    first /= np.linalg.norm(first)
+    moves = []
+    for axis in (first, np.cross(diode.direction, first)):
+        turned = Rotation.from_rotvec(np.radians(diode.direction_sigma_deg) * axis)
+        tilted = replace(diode, direction=turned.apply(diode.direction))
+        moved = replace(rig, diodes=(tilted,))
+        moves.append(np.nanmax(np.linalg.norm(
+            beam_image_path(moved, laser_id, heights_mm) - path, axis=1)))
+    return float(max(moves))
+
+
 class FrameTracker:
     """Spots and line per frame; spots come out `hampel_window // 2` frames late, filtered.
     With `stills` (images of different surfaces, not a video) every frame is tracked on its
@@ -109,7 +136,11 @@ class FrameTracker:
         heights = np.linspace(low, high, 15)
         self.paths = {d.laser_id: beam_image_path(rig, d.laser_id, heights)
                       for d in rig.tracked_diodes}
-        self.spots = SpotTracker(self.paths, self.config.spots)
+        widened = {d.laser_id: float(np.hypot(self.config.spots.path_tolerance_px,
+                                              PATH_SIGMAS * path_sigma_px(rig, d.laser_id,
+                                                                          heights)))
+                   for d in rig.tracked_diodes}
+        self.spots = SpotTracker(self.paths, self.config.spots, widened)
         for laser_id, position in (seeds or {}).items():
             if laser_id not in self.paths:
                 raise ValueError(f"seed for laser {laser_id}, which the rig does not have")

@@ -51,6 +51,25 @@ def camera_from_dict(content: dict[str, Any]) -> CameraModel:
         raise CameraModelError(f"bad {name} parameters: {error!r}") from error
 
 
+def camera_sigma(content: dict[str, Any], camera: CameraModel) -> dict[str, float]:
+    """The one-sigma errors of a camera file's calibration (`sigma:`, a mapping from the
+    model's intrinsic names to σ in their units; absent: none declared)."""
+    sigma = content.get("sigma") or {}
+    if not isinstance(sigma, dict):
+        raise CameraModelError("sigma must be a mapping of intrinsic names to one-sigma errors")
+    known = camera.intrinsics()
+    unknown = sorted(set(sigma) - set(known))
+    if unknown:
+        raise CameraModelError(f"sigma: unknown intrinsics {unknown} (known: {sorted(known)})")
+    try:
+        values = {str(name): float(value) for name, value in sigma.items()}
+    except (TypeError, ValueError) as error:
+        raise CameraModelError(f"sigma: each value must be a number: {error}") from error
+    if any(not value >= 0 for value in values.values()):
+        raise CameraModelError("sigma: every one-sigma error must be zero or positive")
+    return {name: value for name, value in values.items() if value > 0}
+
+
 def read_yaml(path: str | Path) -> Any:
     """The content of a YAML (or JSON) file; CameraModelError if it cannot be read or parsed."""
     try:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Mapping
 from typing import Any, ClassVar
 
 import numpy as np
@@ -41,6 +42,15 @@ class CameraModel(ABC):
     def from_parameters(cls, parameters: dict[str, Any], width_px: int, height_px: int,
                         pixel_origin: int) -> CameraModel:
         """Build the model from the `parameters` mapping of a camera file."""
+
+    @abstractmethod
+    def intrinsics(self) -> dict[str, float]:
+        """The model's scalar intrinsic parameters by name (the names a camera file's `sigma:`
+        gives one-sigma errors for)."""
+
+    @abstractmethod
+    def with_intrinsics(self, changes: Mapping[str, float]) -> CameraModel:
+        """The same camera with the named intrinsics changed by the given amounts."""
 
     def to_dict(self) -> dict[str, Any]:
         """The camera file content as a mapping."""

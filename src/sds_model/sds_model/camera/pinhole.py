@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from typing import Any, ClassVar
 
@@ -17,6 +18,8 @@ from sds_model.camera.model import (
     scaled_size,
 )
 
+INTRINSICS = ("alpha_px", "beta_px", "x0_px", "y0_px", "k1", "k2", "k3", "p1", "p2")
+"""The scalar intrinsics a camera file's `sigma:` may name."""
 UNDISTORT_TOLERANCE = 1e-12
 """Newton undistortion stops when the distorted point is matched to this (normalised units)."""
 UNDISTORT_MAX_ITERATIONS = 30
@@ -171,6 +174,15 @@ class PinholeCamera(CameraModel):
                        alpha_px=self.alpha_px * factor, beta_px=self.beta_px * factor,
                        x0_px=scaled_pixel(self.x0_px, factor),
                        y0_px=scaled_pixel(self.y0_px, factor))
+
+    def intrinsics(self) -> dict[str, float]:
+        """α, β, the centre (Eq. 2) and the distortion terms (Eqs. 3–4) by field name."""
+        return {name: float(getattr(self, name)) for name in INTRINSICS}
+
+    def with_intrinsics(self, changes: Mapping[str, float]) -> PinholeCamera:
+        """The camera with the named intrinsics changed by the given amounts."""
+        return replace(self, **{name: getattr(self, name) + changes[name]
+                                for name in INTRINSICS if name in changes})
 
     def parameters(self) -> dict[str, Any]:
         """Eq. 2 intrinsics [px] and θ [deg]; Eqs. 3–4 distortion."""

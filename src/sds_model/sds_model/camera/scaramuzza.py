@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
 from typing import Any, ClassVar
 
 import numpy as np
@@ -146,6 +147,22 @@ class ScaramuzzaCamera(CameraModel):
                                 tuple(np.asarray(self.polynomial) * factor ** (1.0 - powers)),
                                 scaled_pixel(self.x0_px, factor), scaled_pixel(self.y0_px, factor),
                                 self.c, self.e, self.m)
+
+    def intrinsics(self) -> dict[str, float]:
+        """a0, a2, a3, ... (Eq. 6), the centre x0_px, y0_px and the stretch c, e, m (Eq. 7)."""
+        terms = {f"a{k}": float(a) for k, a in enumerate(self.polynomial) if k != 1}
+        return {**terms, "x0_px": float(self.x0_px), "y0_px": float(self.y0_px),
+                "c": float(self.c), "e": float(self.e), "m": float(self.m)}
+
+    def with_intrinsics(self, changes: Mapping[str, float]) -> ScaramuzzaCamera:
+        """The camera with the named intrinsics changed by the given amounts."""
+        polynomial = [a + changes.get(f"a{k}", 0.0) if k != 1 else a
+                      for k, a in enumerate(self.polynomial)]
+        return replace(self, polynomial=tuple(polynomial),
+                       x0_px=self.x0_px + changes.get("x0_px", 0.0),
+                       y0_px=self.y0_px + changes.get("y0_px", 0.0),
+                       c=self.c + changes.get("c", 0.0), e=self.e + changes.get("e", 0.0),
+                       m=self.m + changes.get("m", 0.0))
 
     def parameters(self) -> dict[str, Any]:
         """Eq. 6 polynomial (ascending, a1 included) and Eq. 7 centre [px] and stretch."""

@@ -46,6 +46,16 @@ LINE_PLANE_KIND = Kind("line plane", "rad", DEGREE, np.radians(0.2), np.radians(
                        "in nearly every plane through it)")
 LINE_OFFSET_KIND = Kind("line plane offset", "mm", 1.0, 1.0, 0.1, LINE_PLANE_KIND.determined_by)
 
+
+
+def intrinsic_kind(name: str, sigma: float) -> Kind:
+    """The kind of one camera intrinsic (a camera file's `sigma:` entry): its own scale, always
+    determined (its prior bounds it)."""
+    unit = "px" if name.endswith("_px") or name.startswith("a") else "-"
+    return Kind(f"camera {name}", unit, sigma, np.inf, np.inf,
+                "a camera calibration from more images (sds calibrate camera)")
+
+
 CAMERA_ROTATION = ("camera rotation about X", "camera rotation about Y",
                    "camera rotation about Z")
 CAMERA_SHIFT = ("camera X", "camera Y", "camera Z")

@@ -39,7 +39,7 @@ from sds_recon.calibration.lasers import (
     fit_plane_robust,
     points_on_surfaces,
 )
-from sds_recon.calibration.model_check import ModelCheck, check_model
+from sds_recon.calibration.model_check import PULL_FAIL, ModelCheck, check_model
 from sds_recon.calibration.rig_model import LineObservations
 from sds_recon.calibration.self_calibration import SelfCalibration, self_calibrate
 
@@ -132,7 +132,10 @@ def _fit_without_outliers(rig: Rig, surfaces: list[KnownSurface], spots: _Spots,
                           outliers: list[tuple[int, int, float]]
                           ) -> tuple[SelfCalibration, _Spots]:
     """Fit, leave out the spots beyond `outlier_sigma` and the diodes whose spots do not fit
-    one beam (named in `unidentified`, the spots in `outliers`), until none is left out."""
+    one beam (named in `unidentified`, the spots in `outliers`), until none is left out. A
+    diode whose spots fit a beam only with its emitter moved beyond PULL_FAIL of its declared
+    tolerance has another diode's spots (two emitters 10 mm apart: a 0.3 mm tolerance would
+    let the fit slide one onto the other's beam), and is left out too."""
     while True:
         fit = self_calibrate(rig, spots.ids, surfaces, spots.diode, spots.frame, spots.pixels,
                              spots.covariance, s.fit_emitters, s.fit_camera)
@@ -140,16 +143,28 @@ def _fit_without_outliers(rig: Rig, surfaces: list[KnownSurface], spots: _Spots,
         keep = normalised <= s.outlier_sigma
         rms = {i: float(np.sqrt(np.mean(normalised[spots.diode == k] ** 2)))
                for k, i in enumerate(spots.ids)}
-        bad_diodes = [i for i in spots.ids if rms[i] > s.diode_rms_sigma * np.sqrt(2)]
+        moved = _emitter_pulls(fit, spots.ids)
+        bad_diodes = [i for i in spots.ids
+                      if rms[i] > s.diode_rms_sigma * np.sqrt(2) or moved[i] > PULL_FAIL]
         if keep.all() and not bad_diodes:
             return fit, spots
         for k, i in enumerate(spots.ids):
             if i in bad_diodes:
-                unidentified[i] = f"its spots do not fit one beam (RMS {rms[i]:.1f} σ)"
+                unidentified[i] = (f"its spots do not fit one beam (RMS {rms[i]:.1f} σ)"
+                                   if moved[i] <= PULL_FAIL else
+                                   f"its spots fit a beam only with its emitter moved "
+                                   f"{moved[i]:.0f} σ of its tolerance (another diode's)")
                 keep &= spots.diode != k
         outliers += [(spots.ids[spots.diode[k]], int(spots.frame[k]), float(normalised[k]))
                      for k in np.flatnonzero(~keep) if spots.ids[spots.diode[k]] not in bad_diodes]
         spots = spots.kept(keep)
+
+
+def _emitter_pulls(fit: SelfCalibration, laser_ids: list[int]) -> dict[int, float]:
+    """Per diode, how far its emitter moved in σ of its declared tolerance (0 without one)."""
+    pulls = dict(zip(fit.names, np.nan_to_num(np.abs(fit.pulls())), strict=True))
+    return {i: max(pulls.get(f"emitter {i} a", 0.0), pulls.get(f"emitter {i} b", 0.0))
+            for i in laser_ids}
 
 
 def _identify_again(fitted: Rig, nominal: Rig, laser_ids: list[int],

@@ -2,11 +2,12 @@
 
 Parameters (`parameters.py`: one table with their priors; each a small change from the rig
 file's or the surfaces CSV's value): camera rotation about the world X, Y, Z axes [rad] and
-centre shift [mm]; per beam two tilts of its direction [rad] and, where the emitter's position
-is uncertain (a tolerance, or `fit_emitters`), two shifts of its emitter across the beam [mm]
-(along the beam an emitter shift changes nothing); per known surface whose reading is
-uncertain, its two angles [rad] and its fill level [mm]; with line observations, two tilts of
-the line laser's plane about a point on it [rad] and its shift along its normal [mm].
+centre shift [mm]; the camera's intrinsics its file gives a σ for (`sigma:`); per beam two
+tilts of its direction [rad] and, where the emitter's position is uncertain (a tolerance, or
+`fit_emitters`), two shifts of its emitter across the beam [mm] (along the beam an emitter
+shift changes nothing); per known surface whose reading is uncertain, its two angles [rad]
+and its fill level [mm]; with line observations, two tilts of the line laser's plane about a
+point on it [rad] and its shift along its normal [mm].
 
 Residuals: spots are predicted as the beam's hit on the frame's surface (Eq. 9 with Z = g(X, Y)
 known), projected through the camera (Eq. 1 and the camera model); a line pixel's residual is
@@ -20,6 +21,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
+from sds_model.camera.model import CameraModel
 from sds_model.geometry import RigidTransform, ray_plane_points
 from sds_model.rig import LineLaser, Rig
 
@@ -39,6 +41,7 @@ from sds_recon.calibration.parameters import (
     SURFACE_TILT_KIND,
     Parameter,
     ParameterTable,
+    intrinsic_kind,
 )
 
 
@@ -95,6 +98,8 @@ def _parameters(rig: Rig, laser_ids: list[int], surfaces: list[KnownSurface],
         if surface.offset_sigma_mm > 0:
             table.append(Parameter(f"surface {index} offset", SURFACE_OFFSET_KIND,
                                    surface.offset_sigma_mm))
+    table += [Parameter(f"camera {name}", intrinsic_kind(name, sigma), sigma)
+              for name, sigma in sorted(rig.camera_sigma.items())]
     if line:
         plane = _prior(tolerances.line_plane_deg, True)
         table += [Parameter(LINE_PLANE[0], LINE_PLANE_KIND, plane),
@@ -134,17 +139,13 @@ class RigModel:
         prior = self.table.prior_sigmas
         self._prior_index = np.flatnonzero(np.isfinite(prior))
         self._prior_sigma = prior[self._prior_index]
+        self._intrinsics = {name: names.index(f"camera {name}") for name in rig.camera_sigma}
         self.line = line
         if line is not None:
             if line_plane is None:
                 raise ValueError("line observations need a starting line plane")
             self._plane_start = line_plane
             self._plane_axes = _across(line_plane[0])
-            camera = rig.camera
-            # Rays through each line pixel and its neighbour along the row, camera frame:
-            # fixed, since the intrinsics are not fitted.
-            self._line_rays = camera.pixel_to_ray(line.pixels)
-            self._next_rays = camera.pixel_to_ray(line.pixels + np.array([1.0, 0.0]))
 
     @property
     def size(self) -> int:
@@ -155,6 +156,14 @@ class RigModel:
     def prior_count(self) -> int:
         """Number of parameters with a declared tolerance (each adds one residual)."""
         return len(self._prior_index)
+
+    def intrinsics(self, x: np.ndarray) -> CameraModel:
+        """The camera model for parameters `x` (the rig file's, its declared intrinsics
+        changed)."""
+        if not self._intrinsics:
+            return self.rig.camera
+        return self.rig.camera.with_intrinsics({name: float(x[k])
+                                                for name, k in self._intrinsics.items()})
 
     def camera(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Camera-to-world rotation and camera centre [mm] for parameters `x`."""
@@ -216,9 +225,13 @@ class RigModel:
         normal, point = self.line_plane(x)
         normals, offsets = self.surface_planes(x)
         frame = self.line.frame
-        here = self._distance_mm(self._line_rays @ rotation.T, centre, normals[frame],
+        # Rays through each line pixel and its neighbour along the row.
+        camera = self.intrinsics(x)
+        rays = camera.pixel_to_ray(self.line.pixels)
+        next_rays = camera.pixel_to_ray(self.line.pixels + np.array([1.0, 0.0]))
+        here = self._distance_mm(rays @ rotation.T, centre, normals[frame],
                                  offsets[frame], normal, point)
-        beside = self._distance_mm(self._next_rays @ rotation.T, centre, normals[frame],
+        beside = self._distance_mm(next_rays @ rotation.T, centre, normals[frame],
                                    offsets[frame], normal, point)
         return here / (here - beside)
 
@@ -238,7 +251,7 @@ class RigModel:
         """Predicted pixels (N×2) of each (diode, frame) spot."""
         rotation, centre = self.camera(x)
         points = self.hits(x, diode, frame)
-        return self.rig.camera.project((points - centre) @ rotation)
+        return self.intrinsics(x).project((points - centre) @ rotation)
 
     def to_rig(self, x: np.ndarray) -> Rig:
         """The rig with these parameters (diodes not in the model stay as they were)."""
@@ -257,4 +270,5 @@ class RigModel:
                 normal = -normal
             emitter = line_laser.emitter_mm - ((line_laser.emitter_mm - point) @ normal) * normal
             line_laser = LineLaser(emitter, normal)
-        return replace(self.rig, world_to_camera=pose, diodes=diodes, line_laser=line_laser)
+        return replace(self.rig, camera=self.intrinsics(x), world_to_camera=pose, diodes=diodes,
+                       line_laser=line_laser)

@@ -56,7 +56,15 @@ def calibrated_rig(nominal: Rig, result: RigCalibration) -> Rig:
     record = {key: report[key] for key in ("model_check", "method", "frames", "spots",
                                            "rms_px", "camera", "line_laser", "unidentified",
                                            "not_determined", "weakly_determined")}
-    return replace(fitted, diodes=diodes, calibration=record)
+    fit = result.fit
+    intrinsics = {name: fit.sigma_of(f"camera {name}") for name in nominal.camera_sigma}
+    if not intrinsics:
+        return replace(fitted, diodes=diodes, calibration=record)
+    # The fitted intrinsics are the rig's own now: the camera goes into the rig file inline,
+    # with their posterior σ, and the camera file stays as calibrated.
+    return replace(fitted, diodes=diodes, calibration=record, camera_file=None,
+                   camera_sigma={name: float(f"{sigma:.4g}")
+                                 for name, sigma in intrinsics.items()})
 
 
 def rig_report(nominal: Rig, result: RigCalibration) -> dict[str, Any]:
@@ -136,7 +144,7 @@ def parameter_rows(fit: SelfCalibration) -> list[dict[str, Any]]:
         angle = parameter.kind.unit == "rad"
         show = _deg if angle else _mm
         rows.append({"name": parameter.name, "kind": parameter.kind.name,
-                     "unit": "deg" if angle else "mm",
+                     "unit": "deg" if angle else parameter.kind.unit,
                      "prior_sigma": show(parameter.prior_sigma) if parameter.has_prior else None,
                      "change": show(value), "sigma": _sigma(sigma, angle),
                      "pull": None if np.isnan(pull) else float(f"{pull:.3g}"),
