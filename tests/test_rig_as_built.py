@@ -21,6 +21,7 @@ from sds_recon.calibration.laser_files import read_surfaces
 from sds_recon.calibration.lasers import KnownSurface
 from sds_recon.calibration.model_check import check_model
 from sds_recon.calibration.plan import plan
+from sds_recon.calibration.rig_calibration import calibrate_rig
 from sds_recon.calibration.rig_model import RigModel
 from sds_recon.calibration.self_calibration import SelfCalibration, self_calibrate
 from sds_sim.tilt_series import declared, true_surfaces
@@ -177,3 +178,21 @@ def test_the_planner_predicts_the_fits_sigma_and_asks_first_for_a_second_fill_le
     assert len(written) == len(planned.surfaces)
     assert [s.offset_mm for _, s in sorted(written.items())] == \
         [s.offset_mm for s in planned.surfaces]
+
+
+def test_a_wrong_model_keeps_every_diode_and_is_flagged_not_emptied() -> None:
+    """Emitters declared but the table's readings taken as exact: every emitter is pulled
+    alike (5-10 σ), which is the model's fault, not a swap: no diode is dropped for it, and
+    the model check says the model does not explain the data."""
+    rng = np.random.default_rng(13)
+    designed = random_layout(load_rig(STELIUM), rng)
+    true = true_rig(designed, RigErrors(emitter_sigma_mm=0.3), rng)
+    readings = protocol_readings()
+    truths = true_surfaces(readings, SEED_READINGS, rng)
+    ids, _, frame, pixels, covariance = _spots(true, truths, rng)
+    blobs = [pixels[frame == f] for f in range(len(readings))]
+    covariances = [covariance[frame == f] for f in range(len(readings))]
+    result = calibrate_rig(replace(designed, tolerances=Tolerances(emitter_mm=0.3)), readings,
+                           blobs, covariances)
+    assert sorted(result.laser_ids) == sorted(ids) and not result.unidentified
+    assert not result.check.explained

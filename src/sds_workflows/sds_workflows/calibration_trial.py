@@ -36,7 +36,7 @@ from sds_sim.true_rig import RigErrors, camera_as_calibrated, random_layout, tru
 from sds_tracker.spots import LOST
 from sds_tracker.tracker import FrameTracker
 
-from sds_workflows.rig_calibration import calibrate_images
+from sds_workflows.rig_calibration import CalibrationImages, calibrate_images
 
 ANGLES = [0.0, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0, 35.0]
 """The seed's tilt table (Table 3)."""
@@ -189,6 +189,22 @@ def geometry_errors(rig: Rig, true: Rig, result: RigCalibration) -> GeometryErro
                           plane_sigma)
 
 
+def wrong_identities(result: RigCalibration, found: CalibrationImages, series: TiltSeries
+                     ) -> int:
+    """How many spots the calibration used are not their diode's (another diode's spot, or a
+    reflection nearer than any spot), against the renderer's truth."""
+    wrong = 0
+    for d, f, b in zip(result.diode, result.frame, result.blob, strict=True):
+        truth = series.truths[f]
+        blob = found.spots[f].pixels[b]
+        to_spots = np.linalg.norm(truth.spot_exposure_px - blob, axis=1)
+        to_reflections = np.linalg.norm(truth.reflection_px - blob, axis=1)
+        if np.nanargmin(to_spots) != result.laser_ids[d] or \
+                np.nanmin(to_spots) > np.nanmin(np.append(to_reflections, np.inf)):
+            wrong += 1
+    return wrong
+
+
 def trial(seed: int, rig_file: Path, scale: float = 1.0, errors: RigErrors | None = None,
           drop: bool = True, second_axis: bool = False) -> dict[str, Any]:
     """Calibrate a random true rig (seeded) from a one-axis tilt series and check it on an
@@ -203,15 +219,7 @@ def trial(seed: int, rig_file: Path, scale: float = 1.0, errors: RigErrors | Non
     nominal = replace(designed, camera=base.camera.scaled(scale), camera_sigma={})
     result, found = calibrate_images(nominal, series.images, series.surfaces)
     rig = calibrated_rig(nominal, result)
-    wrong = 0
-    for d, f, b in zip(result.diode, result.frame, result.blob, strict=True):
-        truth = series.truths[f]
-        blob = found.spots[f].pixels[b]
-        to_spots = np.linalg.norm(truth.spot_exposure_px - blob, axis=1)
-        to_reflections = np.linalg.norm(truth.reflection_px - blob, axis=1)
-        if np.nanargmin(to_spots) != result.laser_ids[d] or \
-                np.nanmin(to_spots) > np.nanmin(np.append(to_reflections, np.inf)):
-            wrong += 1
+    wrong = wrong_identities(result, found, series)
     geometry = geometry_errors(rig, true, result)
     two_axis = None
     if second_axis:
@@ -350,15 +358,7 @@ def as_built_trial(seed: int, rig_file: Path, scale: float = 1.0,
                                 declared(readings, as_built.readings, factor=0.1))
     today, _ = calibrate_images(replace(nominal, tolerances=Tolerances(), camera_sigma={}),
                                 series.images, readings)
-    wrong = 0
-    for d, f, b in zip(result.diode, result.frame, result.blob, strict=True):
-        truth = series.truths[f]
-        blob = found.spots[f].pixels[b]
-        to_spots = np.linalg.norm(truth.spot_exposure_px - blob, axis=1)
-        to_reflections = np.linalg.norm(truth.reflection_px - blob, axis=1)
-        if np.nanargmin(to_spots) != result.laser_ids[d] or \
-                np.nanmin(to_spots) > np.nanmin(np.append(to_reflections, np.inf)):
-            wrong += 1
+    wrong = wrong_identities(result, found, series)
     visible = [i for i in range(len(true.diodes))
                if sum(t.visible[i] for t in series.truths) >= 3]
     other = render_surfaces(true, diagonal_surfaces(), scale, seed + 1000)

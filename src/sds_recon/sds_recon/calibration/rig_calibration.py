@@ -45,6 +45,9 @@ from sds_recon.calibration.self_calibration import SelfCalibration, self_calibra
 
 LINE_FITS = 4
 """Most joint fits spent scaling the line pixels' σ and leaving out their outliers."""
+EMITTER_PULL_RATIO = 3.0
+"""A diode's emitter pulled this many times further than the median emitter (and beyond the
+model check's PULL_FAIL) has another diode's spots."""
 
 
 @dataclass(frozen=True)
@@ -134,9 +137,15 @@ def _fit_without_outliers(rig: Rig, surfaces: list[KnownSurface], spots: _Spots,
     """Fit, leave out the spots beyond `outlier_sigma` and the diodes whose spots do not fit
     one beam (named in `unidentified`, the spots in `outliers`), until none is left out. A
     diode whose spots fit a beam only with its emitter moved beyond PULL_FAIL of its declared
-    tolerance has another diode's spots (two emitters 10 mm apart: a 0.3 mm tolerance would
-    let the fit slide one onto the other's beam), and is left out too."""
+    tolerance, and several times as far as the others' (EMITTER_PULL_RATIO × their median),
+    has another diode's spots (two emitters 10 mm apart: a 0.3 mm tolerance would let the fit
+    slide one onto the other's beam), and is left out too; when every emitter is pulled
+    alike, the model is wrong, not an identity, and the model check says so."""
     while True:
+        if not spots.ids:
+            raise ValueError("no diode's spots fit its beam on these surfaces: "
+                             + "; ".join(f"{i}: {why}" for i, why in
+                                         sorted(unidentified.items())[:3]))
         fit = self_calibrate(rig, spots.ids, surfaces, spots.diode, spots.frame, spots.pixels,
                              spots.covariance, s.fit_emitters, s.fit_camera)
         normalised = fit.spot_residuals_sigma / np.sqrt(max(fit.chi2_per_dof, 1.0))
@@ -144,14 +153,17 @@ def _fit_without_outliers(rig: Rig, surfaces: list[KnownSurface], spots: _Spots,
         rms = {i: float(np.sqrt(np.mean(normalised[spots.diode == k] ** 2)))
                for k, i in enumerate(spots.ids)}
         moved = _emitter_pulls(fit, spots.ids)
-        bad_diodes = [i for i in spots.ids
-                      if rms[i] > s.diode_rms_sigma * np.sqrt(2) or moved[i] > PULL_FAIL]
+        worst = max(spots.ids, key=lambda i: moved[i])
+        typical = float(np.median(list(moved.values())))
+        swapped = moved[worst] > max(PULL_FAIL, EMITTER_PULL_RATIO * typical)
+        bad_diodes = [i for i in spots.ids if rms[i] > s.diode_rms_sigma * np.sqrt(2)
+                      or (swapped and i == worst)]
         if keep.all() and not bad_diodes:
             return fit, spots
         for k, i in enumerate(spots.ids):
             if i in bad_diodes:
                 unidentified[i] = (f"its spots do not fit one beam (RMS {rms[i]:.1f} σ)"
-                                   if moved[i] <= PULL_FAIL else
+                                   if not (swapped and i == worst) else
                                    f"its spots fit a beam only with its emitter moved "
                                    f"{moved[i]:.0f} σ of its tolerance (another diode's)")
                 keep &= spots.diode != k
