@@ -49,6 +49,7 @@ bench: setup
 	$(BIN)/python bench/frame_path.py
 	$(BIN)/python bench/graph.py --minutes 2
 	$(BIN)/python bench/self_calibration.py
+	$(BIN)/python bench/rig_as_built.py
 	$(BIN)/python bench/process.py
 	$(BIN)/python bench/scaling.py
 
