@@ -26,7 +26,8 @@ class VersionAction(argparse.Action):
                  values: object, option_string: str | None = None) -> None:
         import importlib.metadata
 
-        parser.exit(message=f"sds {importlib.metadata.version('sds_cli')}\n")
+        print(f"sds {importlib.metadata.version('sds_cli')}")   # on stdout, as argparse's own
+        parser.exit()
 
 
 def build_parser() -> argparse.ArgumentParser:
