@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 from sds_model.rig import Rig
+from sds_recon.calibration.rig_model import across_axes
 from sds_recon.triangulation import beam_image_path, line_image_path
 
 from sds_tracker.hampel import BankOutput, HampelBank
@@ -111,11 +112,8 @@ def path_sigma_px(rig: Rig, laser_id: int, heights_mm: np.ndarray) -> float:
     if not diode.direction_sigma_deg:
         return 0.0
     path = beam_image_path(rig, laser_id, heights_mm)
-    helper = np.array([1.0, 0.0, 0.0]) if abs(diode.direction[0]) < 0.9 else np.eye(3)[1]
-    first = np.cross(diode.direction, helper)
-    first /= np.linalg.norm(first)
     moves = []
-    for axis in (first, np.cross(diode.direction, first)):
+    for axis in across_axes(diode.direction):
         turned = Rotation.from_rotvec(np.radians(diode.direction_sigma_deg) * axis)
         tilted = replace(diode, direction=turned.apply(diode.direction))
         moved = replace(rig, diodes=(tilted,))

@@ -20,6 +20,7 @@ from sds_model.rig import Rig, Tolerances, load_rig
 from sds_recon.calibration.lasers import KnownSurface, calibrate_beams
 from sds_recon.calibration.parameters import LINE_PLANE
 from sds_recon.calibration.rig_calibration import RigCalibration
+from sds_recon.calibration.rig_model import across_axes
 from sds_recon.calibration.rig_report import beam_sigma_deg, calibrated_rig
 from sds_recon.reconstruction import fit_surface, reconstruct_spots
 from sds_sim.render import FrameRenderer
@@ -302,7 +303,7 @@ def _normalised_errors(result: RigCalibration, nominal: Rig, true: Rig,
                              / fit.sigmas[3:6]])
     beams = []
     for laser_id in result.laser_ids:
-        u, v = _beam_axes(nominal.diode(laser_id).direction)
+        u, v = across_axes(nominal.diode(laser_id).direction)
         error = true.diode(laser_id).direction - rig.diode(laser_id).direction
         beams += [error @ u / fit.sigma_of(f"beam {laser_id} tilt a"),
                   error @ v / fit.sigma_of(f"beam {laser_id} tilt b")]
@@ -323,14 +324,6 @@ def _normalised_errors(result: RigCalibration, nominal: Rig, true: Rig,
         return float(np.sqrt(np.mean(finite**2))) if len(finite) else float("nan")
 
     return NormalisedErrors(rms(camera), rms(beams), rms(surfaces))
-
-
-def _beam_axes(direction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The two axes across a beam its tilt parameters turn it along (as the fit's model)."""
-    helper = np.array([0.0, 0.0, 1.0]) if abs(direction[2]) < 0.9 else np.array([1.0, 0, 0])
-    first = np.cross(helper, direction)
-    first /= np.linalg.norm(first)
-    return first, np.cross(direction, first)
 
 
 def as_built_trial(seed: int, rig_file: Path, scale: float = 1.0,

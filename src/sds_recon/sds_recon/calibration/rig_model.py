@@ -59,8 +59,9 @@ class LineObservations:
         return LineObservations(self.frame[keep], self.pixels[keep], self.sigma_px[keep])
 
 
-def _across(direction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two unit vectors perpendicular to `direction` and to each other."""
+def across_axes(direction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors perpendicular to `direction` and to each other: the axes a beam's (or
+    the line plane's) two tilt parameters turn it along."""
     helper = np.array([0.0, 0.0, 1.0]) if abs(direction[2]) < 0.9 else np.array([1.0, 0, 0])
     first = np.cross(helper, direction)
     first /= np.linalg.norm(first)
@@ -123,7 +124,7 @@ class RigModel:
         self.surfaces = surfaces
         self.table = _parameters(rig, laser_ids, surfaces, fit_emitters, line is not None)
         names = self.table.names
-        self._axes = [_across(d.direction) for d in self.diodes]
+        self._axes = [across_axes(d.direction) for d in self.diodes]
         self._beam_index = np.array([names.index(f"beam {i} tilt a") for i in laser_ids], int)
         self._emitter_index = np.array([names.index(f"emitter {i} a")
                                         if f"emitter {i} a" in names else -1
@@ -145,7 +146,7 @@ class RigModel:
             if line_plane is None:
                 raise ValueError("line observations need a starting line plane")
             self._plane_start = line_plane
-            self._plane_axes = _across(line_plane[0])
+            self._plane_axes = across_axes(line_plane[0])
 
     @property
     def size(self) -> int:
