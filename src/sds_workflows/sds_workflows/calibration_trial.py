@@ -19,6 +19,7 @@ from sds_model.paths import CONFIG
 from sds_model.rig import Rig, Tolerances, load_rig
 from sds_recon.calibration.lasers import KnownSurface, calibrate_beams
 from sds_recon.calibration.parameters import LINE_PLANE
+from sds_recon.calibration.plan import diagonal
 from sds_recon.calibration.rig_calibration import RigCalibration
 from sds_recon.calibration.rig_model import across_axes
 from sds_recon.calibration.rig_report import beam_sigma_deg, calibrated_rig
@@ -277,8 +278,7 @@ def protocol_readings() -> list[KnownSurface]:
 
 def diagonal_surfaces() -> list[KnownSurface]:
     """The unseen series: ANGLES about the diagonal X = Y (an axis the protocol never used)."""
-    return [KnownSurface(0.0, float(np.arctan(np.tan(np.radians(a)) / np.sqrt(2))),
-                         float(np.arctan(np.tan(np.radians(a)) / np.sqrt(2)))) for a in ANGLES]
+    return [diagonal(a) for a in ANGLES]
 
 
 @dataclass(frozen=True)

@@ -110,8 +110,8 @@ def predict(rig: Rig, surfaces: list[KnownSurface]) -> Prediction:
     tilt_sigma, height_sigma = [], []
     for surface in unseen:
         seen_ids, _, _, seen_px = _visible_spots(rig, [surface])
-        base = np.array(_surface_of(rig, seen_ids, seen_px)[:2])
-        base_heights = _surface_of(rig, seen_ids, seen_px)[2]
+        base_x, base_y, base_heights = _surface_of(rig, seen_ids, seen_px)
+        base = np.array([base_x, base_y])
         tilt_rows, height_rows = [], []
         for k in range(model.size):
             step = np.zeros(model.size)
