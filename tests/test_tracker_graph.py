@@ -24,7 +24,7 @@ from sds_model.rig import load_rig
 from sds_recon.results import load_results
 from sds_record.mcap_files import McapRecorder, read_messages
 from sds_record.recorded_series import recorded_rig
-from sds_ros.qos import live_qos, stream_qos
+from sds_ros.qos import stream_qos
 from sds_sim.scenario import load_scenario
 from sds_sim.simulate import SimulationOutput, simulate
 from sensor_msgs.msg import Image, PointCloud2
@@ -34,6 +34,10 @@ from sds_msgs.msg import LaserLineProfile, LaserSpot, LaserSpotArray, SurfaceFit
 pytestmark = pytest.mark.ros
 EVERY_FRAME = stream_qos(100)
 """Keeps all 30 frames' messages: flooding, the graph does not wait for this probe."""
+LIVE_PROBE = QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT,
+                        durability=DurabilityPolicy.VOLATILE)
+"""The live previews as the graph sends them (best-effort), kept 100 deep here: a probe busy
+deserialising 4K images must not drop what the transport delivered (a viewer keeps the newest)."""
 SYNC_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
@@ -82,9 +86,9 @@ def drop_run(repo, tmp_path_factory) -> DropRun:
 
     spots = probe.collect(LaserSpotArray, "/tracker/spots", EVERY_FRAME,
                           arrival("/tracker/spots", frame_index))
-    live_spots = probe.collect(LaserSpotArray, "/tracker/spots_live", live_qos(),
+    live_spots = probe.collect(LaserSpotArray, "/tracker/spots_live", LIVE_PROBE,
                                arrival("/tracker/spots_live", frame_index))
-    live_clouds = probe.collect(PointCloud2, "/recon/points_live", live_qos(),
+    live_clouds = probe.collect(PointCloud2, "/recon/points_live", LIVE_PROBE,
                                 arrival("/recon/points_live", stamp_ns))
     lines = probe.collect(LaserLineProfile, "/tracker/line", EVERY_FRAME)
     clouds = probe.collect(PointCloud2, "/recon/points", EVERY_FRAME)

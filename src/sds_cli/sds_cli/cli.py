@@ -52,6 +52,19 @@ def input_errors() -> tuple[type[BaseException], ...]:
     return CommandError, *workflow_input_errors()
 
 
+def _is_interruption(error: BaseException) -> bool:
+    """Ctrl-C inside compiled code: numba's functions surface it as a SystemError whose cause
+    is the KeyboardInterrupt."""
+    cause = error.__cause__ or error.__context__
+    return isinstance(error, SystemError) and isinstance(cause, KeyboardInterrupt)
+
+
+def interrupted() -> int:
+    """Say so, and the exit code of an interruption (128 + SIGINT)."""
+    print("sds: interrupted", file=sys.stderr)
+    return 130
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the `sds` command: bad input is one line and exit code 2."""
     # The libraries' warnings (e.g. an unfinished recording read up to its last chunk).
@@ -60,11 +73,13 @@ def main(argv: list[str] | None = None) -> None:
         args = build_parser().parse_args(argv)
         code = args.run(args)
     except KeyboardInterrupt:   # Ctrl-C outside a graph (a graph stops on its own signal)
-        print("sds: interrupted", file=sys.stderr)
-        code = 130
+        code = interrupted()
     except Exception as error:
-        if not isinstance(error, input_errors()):
+        if _is_interruption(error):
+            code = interrupted()
+        elif isinstance(error, input_errors()):
+            print(f"sds {args.command}: {error}", file=sys.stderr)
+            code = 2
+        else:
             raise
-        print(f"sds {args.command}: {error}", file=sys.stderr)
-        code = 2
     raise SystemExit(code)

@@ -99,6 +99,8 @@ COLUMNS: dict[str, dict[str, str]] = {
 INTEGER_COLUMNS = frozenset({"frame", "laser_id", "valid", "flags", "point_count", "rejected",
                              "rejected_count"})
 """Columns of whole numbers; every other column is a float (NaN written as an empty cell)."""
+TABLE_FILES = (*(f"{table}.csv" for table in COLUMNS), "columns.json")
+"""The files of a results folder's tables (the analysis adds its report)."""
 BATCH_ROWS = 65536
 """Rows a table buffers before they are formatted and written in one go."""
 
@@ -147,8 +149,7 @@ class _TableFile:
 
 def refuse_results(directory: Path) -> None:
     """FileExistsError when `directory` holds result files already."""
-    earlier = [name for name in [*(f"{t}.csv" for t in COLUMNS), "columns.json"]
-               if (directory / name).exists()]
+    earlier = [name for name in TABLE_FILES if (directory / name).exists()]
     if earlier:
         raise FileExistsError(f"{directory} holds results already ({earlier[0]}, …): "
                               "another folder, or --overwrite")

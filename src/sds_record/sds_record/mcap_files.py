@@ -12,6 +12,7 @@ gave and that `sds mcap-repair` gives the file an index.
 from __future__ import annotations
 
 import logging
+import shlex
 import struct
 import threading
 import time
@@ -35,6 +36,7 @@ from rosbags.typesys import (
     get_types_from_msg,
     get_typestore,
 )
+from sds_model.staging import staged_file
 
 from sds_record.schemas import MESSAGE_ENCODING, SCHEMA_ENCODING, message_definition
 
@@ -44,6 +46,8 @@ DURABILITY_KEY = "durability"
 COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
                 "none": CompressionType.NONE}
 _log = logging.getLogger(__name__)
+_warned_unfinished: set[Path] = set()
+"""Unfinished files this process has warned about (each file is read several times)."""
 
 
 @dataclass(frozen=True)
@@ -170,24 +174,37 @@ def _indexed_messages(path: Path, topics: Iterable[str] | None
         yield from make_reader(stream).iter_messages(topics=topics, log_time_order=True)
 
 
+def require_mcap(path: Path) -> None:
+    """ValueError unless `path` is a file that starts as an MCAP file does."""
+    if not path.is_file():
+        raise ValueError(f"{path}: no such recording")
+    with path.open("rb") as stream:
+        if stream.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
+            raise ValueError(f"{path} is not an MCAP file (no MCAP magic at its start)")
+
+
 def _records(path: Path, topics: Iterable[str] | None
              ) -> Iterator[tuple[Schema | None, Channel, Message]]:
     """The wanted topics' messages: log-time order from the index, else (an unfinished file)
-    file order up to the last complete chunk, with a warning once a read that found some is
-    done."""
+    file order up to the last complete chunk, with one warning per file and process once a
+    read that found some is done. ValueError if the file is not MCAP."""
+    require_mcap(path)
     wanted = set(topics) if topics is not None else None
     if _summary(path) is not None:
         yield from _indexed_messages(path, wanted)
         return
-    count = 0
+    complete = found = 0
     for schema, channel, message in _linear_messages(path):
+        complete += 1
         if wanted is None or channel.topic in wanted:
-            count += 1
+            found += 1
             yield schema, channel, message
-    if count:   # nothing read: the caller's own error (no such topic...) says it all
-        _log.warning(f"{path} is unfinished (its recorder did not close it): read {count} "
-                     f"messages up to its last complete chunk; `sds mcap-repair {path} "
-                     "REPAIRED.mcap` gives it an index")
+    # Nothing found: the caller's own error (no such topic...) says it all.
+    if found and path.resolve() not in _warned_unfinished:
+        _warned_unfinished.add(path.resolve())
+        _log.warning(f"{path} is unfinished (its recorder did not close it): {complete} "
+                     "messages up to its last complete chunk are read; `sds mcap-repair "
+                     f"{shlex.quote(str(path))} REPAIRED.mcap` gives it an index")
 
 
 def read_messages(path: str | Path, topics: Iterable[str] | None = None
@@ -247,6 +264,7 @@ def _decoder(schema: Schema, topic: str) -> Callable[[memoryview], Any]:
 def recorded_topics(path: str | Path) -> dict[str, tuple[str, bool]]:
     """Topic → (type name, latched) of every channel in the file (summary, else a scan)."""
     path = Path(path)
+    require_mcap(path)
     summary = _summary(path)
     if summary is not None:
         schemas, channels = summary.schemas, list(summary.channels.values())
@@ -269,20 +287,19 @@ class RepairReport:
 
 def repair(source: str | Path, target: str | Path, compression: str = "zstd",
            overwrite: bool = False) -> RepairReport:
-    """Copy every complete message of `source` into a new file with a summary section."""
+    """Copy every complete message of `source` into a new file with a summary section (the
+    target appears only when complete)."""
     source, target = Path(source), Path(target)
     if source.resolve() == target.resolve():
         raise ValueError("repair writes a new file: give a target other than the source")
-    with source.open("rb") as stream:
-        if stream.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
-            raise ValueError(f"{source} is not an MCAP file (no MCAP magic at its start)")
+    require_mcap(source)
     if target.exists() and not overwrite:
         raise ValueError(f"{target} exists (not replaced: choose another name, or --overwrite)")
     had_summary = _summary(source) is not None
     schemas: dict[int, int] = {}
     channels: dict[int, int] = {}
     count = 0
-    with target.open("wb") as output:
+    with staged_file(target) as staging, staging.open("wb") as output:
         writer = Writer(output, compression=COMPRESSIONS[compression])
         writer.start(profile=PROFILE, library="sds_record repair")
         for record in _linear_records(source):

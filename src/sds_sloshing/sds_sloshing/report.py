@@ -238,6 +238,10 @@ def _image(path: Path) -> str:
     return f'<p><img src="data:image/png;base64,{data}" style="max-width:100%"></p>'
 
 
+REPORT_FILES = ("analysis.json", "report.html", "modes.png", "spectrum.png", "meniscus.png")
+"""Every file `write_report` may write (meniscus.png only when the line saw a meniscus)."""
+
+
 def write_report(analysis: SloshingAnalysis, directory: str | Path,
                  truth: Truth | None = None) -> ReportFiles:
     """analysis.json, figures (PNG) and report.html (figures embedded) in `directory`."""

@@ -8,7 +8,8 @@ from pathlib import Path
 import rerun as rr
 from mcap.exceptions import McapError
 from sds_model.rig import Rig
-from sds_record.mcap_files import decoded_messages
+from sds_model.staging import staged_file
+from sds_record.mcap_files import decoded_messages, require_mcap
 
 from sds_viz.messages import log_message
 from sds_viz.scene import RerunScene
@@ -24,25 +25,32 @@ class Conversion:
 
 def mcap_to_rrd(recording: str | Path, output: str | Path, rig: Rig | None = None,
                 image_scale: float = 0.25, image_every: int = 1) -> Conversion:
-    """Log every message of `recording` to a new .rrd file, in log-time order."""
-    stream = rr.RecordingStream("sds", recording_id=Path(recording).stem)
-    stream.save(str(output))
-    scene = RerunScene(stream, rig, image_scale)
-    shown = skipped = images = 0
-    try:
-        for recorded, msg in decoded_messages(recording):
-            type_name = recorded.type_name
-            if type_name == "sensor_msgs/msg/Image":
-                images += 1
-                if (images - 1) % max(1, image_every):
-                    continue
-            if log_message(scene, type_name, msg):
-                shown += 1
-            else:
-                skipped += 1
-    except McapError as error:
-        raise ValueError(f"{recording}: {error}") from None
-    finally:
-        stream.flush()
-        stream.disconnect()
+    """Log every message of `recording` to a new .rrd file, in log-time order (the file
+    appears only when complete). ValueError for an image scale outside (0, 1] or a step
+    below 1, and for a file that is not MCAP."""
+    if not 0 < image_scale <= 1 or image_every < 1:
+        raise ValueError(f"image scale {image_scale:g} and step {image_every}: the scale is in "
+                         "(0, 1] (e.g. 0.25), the step 1 or more")
+    require_mcap(Path(recording))
+    with staged_file(Path(output)) as staging:
+        stream = rr.RecordingStream("sds", recording_id=Path(recording).stem)
+        stream.save(str(staging))
+        scene = RerunScene(stream, rig, image_scale)
+        shown = skipped = images = 0
+        try:
+            for recorded, msg in decoded_messages(recording):
+                type_name = recorded.type_name
+                if type_name == "sensor_msgs/msg/Image":
+                    images += 1
+                    if (images - 1) % image_every:
+                        continue
+                if log_message(scene, type_name, msg):
+                    shown += 1
+                else:
+                    skipped += 1
+        except McapError as error:
+            raise ValueError(f"{recording}: {error}") from None
+        finally:
+            stream.flush()
+            stream.disconnect()
     return Conversion(shown, skipped)

@@ -19,11 +19,12 @@ from typing import Any, Protocol
 import numpy as np
 from sds_model.paths import CONFIG
 from sds_model.rig import Rig, load_rig
-from sds_recon.results import ResultsWriter, load_results
+from sds_model.staging import staged_folder
+from sds_recon.results import TABLE_FILES, ResultsWriter, load_results, refuse_results
 from sds_sim.scenario import load_scenario
 from sds_sim.simulate import simulate
 from sds_sloshing.analysis import AnalysisOptions
-from sds_sloshing.report import summary_lines, truth_from_run
+from sds_sloshing.report import REPORT_FILES, summary_lines, truth_from_run
 from sds_sloshing.surface_series import RecordingError
 from sds_viz.from_mcap import mcap_to_rrd
 
@@ -76,12 +77,16 @@ def analyse_run(recording: Path, rig: Rig, out: Path, options: AnalysisOptions,
     (`sds export`'s, in two reads of the recording); the results as a dictionary. The run's
     own folder: an earlier run's results are replaced (the caller checked `overwrite`)."""
     mcap_to_rrd(recording, recording.with_suffix(".rrd"), rig)
-    tables = RunTables(ResultsWriter(out / "results", overwrite), rig)
-    export_recording(recording, rig, tables)
-    truth = truth_from_run(truth_run) if truth_run else None
-    analysis = finish_analysis(tables, str(recording), out / "analysis", options, truth)
-    if analysis.results is None:
-        raise RecordingError(analysis.note)
+    if not overwrite:
+        refuse_results(out / "results")
+    with (staged_folder(out / "results", TABLE_FILES) as results,
+          staged_folder(out / "analysis", REPORT_FILES) as report):
+        tables = RunTables(ResultsWriter(results), rig)
+        export_recording(recording, rig, tables)
+        truth = truth_from_run(truth_run) if truth_run else None
+        analysis = finish_analysis(tables, str(recording), report, options, truth)
+        if analysis.results is None:
+            raise RecordingError(analysis.note)
     if analysis.note:
         print(f"sds: {analysis.note}")
     return analysis.results

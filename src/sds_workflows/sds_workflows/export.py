@@ -7,12 +7,14 @@ from typing import Any
 
 import numpy as np
 from sds_model.rig import Rig
+from sds_model.staging import staged_folder
 from sds_recon.reconstruction import SurfacePoints
-from sds_recon.results import ResultsWriter
+from sds_recon.results import TABLE_FILES, ResultsWriter, refuse_results
 from sds_record.mcap_files import decoded_messages
 from sds_record.recorded_series import recording_rig
 from sds_ros.point_cloud import read_cloud, stamp_s
 from sds_sloshing.analysis import AnalysisOptions
+from sds_sloshing.report import REPORT_FILES
 from sds_sloshing.surface_series import RecordingError
 
 from sds_workflows.run_tables import CAMERA_IMU_TOPIC, RunAnalysis, RunTables, finish_analysis
@@ -22,15 +24,19 @@ def export_results(recording: Path, out: Path, rig_file: Path | None = None,
                    gravity_m_s2: float | None = None, overwrite: bool = False
                    ) -> tuple[int, RunAnalysis]:
     """A recording's result files and analysis report in `out` (refused if it holds results,
-    unless `overwrite`); `rig_file` default: the rig the recording carries. Returns the
-    number of frames and the analysis."""
+    unless `overwrite`; written whole or not at all: `staging.staged_folder`); `rig_file`
+    default: the rig the recording carries. Returns the number of frames and the analysis."""
     if not recording.is_file():
         raise FileNotFoundError(f"{recording}: no such recording")
     rig = recording_rig(recording, rig_file)
-    tables = RunTables(ResultsWriter(out, overwrite), rig)
-    frames = export_recording(recording, rig, tables)
-    return frames, finish_analysis(tables, str(recording), out,
+    if not overwrite:
+        refuse_results(out)
+    with staged_folder(out, (*TABLE_FILES, *REPORT_FILES)) as staging:
+        tables = RunTables(ResultsWriter(staging), rig)
+        frames = export_recording(recording, rig, tables)
+        analysis = finish_analysis(tables, str(recording), staging,
                                    AnalysisOptions(gravity_m_s2=gravity_m_s2))
+    return frames, analysis
 
 
 def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:

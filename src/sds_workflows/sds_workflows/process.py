@@ -9,17 +9,21 @@ result folder each; `calibrate_from_images` self-calibrates the rig first (`--ca
 from __future__ import annotations
 
 import multiprocessing
-from collections.abc import Iterable
+import sys
+from collections.abc import Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 
 from sds_camera.camera_imu import read_camera_imu
+from sds_camera.frame_source import FrameSourceError
 from sds_model.rig import Rig, load_rig
+from sds_model.staging import staged_folder
 from sds_recon.calibration.rig_calibration import RigCalibration
-from sds_recon.results import ResultsWriter
+from sds_recon.results import TABLE_FILES, ResultsWriter, refuse_results
 from sds_record.recorded_series import read_accelerations, recording_rig
 from sds_sloshing.analysis import AnalysisOptions
+from sds_sloshing.report import REPORT_FILES
 from tqdm import tqdm
 
 from sds_workflows.errors import input_errors
@@ -27,17 +31,47 @@ from sds_workflows.pipeline import FramePipeline, RedFrame, mcap_frames, video_f
 from sds_workflows.rig_calibration import calibrate_rig
 from sds_workflows.run_tables import RunAnalysis, RunTables, finish_analysis
 
+RUN_FILES = (*TABLE_FILES, *REPORT_FILES)
+"""What a run of `sds process` or `sds export` writes into its folder: all of it is replaced
+together (`staging.staged_folder`)."""
+
+
+@dataclass
+class FramesRead:
+    """How the input's frames ended: `broken` is the reader's error when it failed after
+    some frames (a truncated or corrupt video), the frames before it being processed."""
+
+    broken: str = ""
+
+
+def _until_broken(frames: Iterable[RedFrame], ending: FramesRead) -> Iterator[RedFrame]:
+    """The frames up to a reader failure, which is noted in `ending` instead of raised once a
+    frame has come (none at all: the failure is raised)."""
+    count = 0
+    try:
+        for frame in frames:
+            count += 1
+            yield frame
+    except FrameSourceError as error:
+        if count == 0:
+            raise
+        ending.broken = str(error)
+
 
 def process_frames(frames: Iterable[RedFrame], rig: Rig, tables: RunTables,
-                   progress: bool = True, stills: bool = False) -> int:
+                   progress: bool = True, stills: bool = False) -> tuple[int, FramesRead]:
     """Every frame through the pipeline into `tables` (`stills`: each frame on its own, no
-    temporal filter); the number of frames."""
+    temporal filter); the number of frames and how the input ended (a video that breaks
+    after some frames keeps their results)."""
     pipeline = FramePipeline(rig, stills=stills)
+    ending = FramesRead()
     count = 0
-    for step in pipeline.run(tqdm(frames, desc="frames", unit="frame", disable=not progress)):
+    frames = tqdm(_until_broken(frames, ending), desc="frames", unit="frame",
+                  disable=not progress)
+    for step in pipeline.run(frames):
         tables.add_step(step)
         count += step.line is not None
-    return count
+    return count, ending
 
 
 @dataclass(frozen=True)
@@ -48,12 +82,15 @@ class ProcessedRun:
     out: Path
     frames: int
     analysis: RunAnalysis
+    broken: str = ""   # the reader's error when the input broke off after `frames` frames
 
     def summary(self) -> str:
         """One line for the console."""
         note = self.analysis.note
         return (f"sds process: {self.frames} frames of {self.source} -> {self.out}"
-                + (f" ({note})" if note else ""))
+                + (f" ({note})" if note else "")
+                + (f"; INPUT INCOMPLETE, results cover the frames read: {self.broken}"
+                   if self.broken else ""))
 
 
 def process_video(video: Path, rig: Rig, out: Path, fps: float = 0.0,
@@ -65,13 +102,23 @@ def process_video(video: Path, rig: Rig, out: Path, fps: float = 0.0,
     its own: images of different surfaces are no video, and a temporal filter across them
     would replace right spots."""
     stills = video.is_dir() if stills is None else stills
-    tables = RunTables(ResultsWriter(out, overwrite), rig)
-    count = process_frames(video_frames(video, rig, fps), rig, tables, progress, stills)
-    imu = read_camera_imu(video)
-    if imu is not None:
-        tables.add_camera_imu(imu)
-    return ProcessedRun(video, out, count, finish_analysis(
-        tables, str(video), out, AnalysisOptions(gravity_m_s2=gravity_m_s2)))
+    if not overwrite:
+        refuse_results(out)
+    with staged_folder(out, RUN_FILES) as staging:
+        tables = RunTables(ResultsWriter(staging), rig)
+        count, ending = process_frames(video_frames(video, rig, fps), rig, tables, progress,
+                                       stills)
+        imu = read_camera_imu(video)
+        if imu is not None:
+            tables.add_camera_imu(imu)
+        analysis = finish_analysis(tables, _source_name(video, ending), staging,
+                                   AnalysisOptions(gravity_m_s2=gravity_m_s2))
+    return ProcessedRun(video, out, count, analysis, ending.broken)
+
+
+def _source_name(source: Path, ending: FramesRead) -> str:
+    """The source as the report names it, flagged when it broke off."""
+    return f"{source} (INCOMPLETE: {ending.broken})" if ending.broken else str(source)
 
 
 def process_recording(recording: Path, out: Path, rig: Rig | None = None,
@@ -80,12 +127,16 @@ def process_recording(recording: Path, out: Path, rig: Rig | None = None,
     """A recording's camera frames tracked again (`rig` default: the one it carries), its
     accelerometers for the gravity regime: result files and the analysis report in `out`."""
     rig = rig if rig is not None else recording_rig(recording, None)
-    tables = RunTables(ResultsWriter(out, overwrite), rig)
-    count = process_frames(mcap_frames(recording), rig, tables, progress)
-    for topic, (time_s, accel_m_s2) in read_accelerations(recording).items():
-        tables.add_accelerations(topic, time_s, accel_m_s2)
-    return ProcessedRun(recording, out, count, finish_analysis(
-        tables, str(recording), out, AnalysisOptions(gravity_m_s2=gravity_m_s2)))
+    if not overwrite:
+        refuse_results(out)
+    with staged_folder(out, RUN_FILES) as staging:
+        tables = RunTables(ResultsWriter(staging), rig)
+        count, ending = process_frames(mcap_frames(recording), rig, tables, progress)
+        for topic, (time_s, accel_m_s2) in read_accelerations(recording).items():
+            tables.add_accelerations(topic, time_s, accel_m_s2)
+        analysis = finish_analysis(tables, _source_name(recording, ending), staging,
+                                   AnalysisOptions(gravity_m_s2=gravity_m_s2))
+    return ProcessedRun(recording, out, count, analysis, ending.broken)
 
 
 def process_input(source: Path, is_video: bool, rig_file: Path | None, out: Path,
@@ -106,10 +157,12 @@ def process_input(source: Path, is_video: bool, rig_file: Path | None, out: Path
 def _process_in_worker(source: Path, is_video: bool, rig_file: Path | None, out: Path,
                        fps: float, gravity_m_s2: float | None, overwrite: bool,
                        sequence: bool) -> tuple[bool, str]:
-    """One input in a worker process: (done, summary line or the failure's one line)."""
+    """One input in a worker process: (done, summary line or the failure's one line); an
+    input that broke off is not done, though its frames' results are written."""
     try:
-        return True, process_input(source, is_video, rig_file, out, fps, gravity_m_s2,
-                                   overwrite, False, sequence).summary()
+        processed = process_input(source, is_video, rig_file, out, fps, gravity_m_s2,
+                                  overwrite, False, sequence)
+        return not processed.broken, processed.summary()
     except Exception as error:
         if not isinstance(error, input_errors()):
             raise
@@ -134,7 +187,7 @@ def process_inputs(inputs: list[Path], is_video: bool, rig_file: Path | None, ou
             for future in as_completed(futures):
                 done, line = future.result()
                 failed += not done
-                bar.write(line)
+                bar.write(line, file=sys.stdout if done else sys.stderr)
                 bar.update()
     print(f"sds process: {len(inputs) - failed} of {len(inputs)} inputs processed into "
           f"{out}" + (f", {failed} failed (above)" if failed else ""))

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 from pathlib import Path
 
 from sds_cli.commands import CommandError, add_overwrite
@@ -97,9 +98,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"sds process: calibrated rig written to {rig_file}; "
               f"{calibration.check.summary()}")
     if len(inputs) == 1:
-        print(process_input(inputs[0], is_video, rig_file, args.out, args.fps, args.gravity,
-                            args.overwrite, not args.no_progress, args.sequence).summary())
-        return 0
+        processed = process_input(inputs[0], is_video, rig_file, args.out, args.fps,
+                                  args.gravity, args.overwrite, not args.no_progress,
+                                  args.sequence)
+        print(processed.summary(), file=sys.stderr if processed.broken else sys.stdout)
+        return 2 if processed.broken else 0
     failed = process_inputs(inputs, is_video, rig_file, args.out, args.jobs, args.fps,
                             args.gravity, args.overwrite, not args.no_progress, args.sequence)
     return 2 if failed else 0

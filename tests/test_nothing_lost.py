@@ -1,0 +1,141 @@
+"""Nothing lost: results are written whole or not at all, whatever stops the run."""
+
+from __future__ import annotations
+
+import hashlib
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import av
+import pytest
+from sds_model.staging import STAGING_PREFIX, staged_file, staged_folder
+from sds_sim.scenario import load_scenario
+from sds_sim.simulate import SimulationOutput, simulate
+
+SDS = str(Path(sys.executable).with_name("sds"))
+REPO = Path(__file__).resolve().parents[1]
+RIG = str(REPO / "config" / "rigs" / "stelium.yaml")
+
+
+def folder_bytes(folder: Path) -> dict[str, str]:
+    """Every file of a folder (recursively) by its relative path: its SHA-256."""
+    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def staging_left(folder: Path) -> list[str]:
+    return [p.name for p in folder.iterdir() if p.name.startswith(STAGING_PREFIX)]
+
+
+def test_a_folder_is_replaced_only_when_the_block_completes(tmp_path: Path) -> None:
+    target = tmp_path / "out"
+    target.mkdir()
+    (target / "points.csv").write_text("old")
+    (target / "meniscus.png").write_text("old figure")
+    (target / "notes.txt").write_text("the user's own")
+    with pytest.raises(RuntimeError), staged_folder(target, ["points.csv", "meniscus.png"]) \
+            as staging:
+        (staging / "points.csv").write_text("half")
+        raise RuntimeError("disk full")
+    assert (target / "points.csv").read_text() == "old" and not staging_left(tmp_path)
+    with staged_folder(target, ["points.csv", "meniscus.png"]) as staging:
+        (staging / "points.csv").write_text("new")
+    # The earlier run's figure this run did not draw is gone; the user's file stays.
+    assert sorted(p.name for p in target.iterdir()) == ["notes.txt", "points.csv"]
+    assert (target / "points.csv").read_text() == "new" and not staging_left(tmp_path)
+    fresh = tmp_path / "fresh"
+    with pytest.raises(KeyboardInterrupt), staged_folder(fresh, []) as staging:
+        (staging / "points.csv").write_text("half")
+        raise KeyboardInterrupt
+    assert not fresh.exists() and not staging_left(tmp_path)
+
+
+def test_a_file_appears_only_when_complete(tmp_path: Path) -> None:
+    target = tmp_path / "rig.mcap"
+    target.write_text("earlier")
+    with pytest.raises(OSError), staged_file(target) as staging:
+        staging.write_text("half")
+        raise OSError("no space left on device")
+    assert target.read_text() == "earlier" and not staging_left(tmp_path)
+    with staged_file(target) as staging:
+        staging.write_text("complete")
+    assert target.read_text() == "complete" and not staging_left(tmp_path)
+
+
+@pytest.fixture(scope="module")
+def kick(tmp_path_factory) -> SimulationOutput:
+    """A 1 s simulated kick (30 frames, 4K)."""
+    scenario = load_scenario(REPO / "config" / "scenarios" / "ground_kick.yaml",
+                             {"duration_s": 1.0})
+    return simulate(scenario, tmp_path_factory.mktemp("kick") / "sim", progress=False)
+
+
+def process(video: Path, out: Path, *extra: str) -> subprocess.Popen:
+    return subprocess.Popen([SDS, "process", "--video", str(video), "--rig", RIG, "--out",
+                             str(out), "--no-progress", *extra],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def test_process_interrupted_at_any_moment_keeps_the_earlier_results(
+        kick: SimulationOutput, tmp_path: Path) -> None:
+    out = tmp_path / "results"
+    start = time.monotonic()
+    first = process(kick.video, out)
+    assert first.wait(timeout=300) == 0, first.stderr.read()
+    duration_s = time.monotonic() - start
+    earlier = folder_bytes(out)
+    assert {"points.csv", "analysis.json", "report.html"} <= set(earlier)
+    # Start-up, tracking (early and late), the analysis and its figures.
+    outcomes = []
+    for fraction in (0.15, 0.4, 0.65, 0.85, 0.95):
+        run = process(kick.video, out, "--overwrite")
+        time.sleep(fraction * duration_s)
+        run.send_signal(signal.SIGINT)
+        code = run.wait(timeout=120)
+        stderr = run.stderr.read()
+        outcomes.append(code)
+        assert code in (0, 130), stderr
+        if code == 130:
+            assert stderr.strip() == "sds: interrupted", stderr
+        assert folder_bytes(out) == earlier, f"interrupted at {fraction:.0%}: {stderr}"
+        assert not staging_left(tmp_path)
+    assert outcomes.count(130) >= 3, outcomes
+
+
+def test_a_failed_run_leaves_nothing_that_blocks_the_retry(kick: SimulationOutput,
+                                                            tmp_path: Path) -> None:
+    broken = tmp_path / "broken.mp4"
+    broken.write_bytes(b"\x00" * 1000)
+    out = tmp_path / "results"
+    run = process(broken, out)
+    assert run.wait(timeout=120) == 2
+    assert not out.exists() and not staging_left(tmp_path)
+    run = process(kick.video, out)
+    assert run.wait(timeout=300) == 0, run.stderr.read()
+
+
+def test_a_video_cut_in_half_keeps_the_frames_before_the_cut(kick: SimulationOutput,
+                                                              tmp_path: Path) -> None:
+    # Matroska, as a camera writes it while it records: readable up to where it stops.
+    whole = tmp_path / "whole.mkv"
+    with av.open(str(kick.video)) as source, av.open(str(whole), "w") as target:
+        stream = target.add_stream_from_template(source.streams.video[0])
+        for packet in source.demux(source.streams.video[0]):
+            if packet.dts is not None:
+                packet.stream = stream
+                target.mux(packet)
+    data = whole.read_bytes()
+    cut = tmp_path / "cut.mkv"
+    cut.write_bytes(data[:len(data) // 2])
+    out = tmp_path / "results"
+    run = process(cut, out)
+    code, stderr = run.wait(timeout=300), run.stderr.read()
+    assert code == 2 and "INPUT INCOMPLETE" in stderr, stderr
+    assert len(stderr.strip().splitlines()) == 1, stderr
+    frames = {int(line.split(",")[0]) for line in
+              (out / "spots.csv").read_text().splitlines()[1:]}
+    assert 3 <= len(frames) < 30 and frames == set(range(len(frames))), sorted(frames)
+    assert "INCOMPLETE" in (out / "analysis.json").read_text()
