@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import difflib
 import os
 from dataclasses import dataclass, field, fields
 from functools import cached_property
@@ -199,6 +200,29 @@ def _number(content: dict[str, Any], key: str, where: str, positive: bool = True
     return value
 
 
+RIG_KEYS = {
+    "": ("camera", "diodes", "line_laser", "container", "fluid", "gravity_m_s2", "tolerances",
+         "calibration"),
+    "camera": ("model", "position_mm", "orientation_xyz_deg"),
+    "diodes[]": ("id", "ring", "emitter_mm", "direction", "direction_sigma_deg", "tracked",
+                 "emitter_sigma_mm"),
+    "line_laser": ("emitter_mm", "normal"),
+    "container": ("radius_mm", "fill_height_mm", "height_mm"),
+    "fluid": ("density_kg_m3", "surface_tension_n_m"),
+}
+"""The keys of each section of a rig file (`rig_to_dict` writes no other)."""
+
+
+def _known_keys(content: dict[str, Any], section: str, where: str) -> None:
+    """RigError naming a key the section does not have (a typo would silently be ignored)."""
+    allowed = RIG_KEYS[section]
+    for key in content:
+        if key not in allowed:
+            close = difflib.get_close_matches(str(key), allowed, n=1)
+            hint = f"did you mean {close[0]}?" if close else f"known: {', '.join(allowed)}"
+            raise RigError(f"{where or 'the rig'}: unknown key {key!r} ({hint})")
+
+
 def _section(content: dict[str, Any], key: str) -> dict[str, Any]:
     section = content.get(key)
     if not isinstance(section, dict):
@@ -222,7 +246,9 @@ def rig_from_dict(content: Any, base: Path) -> Rig:
     """Build a rig from a rig file's mapping; relative paths are taken from `base`."""
     if not isinstance(content, dict):
         raise RigError("a rig file must be a YAML mapping")
+    _known_keys(content, "", "")
     camera_section = _section(content, "camera")
+    _known_keys(camera_section, "camera", "camera")
     if "model" not in camera_section:
         raise RigError("camera.model is missing (a camera file, config/cameras/*.yaml)")
     model = camera_section["model"]
@@ -244,6 +270,7 @@ def rig_from_dict(content: Any, base: Path) -> Rig:
         where = f"diodes[{index}]"
         if not isinstance(entry, dict) or "id" not in entry:
             raise RigError(f"{where} must be a mapping with an id")
+        _known_keys(entry, "diodes[]", where)
         sigma = entry.get("direction_sigma_deg")
         emitter_sigma = entry.get("emitter_sigma_mm")
         diodes.append(LaserDiode(int(entry["id"]), int(entry.get("ring", 0)),
@@ -262,15 +289,22 @@ def rig_from_dict(content: Any, base: Path) -> Rig:
     if line is not None:
         if not isinstance(line, dict):
             raise RigError("line_laser must be a mapping")
+        _known_keys(line, "line_laser", "line_laser")
         line_laser = LineLaser(_vector(line, "emitter_mm", "line_laser"),
                                _vector(line, "normal", "line_laser", unit=True))
     container = _section(content, "container")
+    _known_keys(container, "container", "container")
     fluid = _section(content, "fluid")
+    _known_keys(fluid, "fluid", "fluid")
+    vessel = Container(_number(container, "radius_mm", "container"),
+                       _number(container, "fill_height_mm", "container"),
+                       _number(container, "height_mm", "container"))
+    if vessel.fill_height_mm > vessel.height_mm:
+        raise RigError(f"container.fill_height_mm {vessel.fill_height_mm:g} is above its "
+                       f"height_mm {vessel.height_mm:g}: the liquid would overflow")
     return Rig(
         camera=camera, world_to_camera=pose, diodes=tuple(diodes), line_laser=line_laser,
-        container=Container(_number(container, "radius_mm", "container"),
-                            _number(container, "fill_height_mm", "container"),
-                            _number(container, "height_mm", "container")),
+        container=vessel,
         fluid=Fluid(_number(fluid, "density_kg_m3", "fluid"),
                     _number(fluid, "surface_tension_n_m", "fluid", positive=False)),
         gravity_m_s2=_number(content, "gravity_m_s2", "rig", positive=False),

@@ -49,9 +49,15 @@ def vertical_resolution(camera: CameraModel, radii_mm: ArrayLike, height_mm: flo
     """dZ/dpixel [mm/px] of a spot as the surface moves, camera looking straight down (Fig. 7).
 
     The optical axis is vertical and meets the surface `height_mm` below the camera; infinite
-    where the spot does not move in the image (a vertical beam on the axis).
+    where the spot does not move in the image (a vertical beam on the axis). ValueError for a
+    camera height that is not positive, a negative radius or a beam tilt of 90° or more.
     """
     radii = np.asarray(radii_mm, dtype=float)
+    if not height_mm > 0 or np.any(radii < 0) or not abs(beam_tilt_rad) < np.pi / 2:
+        raise ValueError(f"camera height {height_mm:g} mm, beam tilt "
+                         f"{np.degrees(beam_tilt_rad):g}°, radii from {np.min(radii, initial=0):g}"
+                         " mm: the height must be positive, the tilt below 90°, no radius "
+                         "negative")
     azimuths = np.linspace(0.0, 2 * np.pi, AZIMUTH_SAMPLES, endpoint=False)
     pixels = [camera.project(spot_points(radii, azimuths, height_mm + sign * HEIGHT_STEP_MM,
                                          height_mm, beam_tilt_rad).reshape(-1, 3))

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import ast
 import difflib
+import importlib.util
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -77,6 +79,27 @@ MOVED_PLUGINS = {
 """Plugins of graph files written before the nodes moved into `sds_nodes` (2026-12)."""
 
 
+def _missing_plugin(plugin: str) -> str:
+    """Why 'package.module:Class' names no node class ('' when it does), found without
+    importing the module: the launcher learns it before any process starts."""
+    module_name, _, class_name = plugin.partition(":")
+    if not module_name or not class_name:
+        return "must look like 'package.module:Class'"
+    try:
+        spec = importlib.util.find_spec(module_name)
+    except (ImportError, ValueError):
+        spec = None
+    if spec is None or spec.origin is None or not spec.origin.endswith(".py"):
+        return f"no module {module_name} installed"
+    tree = ast.parse(Path(spec.origin).read_text(), spec.origin)
+    classes = [node.name for node in tree.body if isinstance(node, ast.ClassDef)]
+    if class_name not in classes:
+        close = difflib.get_close_matches(class_name, classes, n=1)
+        return f"no class {class_name} in {module_name}" + (
+            f" (did you mean {close[0]}?)" if close else "")
+    return ""
+
+
 def _node_entry(path: Path, index: int, item: Any) -> NodeEntry:
     where = f"{path}: nodes[{index}]"
     if not isinstance(item, dict):
@@ -92,6 +115,9 @@ def _node_entry(path: Path, index: int, item: Any) -> NodeEntry:
     moved_to = MOVED_PLUGINS.get(item["plugin"])
     if moved_to:
         raise GraphFileError(f"{where}: plugin {item['plugin']} is now {moved_to}")
+    missing = _missing_plugin(item["plugin"])
+    if missing:
+        raise GraphFileError(f"{where}: plugin {item['plugin']!r}: {missing}")
     params = item.get("params", [])
     params = [params] if isinstance(params, str) else params
     files = tuple((path.parent / p).resolve() for p in params)
@@ -140,13 +166,31 @@ def apply_overrides(entries: list[NodeEntry], overrides: list[str]) -> list[Node
             hint = f"; did you mean {', '.join(close)}?" if close else ""
             raise GraphFileError(f"override {override!r}: node {node!r} has no parameter "
                                  f"{parameter!r}{hint}")
-        parsed = yaml.safe_load(value)
-        # ROS refuses an integer for a double parameter (the node would not start): 5 → 5.0
-        if isinstance(documented.get(parameter), float) and isinstance(parsed, int) \
-                and not isinstance(parsed, bool):
-            parsed = float(parsed)
+        try:
+            parsed = yaml.safe_load(value)
+        except yaml.YAMLError as error:
+            raise GraphFileError(f"override {override!r}: not a YAML value ({error})") from None
+        if parameter in documented:
+            parsed = _as_documented(override, parsed, documented[parameter])
         by_name[node] = replace(entry, parameters={**entry.parameters, parameter: parsed})
     return [by_name[entry.name] for entry in entries]
+
+
+def _as_documented(override: str, value: Any, documented: Any) -> Any:
+    """`value` in the type of the parameter file's value: an integer for a double becomes a
+    float (ROS refuses it: the node would not start), a number for a string its text; any
+    other mismatch is an error (ROS would silently keep the file's value)."""
+    kind = type(documented)
+    if isinstance(value, kind) and not (isinstance(value, bool) and kind is not bool):
+        return value
+    if kind is float and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    if kind is str and isinstance(value, int | float) and not isinstance(value, bool):
+        return str(value)
+    names = {bool: "true or false", int: "an integer", float: "a number", str: "a string",
+             list: "a list, e.g. [1, 2]"}
+    raise GraphFileError(f"override {override!r}: the parameter is {names.get(kind, kind.__name__)}"
+                         f" (its parameter file has {documented!r}), not {value!r}")
 
 
 def documented_parameters(entry: NodeEntry) -> dict[str, Any]:

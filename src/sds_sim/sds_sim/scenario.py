@@ -220,6 +220,13 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
     if not isinstance(modes, list):
         raise ScenarioError(f"{path}: modes must be a list")
     parts["modes"] = tuple(_build(ModeSpec, m, f"modes[{i}]") for i, m in enumerate(modes))
+    for index, mode in enumerate(parts["modes"]):
+        if not 0 <= mode.damping_ratio < 1 or mode.amplitude_mm < 0 or (
+                mode.frequency_hz is not None and not mode.frequency_hz > 0):
+            raise ScenarioError(
+                f"{path}: modes[{index}]: damping_ratio {mode.damping_ratio:g} must be in [0, 1) "
+                f"(a free decay), amplitude_mm {mode.amplitude_mm:g} not negative, "
+                "frequency_hz positive")
     for key in ("tilt_deg", "tilt_series_deg"):
         if key in content:
             content[key] = tuple(float(v) for v in content[key])

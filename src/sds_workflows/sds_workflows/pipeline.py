@@ -58,10 +58,17 @@ class RedFrame:
 
 def video_frames(path: Path, rig: Rig, fps: float = 0.0) -> Iterator[RedFrame]:
     """A video's frames, the container's region (Rig.container_region_px) in red; the video
-    is opened and checked here, before the first frame is asked for."""
+    is opened and checked here (its frame size is the rig's camera's), before the first
+    frame is asked for."""
     source = open_source(str(path), fps=fps)
     region = Region(*rig.container_region_px(rig.camera))
+    camera = rig.camera
     try:
+        if (source.width, source.height) != (camera.width_px, camera.height_px):
+            raise FrameSourceError(
+                f"{path}: frames of {source.width}x{source.height} px, but the rig's camera "
+                f"({rig.camera_file or 'rig file'}) is {camera.width_px}x{camera.height_px} px: "
+                "the rig of another camera or resolution?")
         region.check_inside(source.width, source.height)
     except FrameSourceError:
         source.close()
