@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from mcap_ros2.reader import read_ros2_messages
 from sds_arduino.clock import DeviceClock
 from sds_arduino.protocol import FIELDS, WRAP, ProtocolError, Record, format_record, parse_line
+from sds_arduino.stamps import RecordStamper, StampClock
 from sds_arduino.stream import RecordStream
 from sds_sim.arduino import arduino_records
 from sds_sim.scenario import load_scenario
@@ -127,6 +128,48 @@ def test_clock_mapping_recovers_offset_and_drift() -> None:
     errors = np.abs(np.array(errors)[len(errors) // 4:])   # after the first 30 s
     assert errors.max() < 0.5e-3, errors.max()
     assert abs(clock.rate - 1 / (1 + 40e-6)) < 2e-6
+
+
+def arriving_in_batches(seconds: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Device times of 200 Hz records (40 ppm drift), from the first, and the host times they
+    arrive at: each is ready 0.1-5 ms after it was taken, and read with the others ready at
+    the next read (every 5-60 ms)."""
+    rng = np.random.default_rng(seed)
+    true_s = np.arange(0, seconds, 0.005)
+    ready_s = 1000.0 + true_s + 1e-4 + rng.exponential(1e-3, len(true_s))
+    reads_s = 1000.0 + np.cumsum(rng.uniform(0.005, 0.06, int(seconds / 0.005)))
+    return true_s * (1 + 40e-6), reads_s[np.searchsorted(reads_s, ready_s)]
+
+
+@pytest.mark.parametrize("led_at_s, camera_sees_s", [(1.3, 1.45), (40.0, 40.2)])
+def test_stamps_are_on_one_clock_and_never_go_back(led_at_s: float,
+                                                   camera_sees_s: float) -> None:
+    """Records arrive in batches; the sync LED at `led_at_s` (device), seen by the camera at
+    `camera_sees_s` (host time) on a clock 0.67 s ahead: every stamp on the camera's clock
+    from the first record on, or, when the LED comes after the hold, every one on the
+    host's."""
+    device_s, arrival_s = arriving_in_batches(45.0, seed=5)
+    stamper: RecordStamper[int] = RecordStamper(align_to_camera=True, hold_s=30.0)
+    released = []
+    led_index = int(np.searchsorted(device_s, led_at_s))
+    camera_offset_s = 0.67
+    seen = False
+    for index, (device, arrival) in enumerate(zip(device_s, arrival_s, strict=True)):
+        if not seen and arrival >= 1000.0 + camera_sees_s:
+            released += stamper.camera_led_on(1000.0 + led_at_s + camera_offset_s)
+            seen = True
+        released += stamper.add(index, device, arrival, led_on=index == led_index)
+    released += stamper.flush()
+    assert [r.item for r in released] == list(range(len(device_s)))   # all, in order
+    stamps = np.array([r.stamp_s for r in released])
+    assert np.all(np.diff(stamps) > 0)                                  # none shared, none back
+    true_host_s = 1000.0 + np.arange(len(device_s)) * 0.005
+    on_camera = led_at_s < 30.0
+    expected = true_host_s + (camera_offset_s if on_camera else 0.0)
+    assert stamper.clock is (StampClock.CAMERA if on_camera else StampClock.HOST)
+    # Late by the lowest delay seen (0.1 ms and the wait for a read): a bias, no scatter.
+    errors_s = stamps - expected
+    assert np.abs(errors_s).max() < 1.5e-3 and np.ptp(errors_s[len(errors_s) // 4:]) < 1e-3
 
 
 def test_sds_import_sd_writes_every_valid_record_to_mcap(repo: Path, tmp_path: Path) -> None:

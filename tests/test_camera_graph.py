@@ -22,6 +22,7 @@ from rclpy.time import Time
 from ros_helpers import LATCHED, Probe, SdsGraphRun, pid_alive, wait_until
 from sds_camera.camera_imu import CameraImu, sidecar_path, write_sidecar
 from sds_model.camera import PinholeCamera, camera_from_dict, save_camera
+from sds_recon.results import load_results
 from sds_ros.image_msg import msg_to_image
 from sensor_msgs.msg import Image, Imu
 from std_msgs.msg import Header
@@ -202,6 +203,9 @@ def test_demo_measures_a_simulated_drop_with_the_whole_graph(tmp_path, repo):
     for path in ("recording.mcap", "recording.rrd", "analysis/report.html", "results/points.csv",
                  "results/imu.csv", "results/tof.csv"):
         assert (tmp_path / path).is_file(), path
+    results = load_results(tmp_path / "results")
+    for table in (results.imu, results.tof):   # one clock from the first record: none back
+        assert table is not None and np.all(np.diff(table["t_s"]) > 0)
     analysis = json.loads((tmp_path / "analysis" / "analysis.json").read_text())
     lateral_1 = next(m for m in analysis["modes"] if m["mode"] == "lateral_1")
     assert abs(lateral_1["estimates"][0]["frequency_error_pct"]) < 0.5

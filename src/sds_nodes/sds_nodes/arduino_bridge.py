@@ -5,12 +5,11 @@ from __future__ import annotations
 import threading
 from dataclasses import fields
 
-import numpy as np
 import serial
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
-from sds_arduino.clock import DeviceClock, camera_offset_s
 from sds_arduino.protocol import Record
+from sds_arduino.stamps import HOLD_S, RecordStamper, StampClock, Stamped
 from sds_arduino.stream import RecordStream
 from sds_ros.arduino_msg import TOPICS, SensorSpec, record_message
 from sds_ros.hosted_node import HostedNode
@@ -20,7 +19,8 @@ from sds_msgs.msg import SyncEvent
 
 PARAMETERS = {"port": "/dev/ttyACM0", "baud": 115200,
               **{f.name: f.default for f in fields(SensorSpec)},
-              "reconnect_period_s": 0.2, "stats_period_s": 5.0, "align_to_camera": True}
+              "reconnect_period_s": 0.2, "stats_period_s": 5.0, "align_to_camera": True,
+              "hold_for_led_s": HOLD_S}
 """The node's parameters and defaults, the sensors' from `SensorSpec`
 (config/params/arduino.yaml documents each)."""
 
@@ -33,7 +33,9 @@ class ArduinoBridgeNode(HostedNode):
     the sensor flags the reading), `events` (sds_msgs/SyncEvent). Stamps are the device clock
     mapped onto the ROS clock (offset and drift, updated online) and, once the sync LED has
     been seen both commanded (LED record) and in the video (`camera_sync`), shifted onto the
-    camera's clock so that IMU, ToF and frames line up (`align_to_camera`).
+    camera's clock so that IMU, ToF and frames line up (`align_to_camera`). Records wait until
+    both are known (at most `hold_for_led_s`), so that every stamp of a run is on one clock
+    and none goes back (`sds_arduino.stamps`).
     """
 
     def __init__(self, node_name: str = "arduino", **node_kwargs) -> None:
@@ -46,14 +48,13 @@ class ArduinoBridgeNode(HostedNode):
             "tof": self.create_publisher(Range, "tof", reliable),
             "events": self.create_publisher(SyncEvent, "events", reliable)}
         self.stream = RecordStream()
-        self.clock_map = DeviceClock()
+        self.stamper: RecordStamper[tuple[Record, float]] = RecordStamper(
+            bool(self._p["align_to_camera"]), hold_s=float(self._p["hold_for_led_s"]))
         self.published = 0
         self.reconnects = 0
         self._stop = threading.Event()
-        self._sync_lock = threading.Lock()
-        self._device_led_on: list[float] = []
-        self._camera_led_on: list[float] = []
-        self.camera_offset_s = float("nan")
+        self._stamp_lock = threading.Lock()   # the serial thread and the sync callback
+        self._clock_said = StampClock.UNDECIDED
         self.create_subscription(SyncEvent, "camera_sync", self._on_camera_sync, QoSProfile(
             depth=10, reliability=ReliabilityPolicy.RELIABLE,
             durability=DurabilityPolicy.TRANSIENT_LOCAL))
@@ -77,43 +78,49 @@ class ArduinoBridgeNode(HostedNode):
                     port.close()
                     port = None
                     self.stream.reset()
+                    with self._stamp_lock:
+                        self.stamper.new_session()
                     self.reconnects += 1
                 self._stop.wait(float(self._p["reconnect_period_s"]))
                 continue
             if data:
                 now_s = self.get_clock().now().nanoseconds * 1e-9
                 for record in self.stream.feed(data):
-                    self._publish(record, now_s)
+                    self._stamp(record, now_s)
         if port is not None:
             port.close()
 
     def _on_camera_sync(self, msg: SyncEvent) -> None:
         """A sync-LED switch seen in the video: the camera's clock against the device's."""
         if msg.kind == SyncEvent.KIND_LED_ON:
-            with self._sync_lock:
-                self._camera_led_on.append(Time.from_msg(msg.header.stamp).nanoseconds * 1e-9)
-                self._align()
+            with self._stamp_lock:
+                self._publish(self.stamper.camera_led_on(
+                    Time.from_msg(msg.header.stamp).nanoseconds * 1e-9))
 
-    def _align(self) -> None:
-        offset = camera_offset_s(self._device_led_on, self._camera_led_on)
-        if self._p["align_to_camera"] and np.isfinite(offset) and offset != self.camera_offset_s:
-            self.camera_offset_s = offset
-            self.get_logger().info(f"stamps on the camera's clock: LED offset {offset:+.4f} s")
+    def _stamp(self, record: Record, received_s: float) -> None:
+        """A record in: the records whose stamps are now known out."""
+        with self._stamp_lock:
+            device_s = self.stamper.clock_map.device_seconds(record.t_us)
+            self._publish(self.stamper.add((record, device_s), device_s, received_s,
+                                           led_on=record.kind == "LED" and record.values[0] > 0))
 
-    def _publish(self, record: Record, received_s: float) -> None:
-        device_s = self.clock_map.device_seconds(record.t_us)
-        self.clock_map.observe(device_s, received_s)
-        host_s = self.clock_map.to_host(device_s)
-        with self._sync_lock:
-            if record.kind == "LED" and record.values[0]:
-                self._device_led_on.append(host_s)
-                self._align()
-            if np.isfinite(self.camera_offset_s):
-                host_s += self.camera_offset_s
-        stamp = Time(nanoseconds=round(host_s * 1e9)).to_msg()
-        msg = record_message(record, stamp, round(device_s * 1e6), self._spec)
-        self._publishers_by_topic[TOPICS[record.kind]].publish(msg)
-        self.published += 1
+    def _publish(self, released: list[Stamped[tuple[Record, float]]]) -> None:
+        """Released records, in order, on the run's one clock (said once when decided)."""
+        if released and self.stamper.clock is not self._clock_said:
+            self._clock_said = self.stamper.clock
+            if self._clock_said is StampClock.CAMERA:
+                self.get_logger().info("stamps on the camera's clock: LED offset "
+                                       f"{self.stamper.camera_offset_s:+.4f} s")
+            elif self._p["align_to_camera"]:
+                self.get_logger().warning(
+                    f"no sync LED seen within {self._p['hold_for_led_s']:g} s: this run's "
+                    "Arduino stamps are on the host clock, not the camera's")
+        for stamped in released:
+            record, device_s = stamped.item
+            stamp = Time(nanoseconds=round(stamped.stamp_s * 1e9)).to_msg()
+            msg = record_message(record, stamp, round(device_s * 1e6), self._spec)
+            self._publishers_by_topic[TOPICS[record.kind]].publish(msg)
+            self.published += 1
 
     def summary(self) -> str:
         """One line: what was published and rejected."""
@@ -130,9 +137,11 @@ class ArduinoBridgeNode(HostedNode):
             self._reported = summary
 
     def close(self) -> None:
-        """Stop reading; the last counts go to the log."""
+        """Stop reading, publish what is held; the last counts go to the log."""
         self._stop.set()
         self._thread.join(timeout=2.0)
+        with self._stamp_lock:
+            self._publish(self.stamper.flush())
         self.get_logger().info(f"final: {self.summary()}")
 
 

@@ -83,7 +83,7 @@ def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:
     origin = first if first is not None else 0.0
     for stamp, msg in sorted(camera_imu, key=lambda item: item[0]):
         tables.add_camera_imu_message(msg, stamp - origin)
-    for stamp, topic, msg in sensors:
+    for stamp, topic, msg in sorted(sensors, key=lambda item: item[0]):
         if hasattr(msg, "range"):
             tables.add_tof(stamp - origin, msg.range * 1e3)
         else:
