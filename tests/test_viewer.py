@@ -19,6 +19,8 @@ from sds_recon.reconstruction import SurfacePoints
 from sds_record.mcap_files import McapRecorder
 from sds_ros.image_msg import image_to_msg
 from sds_ros.point_cloud import points_to_cloud
+from sds_viz.messages import log_message
+from sensor_msgs.msg import Imu
 from std_msgs.msg import String
 
 from sds_msgs.msg import CameraModel, LaserSpot, LaserSpotArray, SurfaceFit
@@ -69,15 +71,60 @@ def test_sds_view_turns_a_recording_into_rerun_entities(repo: Path, tmp_path: Pa
         for topic, type_name, msg in frame_messages(rig, index):
             recording.add_topic(topic, type_name)
             recording.write(topic, serialize_message(msg), index + 1, index + 1)
+    for topic, msg in imu_messages():
+        recording.add_topic(topic, "sensor_msgs/msg/Imu")
+        recording.write(topic, serialize_message(msg), 5, 5)
     recording.close()
     done = subprocess.run([SDS, "view", str(tmp_path / "run.mcap"), "--out",
                            str(tmp_path / "run.rrd")], capture_output=True, text=True,
                           timeout=120)
     assert done.returncode == 0, done.stderr
-    assert "13 messages shown" in done.stdout
+    assert "16 messages shown" in done.stdout
     entities = rrd_entities(tmp_path / "run.rrd")
     for entity, archetype in EXPECTED.items():
         assert archetype in entities.get(entity, set()), (entity, sorted(entities))
+    imu_series = {e for e in entities if e.startswith("/series/imu/")}
+    assert imu_series == {f"/series/imu/arduino/a{axis}_m_s2" for axis in "xyz"} | {
+        f"/series/imu/camera_optical/{quantity}" for quantity in (
+            "ax_m_s2", "ay_m_s2", "az_m_s2", "gx_rad_s", "gy_rad_s", "gz_rad_s")}
+
+
+def imu_messages() -> list[tuple[str, Imu]]:
+    """The Arduino's accelerometer (rig axes) and the camera's accelerometer and gyroscope
+    (optical axes, one sensor per message), as the graph publishes them."""
+    arduino = Imu()
+    arduino.header.frame_id = "arduino"
+    arduino.linear_acceleration.z = 9.8
+    arduino.angular_velocity_covariance[0] = arduino.orientation_covariance[0] = -1.0
+    accel, gyro = Imu(), Imu()
+    accel.header.frame_id = gyro.header.frame_id = "camera_optical"
+    accel.linear_acceleration.y = -9.86
+    accel.angular_velocity_covariance[0] = accel.orientation_covariance[0] = -1.0
+    gyro.angular_velocity.x = 0.1
+    gyro.linear_acceleration_covariance[0] = gyro.orientation_covariance[0] = -1.0
+    return [("/arduino/imu", arduino), ("/camera/imu", accel), ("/camera/imu", gyro)]
+
+
+class LoggedImu:
+    """A scene that keeps what it is asked to log of the IMU."""
+
+    def __init__(self) -> None:
+        self.samples: list[tuple[str, str, tuple[float, float, float]]] = []
+
+    def set_time(self, time_s: float) -> None:
+        pass
+
+    def log_imu(self, frame_id: str, sensor: str, values: tuple[float, float, float]) -> None:
+        self.samples.append((frame_id, sensor, values))
+
+
+def test_each_imu_source_and_sensor_is_a_series_of_its_own() -> None:
+    scene = LoggedImu()
+    for _, msg in imu_messages():
+        assert log_message(scene, "sensor_msgs/msg/Imu", msg)
+    assert scene.samples == [("arduino", "accel", (0.0, 0.0, 9.8)),
+                             ("camera_optical", "accel", (0.0, -9.86, 0.0)),
+                             ("camera_optical", "gyro", (0.1, 0.0, 0.0))]
 
 
 @pytest.mark.ros

@@ -62,8 +62,16 @@ def _estimate(scene: RerunScene, msg) -> None:
 
 
 def _imu(scene: RerunScene, msg) -> None:
-    a = msg.linear_acceleration
-    scene.log_imu((a.x, a.y, a.z))
+    """Each sensor the message carries (REP-145: covariance[0] −1 marks one it does not), in a
+    series of its own per frame: the Arduino's (rig axes) and the camera's (optical axes) are
+    different quantities."""
+    source = msg.header.frame_id or "imu"
+    if msg.linear_acceleration_covariance[0] != -1:
+        a = msg.linear_acceleration
+        scene.log_imu(source, "accel", (a.x, a.y, a.z))
+    if msg.angular_velocity_covariance[0] != -1:
+        g = msg.angular_velocity
+        scene.log_imu(source, "gyro", (g.x, g.y, g.z))
 
 
 def _tof(scene: RerunScene, msg) -> None:

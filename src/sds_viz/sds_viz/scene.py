@@ -6,8 +6,9 @@ Entity paths:
 - world/container (static: rim at the fill level, bottom, wall), world/beams (static),
   world/points, world/line_points, world/fitted_plane — mm in the rig's world frame;
 - series/height/<laser_id>, series/plane/<tilt_x_deg|tilt_y_deg|p00_mm|rmse_mm>,
-  series/modal/<mode name>, series/sloshing/<mode>/<method>, series/imu/<ax|ay|az>,
-  series/tof/range_mm.
+  series/modal/<mode name>, series/sloshing/<mode>/<method>,
+  series/imu/<frame_id>/<ax_m_s2|ay_m_s2|az_m_s2|gx_rad_s|gy_rad_s|gz_rad_s> (one series per
+  source: the Arduino's frame "arduino", the camera's "camera_optical"), series/tof/range_mm.
 """
 
 from __future__ import annotations
@@ -23,6 +24,9 @@ RIM_SEGMENTS = 96
 PLANE_SEGMENTS = 48
 RING_COLOURS = {1: (230, 60, 60), 2: (60, 160, 230), 3: (90, 200, 90)}
 LOST_COLOUR = (128, 128, 128)
+IMU_AXES = {"accel": ("ax_m_s2", "ay_m_s2", "az_m_s2"),
+            "gyro": ("gx_rad_s", "gy_rad_s", "gz_rad_s")}
+"""An IMU sensor's series names (results/camera_imu.csv's columns)."""
 
 
 class RerunScene:
@@ -147,10 +151,11 @@ class RerunScene:
             self.stream.log(f"series/sloshing/{mode}/{method}/damping_ratio",
                             rr.Scalars(float(damping_ratio)))
 
-    def log_imu(self, acceleration_m_s2: tuple[float, float, float]) -> None:
-        """Accelerometer [m/s²]."""
-        for axis, value in zip(("ax", "ay", "az"), acceleration_m_s2, strict=True):
-            self.stream.log(f"series/imu/{axis}", rr.Scalars(float(value)))
+    def log_imu(self, frame_id: str, sensor: str, values: tuple[float, float, float]) -> None:
+        """One IMU sensor's sample in its frame: "accel" [m/s²] or "gyro" [rad/s]."""
+        axes = IMU_AXES[sensor]
+        for axis, value in zip(axes, values, strict=True):
+            self.stream.log(f"series/imu/{frame_id}/{axis}", rr.Scalars(float(value)))
 
     def log_tof(self, range_mm: float) -> None:
         """Time-of-flight range [mm]."""
