@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import os
 import signal
 import subprocess
 import sys
@@ -139,3 +140,24 @@ def test_a_video_cut_in_half_keeps_the_frames_before_the_cut(kick: SimulationOut
               (out / "spots.csv").read_text().splitlines()[1:]}
     assert 3 <= len(frames) < 30 and frames == set(range(len(frames))), sorted(frames)
     assert "INCOMPLETE" in (out / "analysis.json").read_text()
+
+
+@pytest.mark.ros
+def test_ctrl_c_during_the_demos_graph_is_an_interruption_not_a_failure(tmp_path: Path) -> None:
+    """Ctrl-C (SIGINT to the terminal's process group) while the graph runs: exit 130, said
+    in one line, no export or analysis of a partial run."""
+    demo = subprocess.Popen([SDS, "demo", "--seconds", "1", "--out", str(tmp_path)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    assert demo.stdout is not None and demo.stderr is not None
+    for line in demo.stdout:
+        if line.startswith("running the graph"):
+            break
+    time.sleep(5.0)
+    os.killpg(demo.pid, signal.SIGINT)
+    code = demo.wait(timeout=120)
+    stderr = demo.stderr.read()
+    assert code == 130, stderr
+    assert "sds demo: interrupted: no results and no analysis written" in stderr, stderr
+    assert not (tmp_path / "results").exists() and not (tmp_path / "analysis").exists()
+    assert "FRAMES MISSING" not in demo.stdout.read()

@@ -40,6 +40,8 @@ class RunOutputs:
     exit_code: int = 0
     failure: str | None = None
     """The needed node that failed and why (None if none did)."""
+    interrupted: bool = False
+    """Whether Ctrl-C (or SIGTERM) stopped the graph."""
 
 
 def live_view() -> bool:
@@ -92,7 +94,8 @@ def run_chain(overrides: list[str], out: Path, expected_frames: int | None,
             os.close(fd)
     if port is not None:
         port.unlink(missing_ok=True)   # the stand-in cable's link dangles once it is gone
-    return replace(outputs, exit_code=exit_code, failure=launcher.failure)
+    return replace(outputs, exit_code=exit_code, failure=launcher.failure,
+                   interrupted=launcher.signal_received is not None)
 
 
 def _watch(launcher: Launcher, expected_frames: int | None, serial_lines: list[bytes] | None,

@@ -105,6 +105,8 @@ class Launcher:
         self.grace_period_s = grace_period_s
         self.failure: str | None = None
         """One line on the first needed process that failed (None while none has)."""
+        self.signal_received: int | None = None
+        """The SIGINT or SIGTERM that stopped the graph (None: it ended otherwise)."""
         self._stop = threading.Event()
         self._print_lock = threading.Lock()
         self._log_threads: list[threading.Thread] = []
@@ -113,6 +115,12 @@ class Launcher:
         """Ask the graph to shut down (signal handler and API)."""
         self._stop.set()
 
+    def _on_signal(self, signum: int, _frame: object) -> None:
+        """Ctrl-C or a termination: remember which, then stop."""
+        if self.signal_received is None:
+            self.signal_received = signum
+        self.request_stop()
+
     @property
     def stopping(self) -> bool:
         """Whether a shutdown was asked for."""
@@ -120,7 +128,7 @@ class Launcher:
 
     def run(self, on_started: Callable[[], None] | None = None) -> int:
         """Start every process, wait, shut down; return the first non-zero exit code or 0."""
-        previous = {s: signal.signal(s, self.request_stop) for s in (signal.SIGINT, signal.SIGTERM)}
+        previous = {s: signal.signal(s, self._on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
         try:
             self._start()
             if on_started:

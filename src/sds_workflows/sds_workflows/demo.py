@@ -49,6 +49,9 @@ class ChainOutputs(Protocol):
     @property
     def failure(self) -> str | None:
         """The needed node that failed and why (None if none did)."""
+    @property
+    def interrupted(self) -> bool:
+        """Whether Ctrl-C (or SIGTERM) stopped the graph."""
 
 
 class ChainRunner(Protocol):
@@ -92,6 +95,16 @@ def analyse_run(recording: Path, rig: Rig, out: Path, options: AnalysisOptions,
     return analysis.results
 
 
+def interrupted(command: str, outputs: ChainOutputs) -> int:
+    """Say that the run was interrupted (no results, no analysis) and what it kept; the exit
+    code of an interruption."""
+    kept = (f"the recording so far is in {outputs.recording}" if outputs.recording.is_file()
+            else "nothing was recorded")
+    print(f"{command}: interrupted: no results and no analysis written; {kept}",
+          file=sys.stderr)
+    return 130
+
+
 def run_demo(out: Path, seconds: float | None, run_chain: ChainRunner) -> int:
     """Simulate a drop, run the whole chain on it, analyse, print the summary."""
     out.mkdir(parents=True, exist_ok=True)
@@ -116,6 +129,8 @@ def run_demo(out: Path, seconds: float | None, run_chain: ChainRunner) -> int:
                          f"viewer.rig={scenario.rig_file.resolve()}",
                          f"arduino.port={port}"],
                         out, scenario.frame_count, serial_lines, port)
+    if outputs.interrupted:
+        return interrupted("sds demo", outputs)
     if outputs.failure or not outputs.recording.is_file():
         print(f"demo failed: {outputs.failure or 'no recording'} (see {outputs.log})",
               file=sys.stderr)
@@ -185,6 +200,8 @@ def run_live(source: str, rig_file: Path, out: Path, port: str | None,
 
         frames = VideoFileSource(Path(source)).announced_frames
     outputs = run_chain(overrides, out, frames)
+    if outputs.interrupted and is_file:   # a live camera's run ends with Ctrl-C
+        return interrupted("sds run", outputs)
     if outputs.failure or not outputs.recording.is_file():
         print(f"sds run: {outputs.failure or 'no recording'} (see {outputs.log})",
               file=sys.stderr)
