@@ -131,3 +131,22 @@ def test_resolution_refuses_a_camera_below_the_surface(tmp_path: Path) -> None:
     one_line_error(sds("resolution", "--height-mm", "-170", "--out", str(tmp_path / "r")),
                    "the height must be positive")
     assert not (tmp_path / "r").exists()
+
+
+def test_every_argument_of_every_command_says_what_it_is() -> None:
+    import argparse
+
+    from sds_cli.cli import build_parser
+
+    silent = []
+
+    def walk(parser: argparse.ArgumentParser, command: str) -> None:
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for name, sub in action.choices.items():
+                    walk(sub, f"{command} {name}")
+            elif not action.help:
+                silent.append(f"{command} {'/'.join(action.option_strings) or action.dest}")
+
+    walk(build_parser(), "sds")
+    assert not silent, silent

@@ -108,7 +108,8 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
     plane.add_argument("--images", nargs="+", type=Path, required=True,
                        help="colour images, one board pose each, the line crossing the board")
     add_board_arguments(plane)
-    plane.add_argument("--model", choices=["pinhole", "scaramuzza"], default="pinhole")
+    plane.add_argument("--model", choices=["pinhole", "scaramuzza"], default="pinhole",
+                       help="camera model calibrated on the board (default pinhole)")
     plane.add_argument("--out", type=Path, required=True, help="JSON file to write")
     add_overwrite(plane)
     plane.set_defaults(run=run_line_plane, command="calibrate line-plane")

@@ -20,15 +20,17 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
         "import", help="write an SDS camera file from another tool's calibration",
         description="ocamcalib: OCamCalib's calib_results.txt; matlab: fisheyeIntrinsics "
                     "properties in YAML/JSON; camera-info: a ROS camera_info YAML (plumb_bob).")
-    importing.add_argument("format", choices=sorted(IMPORTERS))
-    importing.add_argument("source", type=Path)
+    importing.add_argument("format", choices=sorted(IMPORTERS),
+                           help="the other tool's file format")
+    importing.add_argument("source", type=Path, help="the other tool's calibration file")
     importing.add_argument("--out", type=Path, required=True, help="SDS camera file to write")
     add_overwrite(importing)
     importing.set_defaults(run=run_import, command="camera import")
     exporting = actions.add_parser(
         "camera-info", help="write a ROS camera_info YAML from a pinhole SDS camera file")
-    exporting.add_argument("camera", type=Path)
-    exporting.add_argument("--out", type=Path, required=True)
+    exporting.add_argument("camera", type=Path, help="SDS camera file (pinhole)")
+    exporting.add_argument("--out", type=Path, required=True,
+                           help="camera_info YAML to write")
     exporting.add_argument("--name", default="sds_camera", help="camera_name in the file")
     add_overwrite(exporting)
     exporting.set_defaults(run=run_camera_info, command="camera camera-info")

@@ -17,7 +17,8 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
                     "and by the sync LED where --led-roi is given; print both with their σ, "
                     "their disagreement, and the --start-s that puts the log on the video's "
                     "clock in `sds import-sd`.")
-    parser.add_argument("--video", type=Path, required=True)
+    parser.add_argument("--video", type=Path, required=True,
+                        help="the video (its own IMU: GoPro GPMF or a sidecar CSV)")
     parser.add_argument("--arduino", type=Path, required=True,
                         help="the SD-card log or a serial capture (protocol v1)")
     parser.add_argument("--rig", type=Path, required=True,

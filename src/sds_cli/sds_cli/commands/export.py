@@ -14,7 +14,7 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
         "export", help="a recording's spots, points, line, fits, IMU, ToF and analysis as files",
         description="Write the result files of a recording of the graph (see README, "
                     "'Result files').")
-    parser.add_argument("recording", type=Path)
+    parser.add_argument("recording", type=Path, help="a recording of the graph (MCAP)")
     parser.add_argument("--rig", type=Path,
                         help="the rig file (default: the one the recording carries)")
     parser.add_argument("--out", type=Path, required=True,

@@ -17,7 +17,7 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
                     "sensor per message, optical frame, SI units), stamped with the video's "
                     "clock plus --start-s; samples that would be stamped before 0 are left "
                     "out.")
-    parser.add_argument("video", type=Path)
+    parser.add_argument("video", type=Path, help="a GoPro video (its GPMF IMU stream)")
     parser.add_argument("--out", type=Path, help="MCAP to write (default: beside the video)")
     parser.add_argument("--start-s", type=float, default=0.0,
                         help="time of the video's first frame on the recording's clock [s]")

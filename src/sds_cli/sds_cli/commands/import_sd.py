@@ -15,7 +15,7 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
         description="Turn the Arduino's SD-card log (protocol v1) into /arduino/imu, "
                     "/arduino/tof and /arduino/events messages in an MCAP file, stamped with "
                     "the device clock (seconds since the first record, plus --start-s).")
-    parser.add_argument("log", type=Path)
+    parser.add_argument("log", type=Path, help="the Arduino's SD-card log (protocol v1)")
     parser.add_argument("--out", type=Path, help="MCAP to write (default: beside the log)")
     parser.add_argument("--start-s", type=float, default=0.0,
                         help="time of the log's first record on the recording's clock [s]")

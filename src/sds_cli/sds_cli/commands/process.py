@@ -52,7 +52,7 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
                              "[, offset_mm] (frame k = k-th image)")
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
                         help="inputs processed at once (default: one per core)")
-    parser.add_argument("--no-progress", action="store_true")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.set_defaults(run=run, command="process")
 
 

@@ -17,7 +17,7 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
         description="Camera looking straight down at a flat surface: how many mm of surface "
                     "height one pixel of spot motion means, for each radial spot position.",
     )
-    parser.add_argument("--camera", type=Path,
+    parser.add_argument("--camera", type=Path, help="camera file (default: the GoPro's)",
                         default=CONFIG / "cameras" / "gopro_hero5_session.yaml")
     parser.add_argument("--height-mm", type=float, default=170.0,
                         help="camera above the flat surface [mm] (default 170)")

@@ -14,12 +14,17 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
         "simulate", help="render a simulated run: video, Arduino streams, ground truth",
         description="Render a scenario (config/scenarios/*.yaml) as the rig's camera and Arduino "
                     "would record it, with the exact truth beside it (format: sds_sim.simulate).")
-    parser.add_argument("scenario", type=Path)
-    parser.add_argument("--out", type=Path, default=Path("simulation"))
+    parser.add_argument("scenario", type=Path,
+                        help="scenario file (config/scenarios/*.yaml)")
+    parser.add_argument("--out", type=Path, default=Path("simulation"),
+                        help="folder for the video, the Arduino streams and the truth "
+                             "(default: simulation)")
     parser.add_argument("--seconds", type=float, help="override the scenario's duration [s]")
     parser.add_argument("--scale", type=float, help="image scale, e.g. 0.25 for 960x540")
     parser.add_argument("--seed", type=int, help="override the scenario's random seed")
-    parser.add_argument("--codec", choices=["h264", "lossless", "png"], default="h264")
+    parser.add_argument("--codec", choices=["h264", "lossless", "png"], default="h264",
+                        help="h264 as the camera writes (default), lossless H.264, or PNG "
+                             "images")
     add_overwrite(parser, "replace an earlier simulation in --out")
     parser.set_defaults(run=run, command="simulate")
 
