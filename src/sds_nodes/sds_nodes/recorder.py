@@ -7,15 +7,11 @@ from datetime import datetime
 from pathlib import Path
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.serialization import deserialize_message
 from rclpy.time import Time
-from sds_model.rig import rig_from_document
 from sds_record.mcap_files import McapRecorder, header_stamp_ns
-from sds_record.recorded_series import RIG_TOPIC
 from sds_record.schemas import SchemaError
-from sds_record.static_transforms import TF_MESSAGE_TYPE, TF_STATIC_TOPIC, camera_transform_cdr
 from sds_ros.hosted_node import HostedNode
-from std_msgs.msg import Header, String
+from std_msgs.msg import Header
 
 EXIT_CONFIG_ERROR = 2
 SKIPPED_TOPICS = ("/rosout", "/parameter_events")
@@ -122,23 +118,10 @@ class RecorderNode(HostedNode):
         def write(data: bytes, info) -> None:
             now_ns = self.get_clock().now().nanoseconds
             self._recorder.write(topic, data, now_ns, int(info["source_timestamp"]))
-            if topic == RIG_TOPIC:
-                self._write_static_transform(data, now_ns)
             if acks:
                 stamp = Time(nanoseconds=header_stamp_ns(data)).to_msg()
                 self._ack_pub.publish(Header(stamp=stamp))
         return write
-
-    def _write_static_transform(self, rig_cdr: bytes, now_ns: int) -> None:
-        """/tf_static in the file: world → camera of the rig the reconstruction measures
-        with (its latched /recon/rig), so that tf-aware viewers place cloud and camera."""
-        try:
-            rig = rig_from_document(deserialize_message(rig_cdr, String).data, RIG_TOPIC)
-        except ValueError as error:   # RigError
-            self.get_logger().error(f"no /tf_static written: {error}")
-            return
-        self._recorder.add_topic(TF_STATIC_TOPIC, TF_MESSAGE_TYPE, latched=True)
-        self._recorder.write(TF_STATIC_TOPIC, camera_transform_cdr(rig, now_ns), now_ns, now_ns)
 
     def close(self) -> None:
         """Finish the file (summary section) when the graph stops."""

@@ -72,24 +72,9 @@ def _nested_types(type_name: str) -> list[str]:
 
 
 @cache
-def standard_typestore() -> Typestore:
-    """rosbags' definitions of the standard ROS 2 Kilted types, for those the PyPI wheels do
-    not install (tf2_msgs: /tf_static in recordings)."""
-    from rosbags.typesys import get_typestore
-
-    return get_typestore(Stores.ROS2_KILTED)
-
-
-@cache
 def message_definition(type_name: str) -> str:
-    """The concatenated definition rosbag2 writes into MCAP schemas for 'package/msg/Type':
-    from the installed .msg files, else from rosbags' standard Kilted types."""
-    try:
-        _register(type_name)
-        store = _typestore()
-    except SchemaError:
-        store = standard_typestore()
-        if type_name not in store.fielddefs:
-            raise
-    text, _ = store.generate_msgdef(type_name, ros_version=2)
+    """The concatenated definition rosbag2 writes into MCAP schemas for 'package/msg/Type',
+    from the installed .msg files (tf2_msgs and sds_msgs too: built at setup)."""
+    _register(type_name)
+    text, _ = _typestore().generate_msgdef(type_name, ros_version=2)
     return text

@@ -10,6 +10,7 @@ from sds_arduino.protocol import Record
 from sensor_msgs.msg import Imu, Range
 
 from sds_msgs.msg import SyncEvent
+from sds_ros.static_tf import ARDUINO_FRAME
 
 STANDARD_GRAVITY = 9.80665
 EVENT_KINDS = {("TRG", 1): SyncEvent.KIND_TRIGGER, ("TRG", 0): SyncEvent.KIND_TRIGGER,
@@ -23,7 +24,7 @@ TOPICS = {"IMU": "imu", "TOF": "tof", "TRG": "events", "LED": "events", "LAS": "
 class SensorSpec:
     """What the messages say about the sensors: frame, noise, ToF cone and limits."""
 
-    frame_id: str = "arduino"
+    frame_id: str = ARDUINO_FRAME
     accel_noise_mg: float = 8.0
     tof_noise_mm: float = 1.0
     tof_field_of_view_rad: float = 0.44
