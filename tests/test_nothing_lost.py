@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import hashlib
 import os
+import re
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -80,30 +82,54 @@ def process(video: Path, out: Path, *extra: str) -> subprocess.Popen:
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
+def interrupt_when(run: subprocess.Popen, frames: int | None, after_s: float) -> str:
+    """SIGINT `after_s` once the progress bar shows `frames` frames tracked (None: from the
+    start); what the run printed on stderr."""
+    assert run.stderr is not None
+    printed: list[str] = []
+    seen = threading.Event()
+
+    def read() -> None:
+        assert run.stderr is not None
+        while text := run.stderr.read(1):
+            printed.append(text)
+            counts = re.findall(r"frames: +(\d+)", "".join(printed[-200:]))
+            if frames is not None and counts and int(counts[-1]) >= frames:
+                seen.set()
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    if frames is not None:
+        seen.wait(timeout=120)
+    time.sleep(after_s)
+    run.send_signal(signal.SIGINT)
+    run.wait(timeout=120)
+    reader.join(timeout=10)
+    return "".join(printed)
+
+
 def test_process_interrupted_at_any_moment_keeps_the_earlier_results(
         kick: SimulationOutput, tmp_path: Path) -> None:
     out = tmp_path / "results"
-    start = time.monotonic()
     first = process(kick.video, out)
     assert first.wait(timeout=300) == 0, first.stderr.read()
-    duration_s = time.monotonic() - start
     earlier = folder_bytes(out)
     assert {"points.csv", "analysis.json", "report.html"} <= set(earlier)
     # Start-up, tracking (early and late), the analysis and its figures.
     outcomes = []
-    for fraction in (0.15, 0.4, 0.65, 0.85, 0.95):
-        run = process(kick.video, out, "--overwrite")
-        time.sleep(fraction * duration_s)
-        run.send_signal(signal.SIGINT)
-        code = run.wait(timeout=120)
-        stderr = run.stderr.read()
-        outcomes.append(code)
-        assert code in (0, 130), stderr
-        if code == 130:
-            assert stderr.strip() == "sds: interrupted", stderr
-        assert folder_bytes(out) == earlier, f"interrupted at {fraction:.0%}: {stderr}"
+    for frames, after_s in ((None, 1.0), (2, 0.0), (15, 0.0), (29, 0.0), (30, 0.5)):
+        run = subprocess.Popen([SDS, "process", "--video", str(kick.video), "--rig", RIG,
+                                "--out", str(out), "--overwrite"],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        stderr = interrupt_when(run, frames, after_s)
+        outcomes.append(run.returncode)
+        assert run.returncode in (0, 130), stderr
+        if run.returncode == 130:
+            assert stderr.strip().endswith("sds: interrupted"), stderr
+            assert "Traceback" not in stderr, stderr
+        assert folder_bytes(out) == earlier, f"interrupted at {frames} frames: {stderr}"
         assert not staging_left(tmp_path)
-    assert outcomes.count(130) >= 3, outcomes
+    assert outcomes[:4] == [130] * 4, outcomes
 
 
 def test_a_failed_run_leaves_nothing_that_blocks_the_retry(kick: SimulationOutput,
