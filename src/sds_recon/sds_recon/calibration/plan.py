@@ -92,9 +92,58 @@ def _surface_of(rig: Rig, ids: list[int], pixels: np.ndarray) -> tuple[float, fl
     return plane.tilt_x_rad, plane.tilt_y_rad, points.points_mm[:, 2]
 
 
-def predict(rig: Rig, surfaces: list[KnownSurface]) -> Prediction:
+@dataclass(frozen=True)
+class UnseenSensitivity:
+    """How the reconstruction of each unseen diagonal surface moves per unit of each of the
+    rig's parameters (named as in every fit's table; the known surfaces' own parameters do
+    not move it): its two tilts [rad] and its points' heights [mm]."""
+
+    names: list[str]
+    tilt_gradients: list[np.ndarray]     # one per unseen surface: parameters × 2
+    height_gradients: list[np.ndarray]   # one per unseen surface: parameters × points
+
+    def rows(self, names: list[str], unseen: int) -> tuple[np.ndarray, np.ndarray]:
+        """The gradients of unseen surface `unseen` in the order of `names` (zero for a
+        parameter that is not the rig's)."""
+        index = {name: k for k, name in enumerate(self.names)}
+        tilt, height = self.tilt_gradients[unseen], self.height_gradients[unseen]
+        tilt_rows, height_rows = np.zeros((len(names), 2)), np.zeros((len(names),
+                                                                       height.shape[1]))
+        for row, name in enumerate(names):
+            if name in index:
+                tilt_rows[row], height_rows[row] = tilt[index[name]], height[index[name]]
+        return tilt_rows, height_rows
+
+
+def unseen_sensitivity(rig: Rig) -> UnseenSensitivity:
+    """The unseen diagonal surfaces' sensitivity to the rig's parameters, by differences of
+    1e-3 of each parameter's scale (the same for every protocol: computed once per plan)."""
+    ids = [d.laser_id for d in rig.tracked_diodes]
+    model = RigModel(rig, ids, [])
+    scales = model.table.scales
+    tilt_gradients, height_gradients = [], []
+    for tilt_deg in UNSEEN_TILTS_DEG:
+        seen_ids, _, _, seen_px = _visible_spots(rig, [diagonal(tilt_deg)])
+        base_x, base_y, base_heights = _surface_of(rig, seen_ids, seen_px)
+        base = np.array([base_x, base_y])
+        tilt_rows, height_rows = [], []
+        for k in range(model.size):
+            step = np.zeros(model.size)
+            step[k] = 1e-3 * scales[k]
+            tilt_x, tilt_y, heights = _surface_of(model.to_rig(step), seen_ids, seen_px)
+            tilt_rows.append((np.array([tilt_x, tilt_y]) - base) / step[k])
+            height_rows.append((heights - base_heights) / step[k])
+        tilt_gradients.append(np.array(tilt_rows))
+        height_gradients.append(np.array(height_rows))
+    return UnseenSensitivity(model.table.names, tilt_gradients, height_gradients)
+
+
+def predict(rig: Rig, surfaces: list[KnownSurface],
+            sensitivity: UnseenSensitivity | None = None) -> Prediction:
     """The posterior σ of every parameter after calibrating `rig` (its tolerances as priors)
-    on `surfaces`, and the σ of tilt and heights it gives unseen diagonal surfaces."""
+    on `surfaces`, and the σ of tilt and heights it gives unseen diagonal surfaces
+    (`sensitivity`: `unseen_sensitivity(rig)`, computed here if not given)."""
+    sensitivity = sensitivity or unseen_sensitivity(rig)
     ids, diode, frame, pixels = _visible_spots(rig, surfaces)
     model = RigModel(rig, ids, surfaces)
     covariance = np.full((len(pixels), 1, 1), SPOT_SIGMA_PX**2) * np.eye(2)
@@ -106,21 +155,9 @@ def predict(rig: Rig, surfaces: list[KnownSurface]) -> Prediction:
     information = (design * scales).T @ (design * scales)
     posterior = np.linalg.pinv(information, rcond=1e-12) * np.outer(scales, scales)
     sigmas = np.sqrt(np.clip(np.diag(posterior), 0.0, None))
-    unseen = [diagonal(t) for t in UNSEEN_TILTS_DEG]
     tilt_sigma, height_sigma = [], []
-    for surface in unseen:
-        seen_ids, _, _, seen_px = _visible_spots(rig, [surface])
-        base_x, base_y, base_heights = _surface_of(rig, seen_ids, seen_px)
-        base = np.array([base_x, base_y])
-        tilt_rows, height_rows = [], []
-        for k in range(model.size):
-            step = np.zeros(model.size)
-            step[k] = 1e-3 * scales[k]
-            tilt_x, tilt_y, heights = _surface_of(model.to_rig(step), seen_ids, seen_px)
-            tilt_rows.append((np.array([tilt_x, tilt_y]) - base) / step[k])
-            height_rows.append((heights - base_heights) / step[k])
-        tilt_gradient = np.array(tilt_rows)            # parameters × 2
-        height_gradient = np.array(height_rows)        # parameters × points
+    for unseen in range(len(UNSEEN_TILTS_DEG)):
+        tilt_gradient, height_gradient = sensitivity.rows(model.table.names, unseen)
         tilt_variance = np.einsum("ki,kl,li->i", tilt_gradient, posterior, tilt_gradient)
         height_variance = np.einsum("ki,kl,li->i", height_gradient, posterior, height_gradient)
         tilt_sigma.append(float(np.degrees(np.sqrt(np.max(tilt_variance)))))
@@ -136,10 +173,11 @@ def plan(rig: Rig, base: list[KnownSurface], candidates: list[KnownSurface]
     or the best gains less than LEAST_GAIN. Returns every step's prediction, the last the
     plan."""
     chosen = list(base)
-    steps = [predict(rig, chosen)]
+    sensitivity = unseen_sensitivity(rig)
+    steps = [predict(rig, chosen, sensitivity)]
     left = list(candidates)
     while left and not steps[-1].meets_goals():
-        trials = [predict(rig, [*chosen, candidate]) for candidate in left]
+        trials = [predict(rig, [*chosen, candidate], sensitivity) for candidate in left]
         best = int(np.argmin([t.worst_tilt_deg for t in trials]))
         if trials[best].worst_tilt_deg > (1 - LEAST_GAIN) * steps[-1].worst_tilt_deg:
             break
