@@ -52,11 +52,12 @@ def input_errors() -> tuple[type[BaseException], ...]:
     return CommandError, *workflow_input_errors()
 
 
-def _is_interruption(error: BaseException) -> bool:
-    """Ctrl-C inside compiled code: numba's functions surface it as a SystemError whose cause
-    is the KeyboardInterrupt."""
-    cause = error.__cause__ or error.__context__
-    return isinstance(error, SystemError) and isinstance(cause, KeyboardInterrupt)
+def _is_interruption(error: BaseException | None) -> bool:
+    """Ctrl-C inside compiled code: numba's functions surface it as a SystemError caused by
+    the KeyboardInterrupt, or by another such SystemError (one per nested numba call)."""
+    while isinstance(error, SystemError):
+        error = error.__cause__ or error.__context__
+    return isinstance(error, KeyboardInterrupt)
 
 
 def interrupted() -> int:

@@ -62,6 +62,10 @@ def load_graph(path: str | Path) -> list[NodeEntry]:
     duplicates = sorted({name for name in names if names.count(name) > 1})
     if duplicates:
         raise GraphFileError(f"{path}: node names used twice: {', '.join(duplicates)}")
+    for index, entry in enumerate(entries):
+        missing = _missing_plugin(entry.plugin)
+        if missing:
+            raise GraphFileError(f"{path}: nodes[{index}]: plugin {entry.plugin!r}: {missing}")
     return entries
 
 
@@ -115,9 +119,6 @@ def _node_entry(path: Path, index: int, item: Any) -> NodeEntry:
     moved_to = MOVED_PLUGINS.get(item["plugin"])
     if moved_to:
         raise GraphFileError(f"{where}: plugin {item['plugin']} is now {moved_to}")
-    missing = _missing_plugin(item["plugin"])
-    if missing:
-        raise GraphFileError(f"{where}: plugin {item['plugin']!r}: {missing}")
     params = item.get("params", [])
     params = [params] if isinstance(params, str) else params
     files = tuple((path.parent / p).resolve() for p in params)
