@@ -16,6 +16,7 @@ from scipy.spatial.transform import Rotation
 
 from sds_model.camera.files import camera_from_dict, camera_sigma, read_yaml
 from sds_model.camera.model import CameraModel, CameraModelError
+from sds_model.camera.rolling_shutter import RollingShutter, rolling_shutter
 from sds_model.geometry import RigidTransform
 
 WORLD_FRAME = ("origin on the container axis at the flat liquid surface (fill level), Z up "
@@ -103,6 +104,7 @@ class Rig:
     calibration: dict[str, Any] | None = None   # what `sds calibrate rig` found (uncertainties)
     tolerances: Tolerances = field(default_factory=Tolerances)
     camera_sigma: dict[str, float] = field(default_factory=dict)   # the camera file's `sigma:`
+    camera_shutter: RollingShutter = field(default_factory=RollingShutter)   # its readout
 
     @property
     def tracked_diodes(self) -> tuple[LaserDiode, ...]:
@@ -257,6 +259,7 @@ def rig_from_dict(content: Any, base: Path) -> Rig:
         content_of_camera = model if camera_file is None else read_yaml(camera_file)
         camera = camera_from_dict(content_of_camera)
         intrinsics_sigma = camera_sigma(content_of_camera, camera)
+        shutter = rolling_shutter(content_of_camera)
     except CameraModelError as error:
         where = "camera.model" if camera_file is None else f"camera.model {camera_file}"
         raise RigError(f"{where}: {error}") from error
@@ -312,6 +315,7 @@ def rig_from_dict(content: Any, base: Path) -> Rig:
         calibration=_calibration(content),
         tolerances=_tolerances(content),
         camera_sigma=intrinsics_sigma,
+        camera_shutter=shutter,
     )
 
 
@@ -361,6 +365,9 @@ def _camera_reference(rig: Rig, directory: Path | None) -> str | dict[str, Any]:
         inline = rig.camera.to_dict()
         if rig.camera_sigma:
             inline["sigma"] = dict(rig.camera_sigma)
+        if rig.camera_shutter.readout_s:
+            inline["readout_s"] = rig.camera_shutter.readout_s
+            inline["readout_direction"] = rig.camera_shutter.direction
         return inline
     try:
         return str(rig.camera_file.relative_to(directory.resolve()))

@@ -109,8 +109,16 @@ class ReconstructionNode(HostedNode):
             self._beam_weight, self._default_sigma)
         header = msg.header
         header.frame_id = self._frame_id
-        cloud = points_to_cloud(header, result, fits.rejected)
+        cloud = points_to_cloud(header, result, fits.rejected, self._sample_offsets_s(result))
         return cloud, result, fits
+
+    def _sample_offsets_s(self, points: SurfacePoints) -> np.ndarray | None:
+        """When each point's row was exposed after the frame's stamp [s]: a rolling shutter's
+        (the camera file's readout_s); None for a global shutter (no time field)."""
+        shutter = self._rig.camera_shutter
+        if not shutter.readout_s or points.row_px is None:
+            return None
+        return shutter.row_time_s(points.row_px, self._rig.camera.height_px)
 
     def _on_live_spots(self, msg: LaserSpotArray) -> None:
         self._live_pub.publish(self._reconstruct(msg)[0])
@@ -125,7 +133,8 @@ class ReconstructionNode(HostedNode):
                                   msg.sigma_px, self._default_sigma)
         header = msg.header
         header.frame_id = self._frame_id
-        self._line_pub.publish(points_to_cloud(header, result))
+        self._line_pub.publish(points_to_cloud(header, result, None,
+                                               self._sample_offsets_s(result)))
 
 
 def main(args: list[str] | None = None) -> None:

@@ -34,12 +34,14 @@ MIN_PLANE_POINTS = 3
 
 @dataclass(frozen=True)
 class SurfacePoints:
-    """Triangulated points [mm, world], each with its laser, height σ and miss distance [mm]."""
+    """Triangulated points [mm, world], each with its laser, height σ and miss distance [mm], and
+    the image row it was measured in (a rolling shutter's rows have their own times)."""
 
     laser_ids: np.ndarray          # (N,)
     points_mm: np.ndarray          # (N, 3)
     height_sigma_mm: np.ndarray    # (N,)
     miss_distance_mm: np.ndarray   # (N,), NaN for the line laser
+    row_px: np.ndarray | None = None   # (N,) the image row each was seen in (None: unknown)
 
 
 @dataclass(frozen=True)
@@ -66,15 +68,15 @@ def reconstruct_spots(rig: Rig, laser_ids: ArrayLike, pixels: ArrayLike, sigma_p
                       beam_weight: float = 0.5, default_sigma_px: float = 0.1) -> SurfacePoints:
     """Eq. 9 for the found spots (finite pixels); unsolvable ones (parallel rays) are left out."""
     ids = np.asarray(laser_ids, dtype=int)
-    pixels = np.asarray(pixels, dtype=float).reshape(-1, 2)
-    found = np.isfinite(pixels).all(axis=1)
-    ids, pixels = ids[found], pixels[found]
+    measured = np.asarray(pixels, dtype=float).reshape(-1, 2)
+    found = np.isfinite(measured).all(axis=1)
+    ids, seen = ids[found], measured[found]
     sigma = _sigmas(np.asarray(sigma_px, dtype=float)[found], default_sigma_px)
-    result = triangulate_beams(rig, pixels, ids, beam_weight)
-    heights_sigma = beam_height_sigma(rig, pixels, ids, sigma)
+    result = triangulate_beams(rig, seen, ids, beam_weight)
+    heights_sigma = beam_height_sigma(rig, seen, ids, sigma)
     keep = np.isfinite(result.points_mm).all(axis=1)
     return SurfacePoints(ids[keep], result.points_mm[keep], heights_sigma[keep],
-                         result.miss_distance_mm[keep])
+                         result.miss_distance_mm[keep], seen[keep, 1])
 
 
 def reconstruct_line(rig: Rig, pixels: ArrayLike, sigma_px: ArrayLike,
@@ -88,7 +90,8 @@ def reconstruct_line(rig: Rig, pixels: ArrayLike, sigma_px: ArrayLike,
     heights_sigma = plane_height_sigma(rig, samples, sigma) if len(samples) else np.empty(0)
     keep = np.isfinite(points).all(axis=1)
     return SurfacePoints(np.full(int(keep.sum()), LINE_LASER_ID), points[keep],
-                         heights_sigma[keep], np.full(int(keep.sum()), np.nan))
+                         heights_sigma[keep], np.full(int(keep.sum()), np.nan),
+                         samples[keep, 1])
 
 
 def fit_surface(points: SurfacePoints, radius_mm: float) -> SurfaceFits:

@@ -96,6 +96,13 @@ COLUMNS: dict[str, dict[str, str]] = {
 """Every table's columns and what they mean (written as columns.json)."""
 
 
+SAMPLE_TIME_COLUMN = {
+    "t_sample_s": "time the point's image row was exposed, since the first frame [s]: t_s plus "
+                  "the row's delay under the camera's rolling shutter (its camera file's "
+                  "readout_s; written only for a rolling shutter)"}
+"""The points table's last column when the camera reads its rows over a time."""
+
+
 INTEGER_COLUMNS = frozenset({"frame", "laser_id", "valid", "flags", "point_count", "rejected",
                              "rejected_count"})
 """Columns of whole numbers; every other column is a float (NaN written as an empty cell)."""
@@ -166,6 +173,20 @@ class ResultsWriter:
         self.directory.mkdir(parents=True, exist_ok=True)
         self._tables: dict[str, _TableFile] = {}
         self._modal_names: tuple[str, ...] | None = None
+        self._timed_points = False
+
+    def time_points(self) -> None:
+        """Give the points table its SAMPLE_TIME_COLUMN (before its first row): each row then
+        ends with its sample time."""
+        if "points" in self._tables:
+            raise ValueError("time_points() after the first points row")
+        self._timed_points = True
+
+    def _columns(self, table: str) -> dict[str, str]:
+        """A table's columns and their meaning, as written."""
+        if table == "points" and self._timed_points:
+            return {**COLUMNS[table], **SAMPLE_TIME_COLUMN}
+        return COLUMNS[table]
 
     def _table(self, table: str, header: list[str]) -> _TableFile:
         if table not in self._tables:
@@ -181,7 +202,7 @@ class ResultsWriter:
         if len(lengths) > 1:
             raise ValueError(f"{table}: columns of different lengths {sorted(lengths)}")
         length = lengths.pop() if lengths else 1
-        file = self._table(table, list(COLUMNS[table]))
+        file = self._table(table, list(self._columns(table)))
         if length:
             file.append([np.broadcast_to(a, (length,)) for a in arrays])
 
@@ -207,7 +228,7 @@ class ResultsWriter:
         for table in self._tables.values():
             table.close()
         written = [self.directory / f"{table}.csv" for table in self._tables]
-        described = {table: COLUMNS[table] for table in self._tables}
+        described = {table: self._columns(table) for table in self._tables}
         (self.directory / "columns.json").write_text(json.dumps(described, indent=2,
                                                                 ensure_ascii=False) + "\n")
         written.append(self.directory / "columns.json")

@@ -8,6 +8,9 @@ One unordered row (height 1) per reconstructed point, little-endian, in the rig'
     height_sigma     float32  one-sigma height uncertainty [m]
     miss_distance    float32  distance between camera ray and beam, Eq. 9 [m]; NaN for the line
     rejected         uint8    1: left out of the frame's fits as not on the surface
+    t                float32  when the point's image row was exposed, after the header stamp [s]
+                              (only under a rolling shutter: the camera file's readout_s; the
+                              per-point time field of lidar drivers)
 
 Recordings made before this layout carry x, y, z in mm and the fields `height_sigma_mm` and
 `miss_distance_mm`; `read_cloud` reads both layouts and gives mm, the unit of the algorithms
@@ -30,21 +33,32 @@ POINT_FIELD_TYPES = {PointField.INT8: "i1", PointField.UINT8: "u1", PointField.I
                      PointField.UINT16: "<u2", PointField.INT32: "<i4", PointField.UINT32: "<u4",
                      PointField.FLOAT32: "<f4", PointField.FLOAT64: "<f8"}
 """sensor_msgs/PointField datatype → numpy type (little-endian clouds)."""
-_DATATYPES = {np.float32: PointField.FLOAT32, np.uint16: PointField.UINT16,
-              np.uint8: PointField.UINT8}
+_DATATYPES: dict[type, int] = {np.float32: PointField.FLOAT32, np.uint16: PointField.UINT16,
+                               np.uint8: PointField.UINT8}
 MM_PER_M = 1000.0
 
 
-def cloud_dtype() -> np.dtype:
+SAMPLE_TIME_FIELD = ("t", np.float32)
+"""The per-point time field, after the header stamp [s] (a rolling shutter's clouds only)."""
+
+
+def cloud_fields(timed: bool = False) -> tuple[tuple[str, type], ...]:
+    """The fields of one cloud point, with the sample time's if `timed`."""
+    return (*CLOUD_FIELDS, SAMPLE_TIME_FIELD) if timed else CLOUD_FIELDS
+
+
+def cloud_dtype(timed: bool = False) -> np.dtype:
     """Packed layout of one cloud point."""
-    return np.dtype([(name, kind) for name, kind in CLOUD_FIELDS])
+    return np.dtype([(name, kind) for name, kind in cloud_fields(timed)])
 
 
-def points_to_cloud(header, points: SurfacePoints, rejected: ArrayLike | None = None
-                    ) -> PointCloud2:
+def points_to_cloud(header, points: SurfacePoints, rejected: ArrayLike | None = None,
+                    sample_offsets_s: ArrayLike | None = None) -> PointCloud2:
     """The PointCloud2 of reconstructed points [mm in, m out]; `rejected` marks the points
-    left out of the frame's fits."""
-    dtype = cloud_dtype()
+    left out of the frame's fits; `sample_offsets_s` (a rolling shutter's) is when each
+    point's row was exposed after the header stamp [s]."""
+    timed = sample_offsets_s is not None
+    dtype = cloud_dtype(timed)
     ids = np.asarray(points.laser_ids)
     rows = np.zeros(len(ids), dtype)
     xyz = np.asarray(points.points_mm, dtype=float).reshape(len(ids), 3)
@@ -55,12 +69,14 @@ def points_to_cloud(header, points: SurfacePoints, rejected: ArrayLike | None = 
     rows["miss_distance"] = np.asarray(points.miss_distance_mm, dtype=float) / MM_PER_M
     if rejected is not None:
         rows["rejected"] = rejected
+    if sample_offsets_s is not None:
+        rows["t"] = sample_offsets_s
     msg = PointCloud2(header=header, height=1, width=len(rows), is_bigendian=False,
                       point_step=dtype.itemsize, row_step=dtype.itemsize * len(rows),
                       is_dense=True)
     offsets = {name: dtype.fields[name][1] for name in dtype.names or ()} if dtype.fields else {}
     msg.fields = [PointField(name=name, offset=offsets[name], datatype=_DATATYPES[kind],
-                             count=1) for name, kind in CLOUD_FIELDS]
+                             count=1) for name, kind in cloud_fields(timed)]
     msg.data = rows.tobytes()
     return msg
 
@@ -71,6 +87,7 @@ class CloudPoints:
 
     points: SurfacePoints
     rejected: np.ndarray           # (N,) bool
+    sample_offsets_s: np.ndarray | None = None   # (N,) after the stamp [s]; None: untimed
 
 
 def read_cloud(msg) -> CloudPoints | None:
@@ -95,7 +112,8 @@ def read_cloud(msg) -> CloudPoints | None:
     return CloudPoints(SurfacePoints(
         rows["laser_id"].astype(int),
         np.column_stack([rows["x"], rows["y"], rows["z"]]).astype(float) * scale,
-        optional(f"height_sigma{suffix}"), optional(f"miss_distance{suffix}")), rejected)
+        optional(f"height_sigma{suffix}"), optional(f"miss_distance{suffix}")), rejected,
+        rows["t"].astype(float) if "t" in names else None)
 
 
 def stamp_s(msg) -> float:

@@ -15,14 +15,16 @@ ROOT_MAX_ITERATIONS = 100
 
 
 def ray_surface_points(surface: Surface, origins: np.ndarray, directions: np.ndarray,
-                       time_s: float) -> np.ndarray:
-    """First crossing of each ray with h(x, y, t), solved along the ray (N×3 mm).
+                       time_s: float | np.ndarray) -> np.ndarray:
+    """First crossing of each ray with h(x, y, t), solved along the ray (N×3 mm), at one time
+    [s] or at each ray's own (N: a rolling shutter's rows).
 
     Exact to ROOT_TOLERANCE_MM: the rays are sampled every BRACKET_STEP_MM through the band the
     surface can occupy, the first sign change of z − h is bracketed and refined by the Illinois
     (modified regula falsi) method. NaN where a ray meets no surface inside the container.
     """
     origins, directions = np.atleast_2d(origins), np.atleast_2d(directions)
+    times = np.broadcast_to(np.asarray(time_s, dtype=float), (len(origins),))
     bound = surface.bound_mm() + 1.0
     dz = directions[:, 2]
     downward = dz < -1e-9
@@ -33,7 +35,7 @@ def ray_surface_points(surface: Surface, origins: np.ndarray, directions: np.nda
     fraction = np.linspace(0.0, 1.0, steps)
     distances = near[:, None] + (far - near)[:, None] * fraction[None, :]
     points = origins[:, None, :] + distances[..., None] * directions[:, None, :]
-    gap = points[..., 2] - surface.height(points[..., 0], points[..., 1], time_s)
+    gap = points[..., 2] - surface.height(points[..., 0], points[..., 1], times[:, None])
     below = gap <= 0
     first = np.argmax(below, axis=1)
     found = below[np.arange(len(first)), first] & (first > 0) & downward
@@ -42,11 +44,11 @@ def ray_surface_points(surface: Surface, origins: np.ndarray, directions: np.nda
     high = distances[rows, first[rows]]
     f_low = gap[rows, first[rows] - 1]
     f_high = gap[rows, first[rows]]
-    o, d = origins[rows], directions[rows]
+    o, d, t = origins[rows], directions[rows], times[rows]
     for _ in range(ROOT_MAX_ITERATIONS):
         guess = high - f_high * (high - low) / (f_high - f_low)
         point = o + guess[:, None] * d
-        f_guess = point[:, 2] - surface.height(point[:, 0], point[:, 1], time_s)
+        f_guess = point[:, 2] - surface.height(point[:, 0], point[:, 1], t)
         above = f_guess > 0
         # Illinois: halve the value kept at the end that did not move.
         f_high = np.where(above, f_high * 0.5, f_guess)
@@ -74,8 +76,9 @@ def line_laser_rays(line: LineLaser, radius_mm: float, count: int) -> np.ndarray
 
 
 def wall_reflections(surface: Surface, points: np.ndarray, directions: np.ndarray,
-                     time_s: float, wall_height_mm: float) -> np.ndarray:
-    """Where each beam, mirrored at the surface, meets the cylinder wall (N×3 mm); NaN if above it.
+                     time_s: float | np.ndarray, wall_height_mm: float) -> np.ndarray:
+    """Where each beam, mirrored at the surface, meets the cylinder wall (N×3 mm); NaN if above it
+    (at one time [s] or at each beam's own).
 
     These are the secondary reflections the seed saw on the container wall (its Fig. 9).
     """
@@ -84,7 +87,8 @@ def wall_reflections(surface: Surface, points: np.ndarray, directions: np.ndarra
     if not valid.any():
         return result
     p, d = points[valid], directions[valid]
-    n = surface.normal(p[:, 0], p[:, 1], time_s)
+    times = np.broadcast_to(np.asarray(time_s, dtype=float), (len(points),))[valid]
+    n = surface.normal(p[:, 0], p[:, 1], times)
     r = d - 2 * np.sum(d * n, axis=1, keepdims=True) * n
     a = r[:, 0] ** 2 + r[:, 1] ** 2
     b = 2 * (p[:, 0] * r[:, 0] + p[:, 1] * r[:, 1])

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from sds_model.camera.rolling_shutter import RollingShutter
 from sds_model.geometry import RigidTransform
 
 from sds_sim.optics import line_laser_rays, ray_surface_points, wall_reflections
@@ -15,6 +16,8 @@ from sds_sim.surface import Surface
 PSF_SIGMA_PX = 0.5
 """Lens and sensor blur added to every spot and line width [px at full resolution]."""
 NOISE_BANK_MARGIN_PX = 64
+ROW_TIME_ITERATIONS = 3
+"""Fixed-point steps to the row a moving spot is exposed in (converged to 1e-6 px)."""
 SATURATION_BLEED = 0.6
 """Share of the red excess above 255 spilling into green and blue (saturated spots look white)."""
 
@@ -30,16 +33,18 @@ class FrameTruth:
 
     index: int
     time_s: float
-    spot_px: np.ndarray           # N×2 spot centres at the frame time (mid-exposure)
+    spot_px: np.ndarray           # N×2 spot centres at their row's time (mid-exposure)
     spot_exposure_px: np.ndarray  # N×2 intensity centroid over the exposure (motion blur)
-    spot_mm: np.ndarray           # N×3 world points where the beams meet the liquid
+    spot_mm: np.ndarray           # N×3 world points where the beams meet the liquid then
     visible: np.ndarray           # N, False while occluded or off the liquid
     reflection_px: np.ndarray     # N×2 wall reflections (NaN: none drawn)
     line_rows: np.ndarray         # image rows the line crosses
-    line_x_px: np.ndarray         # line centre per row at the frame time
-    line_mm: np.ndarray           # M×3 world points of the line at the frame time
+    line_x_px: np.ndarray         # line centre per row at that row's time
+    line_mm: np.ndarray           # M×3 world points of the line at their rows' times
     led_on: bool
     vibration_rad: np.ndarray     # camera roll-off about its x, y axes
+    spot_time_s: np.ndarray       # N: when each spot's centre is exposed (its row's time)
+    line_time_s: np.ndarray       # per line row: when that row is exposed
 
 
 def vibration_rad(d: Disturbances, time_s: float) -> np.ndarray:
@@ -66,6 +71,8 @@ class FrameRenderer:
         self.line_directions = (line_laser_rays(rig.line_laser, rig.container.radius_mm,
                                                 scenario.optics.line_rays)
                                 if rig.line_laser is not None else np.zeros((0, 3)))
+        sensor = scenario.sensor
+        self.shutter = RollingShutter(sensor.readout_s, sensor.readout_direction)
         self.background = self._background()
         self.occluded = self._occlusions()
         sigma = scenario.sensor.read_noise
@@ -122,7 +129,7 @@ class FrameRenderer:
                 hidden[start: start + self.rng.integers(shortest, longest + 1), diode] = True
         return hidden
 
-    def _spots(self, surface: Surface, pose: RigidTransform, time_s: float
+    def _spots(self, surface: Surface, pose: RigidTransform, time_s: float | np.ndarray
                ) -> tuple[np.ndarray, np.ndarray]:
         points = ray_surface_points(surface, self.emitters, self.directions, time_s)
         return points, self.camera.project(pose.apply(points))
@@ -146,7 +153,8 @@ class FrameRenderer:
                                                 / optics.blur_samples - 0.5)
         surface = s.surface_at(time_s)
         pose, vibration = self.pose_at(time_s)
-        spot_mm, spot_px = self._spots(surface, pose, time_s)
+        delays = self._spot_delays(surface, pose, time_s)
+        spot_mm, spot_px = self._spots(surface, pose, time_s + delays)
         visible = np.isfinite(spot_px).all(axis=1) & ~self.occluded[index]
         red = _Layer(self.height, self.width)
         exposure_px = np.zeros_like(spot_px)
@@ -157,12 +165,12 @@ class FrameRenderer:
         for t in samples:
             surface_t = s.surface_at(t)
             pose_t, _ = self.pose_at(t)
-            points, pixels = self._spots(surface_t, pose_t, t)
+            points, pixels = self._spots(surface_t, pose_t, t + delays)
             exposure_px += pixels / len(samples)
             for i in np.flatnonzero(visible & np.isfinite(pixels).all(axis=1)):
                 red.gaussian(pixels[i], covariance[i], optics.spot_peak / len(samples))
             if s.disturbances.reflection_strength > 0:
-                wall = wall_reflections(surface_t, points, self.directions, t,
+                wall = wall_reflections(surface_t, points, self.directions, t + delays,
                                         s.rig.container.height_mm - s.rig.container.fill_height_mm)
                 wall_px = self.camera.project(pose_t.apply(wall))
                 for i in np.flatnonzero(visible & np.isfinite(wall_px).all(axis=1)):
@@ -170,20 +178,50 @@ class FrameRenderer:
                                  s.disturbances.reflection_strength / len(samples))
                     reflection_px[i] = wall_px[i]
             if len(self.line_directions):
-                rows, x_px, width = self._line(self._line_points(surface_t, t), pose_t)
+                rows, x_px, width = self._line(self._timed_line_points(surface_t, pose_t, t),
+                                               pose_t)
                 red.line(rows, x_px, width, optics.line_peak / len(samples))
         if len(self.line_directions):
-            line_mm = self._line_points(surface, time_s)
+            line_mm = self._timed_line_points(surface, pose, time_s)
             line_rows, line_x, _ = self._line(line_mm, pose)
         if optics.speckle > 0:
             red.speckle(self.rng, optics.speckle)
-        led = s.events.led_on_s <= time_s < s.events.led_off_s
+        led_y = s.events.led_position_px[1] * self.scale
+        led_time_s = time_s + float(self.shutter.row_time_s(led_y, self.height))
+        led = s.events.led_on_s <= led_time_s < s.events.led_off_s
         frame = self._compose(red, vibration, led)
         truth = FrameTruth(index, time_s, spot_px, exposure_px, spot_mm, visible, reflection_px,
-                           line_rows, line_x, line_mm, led, vibration)
+                           line_rows, line_x, line_mm, led, vibration, time_s + delays,
+                           time_s + self.shutter.row_time_s(line_rows, self.height))
         return frame, truth
 
-    def _line_points(self, surface: Surface, time_s: float) -> np.ndarray:
+    def _spot_delays(self, surface: Surface, pose: RigidTransform, time_s: float
+                     ) -> np.ndarray:
+        """How long after the frame's time each spot's row is exposed [s] (zeros for a global
+        shutter): the row where the spot is then, found by fixed-point iteration (a spot
+        moves a fraction of a pixel during the readout's few ms)."""
+        delays = np.zeros(len(self.emitters))
+        if not self.shutter.readout_s:
+            return delays
+        for _ in range(ROW_TIME_ITERATIONS):
+            _, pixels = self._spots(surface, pose, time_s + delays)
+            delays = np.nan_to_num(self.shutter.row_time_s(pixels[:, 1], self.height))
+        return delays
+
+    def _timed_line_points(self, surface: Surface, pose: RigidTransform, time_s: float
+                           ) -> np.ndarray:
+        """The line's world points, each at the time its row is exposed (see _spot_delays)."""
+        times = np.full(len(self.line_directions), time_s)
+        points = self._line_points(surface, times)
+        if not self.shutter.readout_s:
+            return points
+        for _ in range(ROW_TIME_ITERATIONS):
+            rows = self.camera.project(pose.apply(points))[:, 1]
+            times = time_s + np.nan_to_num(self.shutter.row_time_s(rows, self.height))
+            points = self._line_points(surface, times)
+        return points
+
+    def _line_points(self, surface: Surface, time_s: float | np.ndarray) -> np.ndarray:
         line = self.scenario.rig.line_laser
         if line is None:   # a rig without a line laser: no line points
             return np.zeros((0, 3))

@@ -8,6 +8,8 @@ from typing import Any
 
 import numpy as np
 import yaml
+from sds_model.camera.model import CameraModelError
+from sds_model.camera.rolling_shutter import rolling_shutter
 from sds_model.mode_theory import ModeShape, mode_root, natural_frequency_hz
 from sds_model.rig import Rig, load_rig
 
@@ -48,11 +50,15 @@ class Optics:
 
 @dataclass(frozen=True)
 class Sensor:
-    """Camera sensor effects: read noise (grey levels), shot noise, background level."""
+    """Camera sensor effects: read noise (grey levels), shot noise, background level, and the
+    true camera's rolling shutter (`sds_model.camera.rolling_shutter`: each row exposed at its
+    own time)."""
 
     read_noise: float = 2.0
     shot_noise: bool = True
     background: float = 18.0
+    readout_s: float = 0.0            # rolling shutter: rows read over this time (0: global)
+    readout_direction: str = "top_to_bottom"
 
 
 @dataclass(frozen=True)
@@ -239,4 +245,9 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
         raise ScenarioError(f"{path}: duration_s and fps must be > 0 and scale in (0, 1]")
     if scenario.tilt_series_axis not in ("x", "y"):
         raise ScenarioError(f"{path}: tilt_series_axis must be x or y")
+    try:
+        rolling_shutter({"readout_s": scenario.sensor.readout_s,
+                         "readout_direction": scenario.sensor.readout_direction})
+    except CameraModelError as error:
+        raise ScenarioError(f"{path}: sensor: {error}") from None
     return scenario

@@ -116,11 +116,14 @@ def simulate(scenario: Scenario, directory: Path, codec: str = "h264",
 
 
 def _write_spots(scenario: Scenario, truths: list[FrameTruth], path: Path) -> None:
+    """One row per frame and diode; under a rolling shutter a last column `t_sample_s`: when
+    the spot's row was exposed (its position and X, Y, Z are the truth then)."""
+    timed = scenario.sensor.readout_s > 0
     with path.open("w", newline="") as file:
         writer = csv.writer(file)
         writer.writerow(["frame", "time_s", "laser_id", "ring", "x_px", "y_px", "x_exposure_px",
                          "y_exposure_px", "X_mm", "Y_mm", "Z_mm", "visible", "reflection_x_px",
-                         "reflection_y_px"])
+                         "reflection_y_px", *(["t_sample_s"] if timed else [])])
         for truth in truths:
             for i, diode in enumerate(scenario.rig.diodes):
                 writer.writerow([truth.index, f"{truth.time_s:.6f}", diode.laser_id, diode.ring,
@@ -128,7 +131,8 @@ def _write_spots(scenario: Scenario, truths: list[FrameTruth], path: Path) -> No
                                                         *truth.spot_exposure_px[i],
                                                         *truth.spot_mm[i])),
                                  int(truth.visible[i]),
-                                 *(f"{v:.6f}" for v in truth.reflection_px[i])])
+                                 *(f"{v:.6f}" for v in truth.reflection_px[i]),
+                                 *([f"{truth.spot_time_s[i]:.9f}"] if timed else [])])
 
 
 def _write_frames(scenario: Scenario, truths: list[FrameTruth], path: Path) -> None:

@@ -53,20 +53,21 @@ class Surface:
     meniscus_height_mm: float = 0.0
     meniscus_length_mm: float = 1.0
 
-    def height(self, x_mm: ArrayLike, y_mm: ArrayLike, time_s: float) -> np.ndarray:
-        """Surface height [mm] at world (x, y) [mm] and time [s]; inside the container."""
+    def height(self, x_mm: ArrayLike, y_mm: ArrayLike, time_s: ArrayLike) -> np.ndarray:
+        """Surface height [mm] at world (x, y) [mm] and time [s] (one time, or one per point:
+        a rolling shutter sees each row at its own); inside the container."""
         x, y = np.asarray(x_mm, dtype=float), np.asarray(y_mm, dtype=float)
         height = self.offset_mm - x * np.tan(self.tilt_x_rad) - y * np.tan(self.tilt_y_rad)
         for mode in self.modes:
-            q = float(mode.coordinate(time_s))
-            if q != 0.0:
+            q = mode.coordinate(time_s)
+            if np.any(q != 0.0):
                 height = height + q * mode.shape.height(x, y, self.radius_mm)
         if self.meniscus_height_mm:
             wall = self.radius_mm - np.hypot(x, y)
             height = height + self.meniscus_height_mm * np.exp(-wall / self.meniscus_length_mm)
         return height
 
-    def normal(self, x_mm: ArrayLike, y_mm: ArrayLike, time_s: float) -> np.ndarray:
+    def normal(self, x_mm: ArrayLike, y_mm: ArrayLike, time_s: ArrayLike) -> np.ndarray:
         """Unit upward normals (N×3) by central differences of the height."""
         x, y, step = np.asarray(x_mm, dtype=float), np.asarray(y_mm, dtype=float), GRADIENT_STEP_MM
         dx = (self.height(x + step, y, time_s) - self.height(x - step, y, time_s)) / (2 * step)

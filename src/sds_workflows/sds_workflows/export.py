@@ -8,11 +8,10 @@ from typing import Any
 import numpy as np
 from sds_model.rig import Rig
 from sds_model.staging import staged_folder
-from sds_recon.reconstruction import SurfacePoints
 from sds_recon.results import TABLE_FILES, ResultsWriter, refuse_results
 from sds_record.mcap_files import decoded_messages
 from sds_record.recorded_series import recording_rig
-from sds_ros.point_cloud import read_cloud, stamp_s
+from sds_ros.point_cloud import CloudPoints, read_cloud, stamp_s
 from sds_sloshing.analysis import AnalysisOptions
 from sds_sloshing.report import REPORT_FILES
 from sds_sloshing.surface_series import RecordingError
@@ -44,7 +43,7 @@ def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:
     first: float | None = None
     frames = 0
     frame_of: dict[float, int] = {}   # header stamp [s] -> frame index (clouds carry none)
-    clouds: list[tuple[float, float, SurfacePoints, np.ndarray]] = []
+    clouds: list[tuple[float, float, CloudPoints]] = []
     camera_imu: list[tuple[float, object]] = []
     sensors: list[tuple[float, str, Any]] = []   # the Arduino's IMU and ToF: stamp, topic
     for recorded, msg in decoded_messages(path):
@@ -69,7 +68,7 @@ def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:
         elif name == "sensor_msgs/msg/PointCloud2":
             cloud = read_cloud(msg)
             if cloud is not None:   # its frame is known once every spots message is read
-                clouds.append((stamp, time_s, cloud.points, cloud.rejected))
+                clouds.append((stamp, time_s, cloud))
         elif name == "sds_msgs/msg/SurfaceFit":
             _add_fit_message(tables, msg, time_s)
         elif name == "sensor_msgs/msg/Imu" and recorded.topic == CAMERA_IMU_TOPIC:
@@ -78,8 +77,9 @@ def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:
             sensors.append((stamp, recorded.topic, msg))   # the same
     if frames == 0:
         raise RecordingError(f"{path}: no laser spots (sds_msgs/LaserSpotArray) recorded")
-    for stamp, time_s, points, rejected in clouds:
-        tables.add_points(frame_of.get(stamp, -1), time_s, points, rejected)
+    for stamp, time_s, cloud in clouds:
+        tables.add_points(frame_of.get(stamp, -1), time_s, cloud.points, cloud.rejected,
+                          cloud.sample_offsets_s)
     origin = first if first is not None else 0.0
     for stamp, msg in sorted(camera_imu, key=lambda item: item[0]):
         tables.add_camera_imu_message(msg, stamp - origin)
