@@ -1,21 +1,26 @@
 """ROS 2 node: tracked spots and line profiles in, surface points (PointCloud2) and fits out.
 
 The live spots (`spots_live`, as measured before the Hampel filter) become `points_live` at
-once, for a live view; `points` and `surface_fit` come from the filtered spots."""
+once, for a live view; `points` and `surface_fit` come from the filtered spots. Under a rolling
+shutter (the camera file's readout_s) each cloud point carries its row's time and the fits are
+the surface at the frame's time (`sds_recon.instant`): a frame's cloud and fit then come when
+the next frame's spots do, the last one after IDLE_FLUSH_S without spots."""
 
 from __future__ import annotations
 
 import numpy as np
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sds_model.rig import Rig, RigError, load_rig, rig_document
+from sds_recon.instant import InstantFits, sample_offsets_s
 from sds_recon.reconstruction import (
     SurfaceFits,
     SurfacePoints,
-    reconstruct_frame,
+    fit_surface,
+    frame_points,
     reconstruct_line,
 )
 from sds_ros.hosted_node import HostedNode
-from sds_ros.point_cloud import points_to_cloud
+from sds_ros.point_cloud import points_to_cloud, stamp_s
 from sds_ros.qos import live_qos, start_when_consumed, stream_qos
 from sds_ros.static_tf import TF_STATIC_TOPIC, rig_transforms, static_tf_qos
 from sensor_msgs.msg import PointCloud2
@@ -30,6 +35,8 @@ from sds_msgs.msg import (
 from tf2_msgs.msg import TFMessage
 
 EXIT_CONFIG_ERROR = 2
+IDLE_FLUSH_S = 1.0
+"""With no spots for this long, the frame whose fits wait for a next one is fitted."""
 
 
 def surface_fit_msg(msg: LaserSpotArray, points: SurfacePoints, fits: SurfaceFits
@@ -71,6 +78,10 @@ class ReconstructionNode(HostedNode):
             self.exit_code = EXIT_CONFIG_ERROR
             self.finished.set()
             return
+        self._instant: InstantFits[int] = InstantFits(self._rig)
+        self._unfitted: dict[int, tuple[LaserSpotArray, SurfacePoints]] = {}
+        self._last_spots = self.get_clock().now()
+        self.create_timer(0.25, self._fit_if_idle)
         self._beam_weight = float(p["beam_weight"])
         self._default_sigma = float(p["default_sigma_px"])
         self._frame_id = p["frame_id"]
@@ -100,33 +111,50 @@ class ReconstructionNode(HostedNode):
         self.create_subscription(LaserSpotArray, "spots", self._on_spots, stream_qos())
         self.create_subscription(LaserLineProfile, "line", self._on_line, stream_qos())
 
-    def _reconstruct(self, msg: LaserSpotArray) -> tuple[PointCloud2, SurfacePoints, SurfaceFits]:
-        """The frame's points (Eq. 9) and fits, and the points as a cloud."""
+    def _frame_points(self, msg: LaserSpotArray) -> SurfacePoints:
+        """The frame's spots triangulated (Eq. 9), lost ones left out."""
         spots = msg.spots
-        result, fits = reconstruct_frame(
+        return frame_points(
             self._rig, [s.laser_id for s in spots], [[s.x_px, s.y_px] for s in spots],
             [s.sigma_px for s in spots], [bool(s.flags & LaserSpot.FLAG_LOST) for s in spots],
             self._beam_weight, self._default_sigma)
-        header = msg.header
-        header.frame_id = self._frame_id
-        cloud = points_to_cloud(header, result, fits.rejected, self._sample_offsets_s(result))
-        return cloud, result, fits
 
     def _sample_offsets_s(self, points: SurfacePoints) -> np.ndarray | None:
         """When each point's row was exposed after the frame's stamp [s]: a rolling shutter's
         (the camera file's readout_s); None for a global shutter (no time field)."""
-        shutter = self._rig.camera_shutter
-        if not shutter.readout_s or points.row_px is None:
+        if not self._instant.timed:
             return None
-        return shutter.row_time_s(points.row_px, self._rig.camera.height_px)
+        return sample_offsets_s(self._rig, points)
 
     def _on_live_spots(self, msg: LaserSpotArray) -> None:
-        self._live_pub.publish(self._reconstruct(msg)[0])
+        """At once, as measured: flagged by this frame's own fits."""
+        points = self._frame_points(msg)
+        fits = fit_surface(points, self._rig.container.radius_mm)
+        header = msg.header
+        header.frame_id = self._frame_id
+        self._live_pub.publish(points_to_cloud(header, points, fits.rejected,
+                                               self._sample_offsets_s(points)))
 
     def _on_spots(self, msg: LaserSpotArray) -> None:
-        cloud, result, fits = self._reconstruct(msg)
-        self._points_pub.publish(cloud)
-        self._fit_pub.publish(surface_fit_msg(msg, result, fits))
+        points = self._frame_points(msg)
+        self._unfitted[msg.frame_index] = (msg, points)
+        self._last_spots = self.get_clock().now()
+        self._publish_fitted(self._instant.push(msg.frame_index, stamp_s(msg), points))
+
+    def _publish_fitted(self, fitted: list[tuple[int, SurfaceFits]]) -> None:
+        """Each fitted frame's cloud (its points as measured, flagged by the fits) and fit."""
+        for frame_index, fits in fitted:
+            msg, points = self._unfitted.pop(frame_index)
+            header = msg.header
+            header.frame_id = self._frame_id
+            self._points_pub.publish(points_to_cloud(header, points, fits.rejected,
+                                                     self._sample_offsets_s(points)))
+            self._fit_pub.publish(surface_fit_msg(msg, points, fits))
+
+    def _fit_if_idle(self) -> None:
+        idle_s = (self.get_clock().now() - self._last_spots).nanoseconds * 1e-9
+        if self._unfitted and idle_s > IDLE_FLUSH_S:
+            self._publish_fitted(self._instant.flush())
 
     def _on_line(self, msg: LaserLineProfile) -> None:
         result = reconstruct_line(self._rig, np.column_stack([msg.x_px, msg.y_px]),

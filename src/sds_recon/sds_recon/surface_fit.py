@@ -108,6 +108,16 @@ def fit_modes(points_mm: ArrayLike, radius_mm: float,
     return ModalFit(tuple(names), amplitudes, float(np.sqrt(np.mean(residual**2))), len(points))
 
 
+def modal_heights(fit: ModalFit, xy_mm: ArrayLike, radius_mm: float,
+                  modes: tuple[tuple[int, int], ...] = DEFAULT_MODES) -> np.ndarray:
+    """The fitted modal surface's heights [mm] at world (x, y) [mm] (N×2)."""
+    xy = np.atleast_2d(np.asarray(xy_mm, dtype=float))
+    design, names = _modal_design(np.column_stack([xy, np.zeros(len(xy))]), radius_mm, modes)
+    if tuple(names) != tuple(fit.names):
+        raise ValueError(f"the fit has the terms {fit.names}, not {tuple(names)}")
+    return design @ np.asarray(fit.amplitudes_mm, dtype=float)
+
+
 def _leave_one_out(design: np.ndarray, heights: np.ndarray, rejected: np.ndarray) -> np.ndarray:
     """|Leave-one-out residual| e / (1 − h) of every point (fit on the points not rejected):
     a point that pulls the fit onto itself (leverage h) cannot hide its error. NaN where

@@ -1,10 +1,11 @@
 """The one per-frame pipeline: camera frames in, tracked spots, surface points and fits out.
 
 `FramePipeline` runs the graph's own per-frame code in one process (FrameTracker, then
-reconstruct_frame for the Hampel-filtered spots and reconstruct_line for the line, Eqs. 9–12)
-with the tracker's and reconstruction's parameters of config/graphs/drop.yaml, so that `sds
-process`, the benches, the tests and a notebook get what the graph's nodes compute. The frames
-come from `video_frames` (a video or an image folder) or `mcap_frames` (a recording's images).
+frame_points for the Hampel-filtered spots, fitted at the frame's time by InstantFits, and
+reconstruct_line for the line, Eqs. 9–12) with the tracker's and reconstruction's parameters
+of config/graphs/drop.yaml, so that `sds process`, the benches, the tests and a notebook get
+what the graph's nodes compute. The frames come from `video_frames` (a video or an image
+folder) or `mcap_frames` (a recording's images).
 """
 
 from __future__ import annotations
@@ -24,10 +25,11 @@ from sds_camera.frame_source import (
 )
 from sds_model.paths import CONFIG
 from sds_model.rig import Rig
+from sds_recon.instant import InstantFits
 from sds_recon.reconstruction import (
     SurfaceFits,
     SurfacePoints,
-    reconstruct_frame,
+    frame_points,
     reconstruct_line,
 )
 from sds_record.mcap_files import decoded_messages, recorded_topics
@@ -186,6 +188,9 @@ class FramePipeline:
         self.beam_weight = float(recon_values["beam_weight"])
         self.default_sigma_px = float(recon_values["default_sigma_px"])
         self._times_s: dict[int, float] = {}   # frames the Hampel window holds: their times
+        self.instant: InstantFits[int] = InstantFits(rig)
+        # Frames whose fits wait for the next frame (rolling shutter): time, spots, points.
+        self._unfitted: dict[int, tuple[float, list[TrackedSpot], SurfacePoints]] = {}
 
     def track(self, frame: RedFrame) -> TrackedFrame:
         """The tracker's step: spots of the frames the Hampel window releases, the line now."""
@@ -207,7 +212,7 @@ class FramePipeline:
 
     def flush(self) -> PipelineStep:
         """The frames the Hampel window still holds (at the end of the frames)."""
-        return PipelineStep(None, self._spot_frames(self.tracker.flush()))
+        return PipelineStep(None, self._spot_frames(self.tracker.flush(), end=True))
 
     def run(self, frames: Iterable[RedFrame]) -> Iterator[PipelineStep]:
         """Every frame's step, then the flush."""
@@ -215,13 +220,24 @@ class FramePipeline:
             yield self.process(frame)
         yield self.flush()
 
-    def _spot_frames(self, released: list[tuple[int, list[TrackedSpot]]]) -> list[SpotFrame]:
-        """Triangulate and fit each released frame's spots (Eq. 9, Eq. 12)."""
-        spot_frames = []
+    def _spot_frames(self, released: list[tuple[int, list[TrackedSpot]]], end: bool = False
+                     ) -> list[SpotFrame]:
+        """Triangulate each released frame's spots (Eq. 9) and fit the frames whose fits are
+        due (Eq. 12 and the modes, at the frame's time: `sds_recon.instant`); `end`: every
+        one left."""
+        fitted = []
         for index, spots in released:
-            points, fits = reconstruct_frame(
+            points = frame_points(
                 self.rig, [s.laser_id for s in spots], [[s.x_px, s.y_px] for s in spots],
                 [s.sigma_px for s in spots], [bool(s.flags & LOST) for s in spots],
                 self.beam_weight, self.default_sigma_px)
-            spot_frames.append(SpotFrame(index, self._times_s.pop(index), spots, points, fits))
+            time_s = self._times_s.pop(index)
+            self._unfitted[index] = (time_s, spots, points)
+            fitted += self.instant.push(index, time_s, points)
+        if end:
+            fitted += self.instant.flush()
+        spot_frames = []
+        for index, fits in fitted:
+            time_s, spots, points = self._unfitted.pop(index)
+            spot_frames.append(SpotFrame(index, time_s, spots, points, fits))
         return spot_frames

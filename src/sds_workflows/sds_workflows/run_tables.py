@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from sds_camera.camera_imu import CameraImu, imu_samples
 from sds_model.rig import Rig
+from sds_recon.instant import sample_offsets_s
 from sds_recon.reconstruction import LINE_LASER_ID, SurfaceFits, SurfacePoints
 from sds_recon.results import ResultsWriter
 from sds_sloshing.analysis import AnalysisOptions, analyze, with_gravity_regime
@@ -50,8 +51,8 @@ class RunTables:
     def __init__(self, writer: ResultsWriter, rig: Rig) -> None:
         self.writer = writer
         self.rig = rig
-        self._shutter = rig.camera_shutter
-        if self._shutter.readout_s:
+        self._timed = rig.camera_shutter.readout_s > 0
+        if self._timed:
             writer.time_points()
         self._kept: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # time, id, X Y Z
         self._tof: list[tuple[float, float]] = []                         # time [s], [mm]
@@ -65,19 +66,19 @@ class RunTables:
 
     def add_points(self, frame: int, time_s: float, points: SurfacePoints,
                    rejected: np.ndarray | None = None,
-                   sample_offsets_s: np.ndarray | None = None) -> None:
+                   recorded_offsets_s: np.ndarray | None = None) -> None:
         """Point rows; `rejected` marks those left out of the frame's fits (and the analysis);
-        under a rolling shutter each row's sample time is its row's (`sample_offsets_s` after
-        the frame, e.g. a recorded cloud's, else from the points' image rows)."""
+        under a rolling shutter each row's sample time is its row's (`recorded_offsets_s` after
+        the frame, a recorded cloud's, else from the points' image rows)."""
         count = len(points.laser_ids)
         flags = np.zeros(count, int) if rejected is None else np.asarray(rejected, dtype=int)
         xyz = np.asarray(points.points_mm, dtype=float).reshape(count, 3)
         columns: list[ArrayLike] = [frame, time_s, points.laser_ids, xyz[:, 0], xyz[:, 1],
                                     xyz[:, 2], points.height_sigma_mm,
                                     points.miss_distance_mm, flags]
-        if self._shutter.readout_s:
-            columns.append(time_s + (sample_offsets_s if sample_offsets_s is not None
-                                     else self.sample_offsets_s(points)))
+        if self._timed:
+            columns.append(time_s + (recorded_offsets_s if recorded_offsets_s is not None
+                                     else sample_offsets_s(self.rig, points)))
         self.writer.add_columns("points", columns)
         kept = flags == 0
         if count and np.all(np.asarray(points.laser_ids) == LINE_LASER_ID):
@@ -87,13 +88,6 @@ class RunTables:
                 return
         self._kept.append((np.full(int(kept.sum()), time_s),
                            np.asarray(points.laser_ids)[kept], xyz[kept]))
-
-    def sample_offsets_s(self, points: SurfacePoints) -> np.ndarray:
-        """How long after the frame's time each point's image row was exposed [s] (the
-        rolling shutter's; NaN where the row is not known)."""
-        rows = points.row_px if points.row_px is not None else np.full(len(points.laser_ids),
-                                                                       np.nan)
-        return self._shutter.row_time_s(rows, self.rig.camera.height_px)
 
     def add_line(self, frame: int, time_s: float, x, y, sigma, peak, flags) -> None:
         """The line's samples of a frame (arrays, one per image row)."""
