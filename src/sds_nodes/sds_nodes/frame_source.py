@@ -25,6 +25,8 @@ from sds_camera.frame_source import (
 from sds_camera.led import LedDetector
 from sds_model.camera import CameraModel as CameraModelBase
 from sds_model.camera import load_camera
+from sds_model.camera.files import read_yaml
+from sds_model.camera.rolling_shutter import RollingShutter, rolling_shutter
 from sds_ros.ack_credit import AckCredit
 from sds_ros.hosted_node import HostedNode
 from sds_ros.image_msg import image_to_msg
@@ -68,6 +70,8 @@ class FrameSourceNode(HostedNode):
             self._source = open_source(p["source"], fps=p["fps"])
             self._region = self._region_from(p["roi"])
             self._camera = self._camera_from(p["camera_model"])
+            self._shutter = rolling_shutter(read_yaml(p["camera_model"])) \
+                if p["camera_model"] else RollingShutter()
         except (FrameSourceError, OSError, ValueError) as error:
             self._fail(str(error))
             return
@@ -87,6 +91,9 @@ class FrameSourceNode(HostedNode):
         roi = [int(v) for v in p["led_roi"]]
         self._led = LedDetector((roi[0], roi[1], roi[2], roi[3])) \
             if len(roi) == 4 and roi[2] > 0 else None
+        # Under a rolling shutter the LED's rows are exposed after the frame's first row.
+        self._led_delay_ns = round(1e9 * float(self._shutter.row_time_s(
+            roi[1] + roi[3] / 2, self._source.height))) if self._led is not None else 0
         self._led_switches: dict[int, bool] = {}
         # Kept for a late subscriber (a recorder that matches after the first frames): the
         # samples of the first seconds come in a burst with the first frame.
@@ -278,8 +285,9 @@ class FrameSourceNode(HostedNode):
             self._publish_imu_until(item.time_ns * 1e-9, origin_ns)
             led_on = self._led_switches.pop(item.index, None)
             if led_on is not None:
+                led_stamp = Time(nanoseconds=stamp_ns + self._led_delay_ns).to_msg()
                 self._sync_pub.publish(SyncEvent(
-                    header=Header(stamp=stamp, frame_id=p["frame_id"]), source=p["frame_id"],
+                    header=Header(stamp=led_stamp, frame_id=p["frame_id"]), source=p["frame_id"],
                     kind=SyncEvent.KIND_LED_ON if led_on else SyncEvent.KIND_LED_OFF))
 
     def _publish(self, msg: Image) -> bool:

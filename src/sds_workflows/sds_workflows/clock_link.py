@@ -98,7 +98,11 @@ def link_clocks(video: Path, log: ArduinoLog, rig: Rig,
     led_offset = led_sigma = None
     if led_region is not None and log.led_on_s:
         camera_on, period = video_led_on_s(video, led_region)
-        offset = camera_offset_s(log.led_on_s, [t - period / 2 for t in camera_on])
+        # The LED's rows are exposed their rolling shutter's delay after the frame's time.
+        led_row = led_region[1] + led_region[3] / 2
+        row_delay_s = float(rig.camera_shutter.row_time_s(led_row, rig.camera.height_px))
+        offset = camera_offset_s(log.led_on_s,
+                                 [t + row_delay_s - period / 2 for t in camera_on])
         if np.isfinite(offset):
             led_offset, led_sigma = offset, period / np.sqrt(12)
     return ClockLinks(acceleration, led_offset, led_sigma)
