@@ -65,6 +65,7 @@ bench: setup
 	$(BIN)/python bench/rig_as_built.py
 	$(BIN)/python bench/process.py
 	$(BIN)/python bench/scaling.py
+	$(BIN)/python bench/rolling_shutter.py
 
 clean:
 	rm -rf $(BUILD) .pytest_cache .ruff_cache demo_output
