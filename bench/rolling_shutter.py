@@ -20,11 +20,11 @@ import csv
 from pathlib import Path
 
 import numpy as np
-import yaml
 from sds_model.rig import load_rig, save_rig
 from sds_recon.reconstruction import SurfacePoints, fit_surface
 from sds_recon.results import Results, load_results
 from sds_recon.surface_fit import ModalFit, modal_heights
+from sds_sim.rolling_shutter import rolling_rig, rolling_scenario
 from sds_sim.scenario import Scenario, load_scenario
 from sds_sim.simulate import SimulationOutput, simulate
 from sds_sim.true_rig import random_layout
@@ -95,21 +95,12 @@ def fit_errors(scenario: Scenario, simulation: SimulationOutput, results: Result
 def one_run(folder: Path, name: str, rig_seed: int, readout_s: float, seconds: float
             ) -> tuple[float, float, float, float]:
     """Render and process one scenario on one random rig with one readout; its four RMSEs."""
-    folder.mkdir(parents=True, exist_ok=True)
-    camera = yaml.safe_load((REPO / "config" / "cameras" / "gopro_hero5_session.yaml")
-                            .read_text())
-    camera["readout_s"] = readout_s
-    (folder / "camera.yaml").write_text(yaml.safe_dump(camera))
-    drawn = yaml.safe_load((REPO / "config" / "rigs" / "stelium.yaml").read_text())
-    drawn["camera"]["model"] = str(folder / "camera.yaml")
-    (folder / "drawn.yaml").write_text(yaml.safe_dump(drawn))
-    rig = random_layout(load_rig(folder / "drawn.yaml"), np.random.default_rng(rig_seed))
+    drawn = rolling_rig(REPO / "config" / "rigs" / "stelium.yaml", readout_s, folder / "drawn")
+    rig = random_layout(load_rig(drawn), np.random.default_rng(rig_seed))
     rig_file = save_rig(rig, folder / "rig.yaml")
-    content = yaml.safe_load((REPO / "config" / "scenarios" / f"{name}.yaml").read_text())
-    content["rig"] = str(rig_file)
-    content["sensor"] = {**content.get("sensor", {}), "readout_s": readout_s}
-    (folder / "scenario.yaml").write_text(yaml.safe_dump(content))
-    scenario = load_scenario(folder / "scenario.yaml", {"duration_s": seconds})
+    scenario = load_scenario(rolling_scenario(REPO / "config" / "scenarios" / f"{name}.yaml",
+                                              rig_file, readout_s, folder),
+                             {"duration_s": seconds})
     simulation = simulate(scenario, folder / "sim", progress=False)
     process_video(simulation.video, load_rig(rig_file), folder / "results", progress=False)
     results = load_results(folder / "results")

@@ -11,7 +11,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 from sds_camera.readout import video_readout
 from sds_model.camera.model import CameraModelError
 from sds_model.camera.rolling_shutter import RollingShutter, rolling_shutter
@@ -20,6 +19,7 @@ from sds_recon.reconstruction import SurfacePoints, fit_surface
 from sds_recon.results import load_results
 from sds_recon.surface_fit import ModalFit, modal_heights
 from sds_sim.flicker import Flicker, flicker_clip
+from sds_sim.rolling_shutter import rolling_rig, rolling_scenario
 from sds_sim.scenario import load_scenario
 from sds_sim.simulate import simulate
 
@@ -87,20 +87,11 @@ def rolling_kick(repo: Path, tmp_path_factory) -> tuple:
     """A 1 g kick filmed by a camera whose rows are read top to bottom over 20 ms, its camera
     file saying so, processed by `process_video`: the scenario and the results."""
     folder = tmp_path_factory.mktemp("rolling")
-    camera = yaml.safe_load((repo / "config" / "cameras" / "gopro_hero5_session.yaml")
-                            .read_text())
-    camera["readout_s"] = READOUT_S
-    (folder / "camera.yaml").write_text(yaml.safe_dump(camera))
-    rig = yaml.safe_load((repo / "config" / "rigs" / "stelium.yaml").read_text())
-    rig["camera"]["model"] = str(folder / "camera.yaml")
-    (folder / "rig.yaml").write_text(yaml.safe_dump(rig))
-    content = yaml.safe_load((repo / "config" / "scenarios" / "ground_kick.yaml").read_text())
-    content["rig"] = str(folder / "rig.yaml")
-    content["sensor"] = {"readout_s": READOUT_S}
-    (folder / "scenario.yaml").write_text(yaml.safe_dump(content))
-    scenario = load_scenario(folder / "scenario.yaml", {"duration_s": 1.2})
+    rig_file = rolling_rig(repo / "config" / "rigs" / "stelium.yaml", READOUT_S, folder)
+    scenario = load_scenario(rolling_scenario(repo / "config" / "scenarios" / "ground_kick.yaml",
+                                              rig_file, READOUT_S, folder), {"duration_s": 1.2})
     simulation = simulate(scenario, folder / "sim", progress=False)
-    process_video(simulation.video, load_rig(folder / "rig.yaml"), folder / "results",
+    process_video(simulation.video, load_rig(rig_file), folder / "results",
                   progress=False)
     return scenario, simulation, load_results(folder / "results")
 
