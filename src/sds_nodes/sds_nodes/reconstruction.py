@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sds_model.rig import Rig, RigError, load_rig, rig_document
-from sds_recon.instant import InstantFits, sample_offsets_s
+from sds_recon.instant import InstantFits, InstantFrame, sample_offsets_s
 from sds_recon.reconstruction import (
     SurfaceFits,
     SurfacePoints,
@@ -141,10 +141,11 @@ class ReconstructionNode(HostedNode):
         self._last_spots = self.get_clock().now()
         self._publish_fitted(self._instant.push(msg.frame_index, stamp_s(msg), points))
 
-    def _publish_fitted(self, fitted: list[tuple[int, SurfaceFits]]) -> None:
+    def _publish_fitted(self, fitted: list[InstantFrame[int]]) -> None:
         """Each fitted frame's cloud (its points as measured, flagged by the fits) and fit."""
-        for frame_index, fits in fitted:
-            msg, points = self._unfitted.pop(frame_index)
+        for instant in fitted:
+            fits = instant.fits
+            msg, points = self._unfitted.pop(instant.key)
             header = msg.header
             header.frame_id = self._frame_id
             self._points_pub.publish(points_to_cloud(header, points, fits.rejected,

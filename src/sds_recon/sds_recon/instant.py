@@ -66,9 +66,19 @@ def heights_at_frame_time(frame: TimedPoints[Key], before: TimedPoints[Key] | No
     return heights
 
 
+@dataclass(frozen=True)
+class InstantFrame(Generic[Key]):
+    """A frame's surface at its time: its fits and the spot points they used (each carried to
+    the frame's time; the points as measured for a global shutter)."""
+
+    key: Key
+    fits: SurfaceFits
+    points: SurfacePoints
+
+
 class InstantFits(Generic[Key]):
-    """Fits each frame at its time (`push` a frame, get the fits of the frame before; `flush`
-    at the end); with the rig's camera a global shutter, each frame's fits come at once."""
+    """Fits each frame at its time (`push` a frame, get the frame before; `flush` at the
+    end); with the rig's camera a global shutter, each frame comes back at once."""
 
     def __init__(self, rig: Rig) -> None:
         self.rig = rig
@@ -77,29 +87,35 @@ class InstantFits(Generic[Key]):
         self._before: TimedPoints[Key] | None = None
         self._held: TimedPoints[Key] | None = None
 
-    def push(self, key: Key, time_s: float, points: SurfacePoints
-             ) -> list[tuple[Key, SurfaceFits]]:
-        """A frame's points in; the fits the frame before can now have (or this frame's, for a
-        global shutter)."""
+    def push(self, key: Key, time_s: float, points: SurfacePoints,
+             recorded_offsets_s: np.ndarray | None = None) -> list[InstantFrame[Key]]:
+        """A frame's points in (their sample times from their image rows, or
+        `recorded_offsets_s` after `time_s`, a recorded cloud's); the frame before out, now
+        that its neighbours are known (this frame, for a global shutter)."""
         if not self.timed:
-            return [(key, fit_surface(points, self.rig.container.radius_mm))]
-        frame = TimedPoints(key, time_s, points, time_s + sample_offsets_s(self.rig, points))
+            return [InstantFrame(key, fit_surface(points, self.rig.container.radius_mm),
+                                 points)]
+        offsets = sample_offsets_s(self.rig, points) if recorded_offsets_s is None \
+            else recorded_offsets_s
+        frame = TimedPoints(key, time_s, points, time_s + offsets)
         done = self._fit(self._held, frame) if self._held is not None else []
         self._before, self._held = self._held, frame
         return done
 
-    def flush(self) -> list[tuple[Key, SurfaceFits]]:
-        """The last frame's fits (no frame after it)."""
+    def flush(self) -> list[InstantFrame[Key]]:
+        """The last frame (no frame after it)."""
         done = self._fit(self._held, None) if self._held is not None else []
         self._before = self._held = None
         return done
 
     def _fit(self, frame: TimedPoints[Key], after: TimedPoints[Key] | None
-             ) -> list[tuple[Key, SurfaceFits]]:
+             ) -> list[InstantFrame[Key]]:
         points = frame.points
         shift = heights_at_frame_time(frame, self._before, after) - points.points_mm[:, 2]
         directions = np.array([self._directions[int(i)] for i in points.laser_ids]).reshape(-1, 3)
         # Along the beam to the new height: a leaning beam's spot moves sideways too.
         moved = points.points_mm + (shift / directions[:, 2])[:, None] * directions
         at_frame_time = replace(points, points_mm=moved)
-        return [(frame.key, fit_surface(at_frame_time, self.rig.container.radius_mm))]
+        return [InstantFrame(frame.key, fit_surface(at_frame_time,
+                                                    self.rig.container.radius_mm),
+                             at_frame_time)]

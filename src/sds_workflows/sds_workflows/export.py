@@ -8,6 +8,8 @@ from typing import Any
 import numpy as np
 from sds_model.rig import Rig
 from sds_model.staging import staged_folder
+from sds_recon.instant import InstantFits
+from sds_recon.reconstruction import LINE_LASER_ID, SurfacePoints
 from sds_recon.results import TABLE_FILES, ResultsWriter, refuse_results
 from sds_record.mcap_files import decoded_messages
 from sds_record.recorded_series import recording_rig
@@ -77,9 +79,10 @@ def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:
             sensors.append((stamp, recorded.topic, msg))   # the same
     if frames == 0:
         raise RecordingError(f"{path}: no laser spots (sds_msgs/LaserSpotArray) recorded")
-    for stamp, time_s, cloud in clouds:
+    analysed = _at_frame_times(rig, clouds)
+    for position, (stamp, time_s, cloud) in enumerate(clouds):
         tables.add_points(frame_of.get(stamp, -1), time_s, cloud.points, cloud.rejected,
-                          cloud.sample_offsets_s)
+                          cloud.sample_offsets_s, analysed.get(position))
     origin = first if first is not None else 0.0
     for stamp, msg in sorted(camera_imu, key=lambda item: item[0]):
         tables.add_camera_imu_message(msg, stamp - origin)
@@ -90,6 +93,22 @@ def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:
             a = msg.linear_acceleration
             tables.add_imu(topic, stamp - origin, (a.x, a.y, a.z))
     return frames
+
+
+def _at_frame_times(rig: Rig, clouds: list[tuple[float, float, CloudPoints]]
+                    ) -> dict[int, SurfacePoints]:
+    """The spot clouds' points carried to their frames' times (`sds_recon.instant`: what the
+    reconstruction fitted), by position in `clouds`; a global shutter's as recorded."""
+    instant: InstantFits[int] = InstantFits(rig)
+    carried: dict[int, SurfacePoints] = {}
+    spots = [(time_s, position, cloud) for position, (_, time_s, cloud) in enumerate(clouds)
+             if not np.all(cloud.points.laser_ids == LINE_LASER_ID)]
+    for time_s, position, cloud in sorted(spots, key=lambda item: item[0]):
+        for frame in instant.push(position, time_s, cloud.points, cloud.sample_offsets_s):
+            carried[frame.key] = frame.points
+    for frame in instant.flush():
+        carried[frame.key] = frame.points
+    return carried
 
 
 def _add_fit_message(tables: RunTables, msg, time_s: float) -> None:

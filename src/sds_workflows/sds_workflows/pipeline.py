@@ -130,13 +130,15 @@ def _recorded_frames(path: Path) -> Iterator[RedFrame]:
 @dataclass(frozen=True)
 class SpotFrame:
     """One frame's spots once the Hampel window has released them, with their surface points
-    (Eq. 9) and the frame's fits (plane, Eq. 12, and modes)."""
+    (Eq. 9, as measured), the frame's fits (plane, Eq. 12, and modes) and the points they
+    used: at the frame's time (`sds_recon.instant`; the same points for a global shutter)."""
 
     index: int
     time_s: float
     spots: list[TrackedSpot]
     points: SurfacePoints
     fits: SurfaceFits
+    instant_points: SurfacePoints
 
 
 @dataclass(frozen=True)
@@ -237,7 +239,8 @@ class FramePipeline:
         if end:
             fitted += self.instant.flush()
         spot_frames = []
-        for index, fits in fitted:
-            time_s, spots, points = self._unfitted.pop(index)
-            spot_frames.append(SpotFrame(index, time_s, spots, points, fits))
+        for instant in fitted:
+            time_s, spots, points = self._unfitted.pop(instant.key)
+            spot_frames.append(SpotFrame(instant.key, time_s, spots, points, instant.fits,
+                                         instant.points))
         return spot_frames

@@ -66,10 +66,13 @@ class RunTables:
 
     def add_points(self, frame: int, time_s: float, points: SurfacePoints,
                    rejected: np.ndarray | None = None,
-                   recorded_offsets_s: np.ndarray | None = None) -> None:
+                   recorded_offsets_s: np.ndarray | None = None,
+                   analysed: SurfacePoints | None = None) -> None:
         """Point rows; `rejected` marks those left out of the frame's fits (and the analysis);
         under a rolling shutter each row's sample time is its row's (`recorded_offsets_s` after
-        the frame, a recorded cloud's, else from the points' image rows)."""
+        the frame, a recorded cloud's, else from the points' image rows). The analysis takes
+        `analysed` (the same points carried to the frame's time, `sds_recon.instant`) where
+        given, else the points."""
         count = len(points.laser_ids)
         flags = np.zeros(count, int) if rejected is None else np.asarray(rejected, dtype=int)
         xyz = np.asarray(points.points_mm, dtype=float).reshape(count, 3)
@@ -86,8 +89,9 @@ class RunTables:
             if (self._line_frames > LINE_FRAMES_IN_FULL
                     and self._line_frames % LINE_FRAME_STEP):
                 return
+        at_frame_time = xyz if analysed is None else np.asarray(analysed.points_mm, dtype=float)
         self._kept.append((np.full(int(kept.sum()), time_s),
-                           np.asarray(points.laser_ids)[kept], xyz[kept]))
+                           np.asarray(points.laser_ids)[kept], at_frame_time[kept]))
 
     def add_line(self, frame: int, time_s: float, x, y, sigma, peak, flags) -> None:
         """The line's samples of a frame (arrays, one per image row)."""
@@ -113,7 +117,8 @@ class RunTables:
             self.add_spots(index, time_s, [(s.laser_id, s.x_px, s.y_px, s.x_raw_px, s.y_raw_px,
                                             s.sigma_px, s.peak, s.flags)
                                            for s in spot_frame.spots])
-            self.add_points(index, time_s, spot_frame.points, spot_frame.fits.rejected)
+            self.add_points(index, time_s, spot_frame.points, spot_frame.fits.rejected,
+                            analysed=spot_frame.instant_points)
             self.add_fit(index, time_s, spot_frame.fits)
         if step.line is not None:
             line = step.line
