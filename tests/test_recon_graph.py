@@ -208,3 +208,47 @@ def test_fits_that_come_during_an_estimate_get_their_own(monkeypatch):
         probe.close()
     pencil = next(e for e in estimates if e.mode == "lateral_1" and e.method == "matrix_pencil")
     assert pencil.frequency_hz == pytest.approx(2.79, rel=1e-3)
+
+
+def test_under_a_rolling_shutter_each_point_has_its_time_and_every_frame_its_fit(repo, tmp_path):
+    """The camera file says the rows are read over 20 ms: every cloud point carries its row's
+    time after the stamp, a frame's cloud and fit come with the next frame's spots (its fit at
+    the frame's time), and the last frame's once no spots came for a second."""
+    from sds_ros.point_cloud import read_cloud
+    from sds_sim.rolling_shutter import rolling_rig
+
+    rig_file = rolling_rig(repo / "config" / "rigs" / "stelium.yaml", 0.02, tmp_path)
+    rig = load_rig(rig_file)
+    surface = Surface(55.0, (), np.radians(TILT_DEG), 0.0, 2.0)   # still: the same each time
+    emitters = np.array([d.emitter_mm for d in rig.diodes])
+    directions = np.array([d.direction for d in rig.diodes])
+    pixels = rig.project(ray_surface_points(surface, emitters, directions, 0.0))
+    probe = Probe("rolling_probe")
+    graph = SdsGraphRun("recon.yaml", "--set", f"recon.rig={rig_file}")
+    try:
+        clouds = probe.collect(PointCloud2, "/recon/points", stream_qos())
+        fits = probe.collect(SurfaceFit, "/recon/surface_fit", stream_qos())
+        spots_pub = probe.node.create_publisher(LaserSpotArray, "/tracker/spots", stream_qos())
+        assert wait_until(lambda: spots_pub.get_subscription_count() > 0), graph.output()
+        for frame in range(3):
+            message = LaserSpotArray(frame_index=frame)
+            message.header.stamp.sec = 100 + frame
+            message.spots = [LaserSpot(laser_id=d.laser_id, x_px=x, y_px=y, sigma_px=0.05)
+                             for d, (x, y) in zip(rig.diodes, pixels, strict=True)]
+            spots_pub.publish(message)
+            if frame == 1:
+                assert wait_until(lambda: len(fits) == 1), graph.output()
+                time.sleep(0.3)
+                assert len(fits) == 1 and fits[0].frame_index == 0   # frame 1 waits for 2
+        assert wait_until(lambda: len(fits) == 3 and len(clouds) == 3, timeout=10), \
+            graph.output()
+    finally:
+        probe.close()
+        graph.stop()
+    assert [f.frame_index for f in fits] == [0, 1, 2]
+    assert all(np.degrees(f.tilt_x_rad) == pytest.approx(TILT_DEG, abs=1e-6) for f in fits)
+    cloud = read_cloud(clouds[0])
+    assert cloud is not None and cloud.sample_offsets_s is not None
+    rows = {d.laser_id: y for d, (_, y) in zip(rig.diodes, pixels, strict=True)}
+    expected = np.array([0.02 * rows[int(i)] / 2160 for i in cloud.points.laser_ids])
+    np.testing.assert_allclose(cloud.sample_offsets_s, expected, rtol=1e-5)
