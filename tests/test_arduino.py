@@ -141,7 +141,7 @@ def arriving_in_batches(seconds: float, seed: int) -> tuple[np.ndarray, np.ndarr
     return true_s * (1 + 40e-6), reads_s[np.searchsorted(reads_s, ready_s)]
 
 
-@pytest.mark.parametrize("led_at_s, camera_sees_s", [(1.3, 1.45), (40.0, 40.2)])
+@pytest.mark.parametrize("led_at_s, camera_sees_s", [(1.3, 1.45), (0.3, 0.45), (40.0, 40.2)])
 def test_stamps_are_on_one_clock_and_never_go_back(led_at_s: float,
                                                    camera_sees_s: float) -> None:
     """Records arrive in batches; the sync LED at `led_at_s` (device), seen by the camera at
@@ -167,6 +167,9 @@ def test_stamps_are_on_one_clock_and_never_go_back(led_at_s: float,
     on_camera = led_at_s < 30.0
     expected = true_host_s + (camera_offset_s if on_camera else 0.0)
     assert stamper.clock is (StampClock.CAMERA if on_camera else StampClock.HOST)
+    if on_camera:   # the LED's switch-on is the camera's, even when it came before settling
+        camera_led_s = 1000.0 + led_at_s + camera_offset_s
+        assert abs(stamps[led_index] - camera_led_s) < 1e-6
     # Late by the lowest delay seen (0.1 ms and the wait for a read): a bias, no scatter.
     errors_s = stamps - expected
     assert np.abs(errors_s).max() < 1.5e-3 and np.ptp(errors_s[len(errors_s) // 4:]) < 1e-3

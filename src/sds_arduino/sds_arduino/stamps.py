@@ -118,6 +118,10 @@ class RecordStamper(Generic[Item]):
 
     def _pop_all(self) -> list[Stamped[Item]]:
         released = []
+        if self.clock is StampClock.CAMERA:
+            # The mapping may have been refined since the link: the LED's switch-on must map
+            # to the camera's own time of it, with the mapping the records get now.
+            self._link()
         shift_s = self.camera_offset_s if self.clock is StampClock.CAMERA else 0.0
         while self._held:
             item, device_s, clock_map = self._held.popleft()
