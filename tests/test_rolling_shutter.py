@@ -198,3 +198,18 @@ def test_the_analysis_takes_each_frames_surface_at_the_frames_time(rolling_kick,
     errors = z - true_heights(scenario, times[found], x, y)
     assert found.sum() > 300 and float(np.sqrt(np.mean(errors**2))) <= 0.1
     tables.writer.close()
+
+
+def test_each_spot_message_carries_its_rows_time(repo: Path, tmp_path: Path) -> None:
+    from sds_nodes.tracker import spots_msg
+    from sds_tracker.tracker import TrackedSpot
+    from std_msgs.msg import Header
+
+    spots = [TrackedSpot(1, 100.0, 1080.0, 100.0, 1080.0, 0.05, 200.0, 0),
+             TrackedSpot(2, np.nan, np.nan, np.nan, np.nan, 0.0, 0.0, 1)]   # lost
+    rolling = load_rig(rolling_rig(repo / "config" / "rigs" / "stelium.yaml", READOUT_S,
+                                   tmp_path))
+    found, lost = spots_msg(Header(), 0, spots, rolling).spots
+    assert found.t_offset_s == pytest.approx(READOUT_S * 1080 / 2160) and np.isnan(lost.t_offset_s)
+    still = spots_msg(Header(), 0, spots, load_rig(repo / "config" / "rigs" / "stelium.yaml"))
+    assert still.spots[0].t_offset_s == 0.0

@@ -9,7 +9,7 @@ from __future__ import annotations
 from collections import deque
 
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from sds_model.rig import load_rig
+from sds_model.rig import Rig, load_rig
 from sds_ros.hosted_node import HostedNode
 from sds_ros.image_msg import msg_to_image
 from sds_ros.qos import live_qos, start_when_consumed, stream_qos
@@ -34,12 +34,16 @@ WAITING_FRAMES = 30
 """Frames kept while the camera_model (region offset) has not arrived yet."""
 
 
-def spots_msg(header: Header, frame: int, spots: list[TrackedSpot]) -> LaserSpotArray:
-    """One frame's spots as a LaserSpotArray."""
+def spots_msg(header: Header, frame: int, spots: list[TrackedSpot], rig: Rig
+              ) -> LaserSpotArray:
+    """One frame's spots as a LaserSpotArray, each with its row's time (the rig camera's
+    rolling shutter)."""
+    offsets = rig.camera_shutter.row_time_s([spot.y_px for spot in spots], rig.camera.height_px)
     return LaserSpotArray(header=header, frame_index=frame, spots=[
         LaserSpot(laser_id=spot.laser_id, x_px=spot.x_px, y_px=spot.y_px,
                   sigma_px=float(spot.sigma_px), x_raw_px=spot.x_raw_px, y_raw_px=spot.y_raw_px,
-                  peak_intensity=float(spot.peak), flags=int(spot.flags)) for spot in spots])
+                  peak_intensity=float(spot.peak), flags=int(spot.flags),
+                  t_offset_s=float(offset)) for spot, offset in zip(spots, offsets, strict=True)])
 
 
 PARAMETERS = {"rig": "", "ack": True, **TRACKING_PARAMETERS, "lost_report_frames": 15,
@@ -56,6 +60,7 @@ class TrackerNode(HostedNode):
         self._p = self.declare_parameter_table(PARAMETERS)
         try:
             rig = load_rig(self._p["rig"])
+            self._rig = rig
             values = {name: self._p[name] for name in TRACKING_PARAMETERS}
             self._tracker = FrameTracker(rig, tracker_config(values), parse_seeds(values["seeds"]))
         except (OSError, ValueError) as error:  # RigError is a ValueError
@@ -133,7 +138,7 @@ class TrackerNode(HostedNode):
         ready, line = self._tracker.process(frame, red, self._offset)
         live = self._tracker.unfiltered(frame)
         if live:
-            self._live_pub.publish(spots_msg(msg.header, frame, live))
+            self._live_pub.publish(spots_msg(msg.header, frame, live, self._rig))
         self._publish_spots(ready)
         self._line_pub.publish(LaserLineProfile(
             header=msg.header, frame_index=frame, x_px=line.x_px.tolist(),
@@ -152,7 +157,8 @@ class TrackerNode(HostedNode):
         headers = dict(self._headers)
         for frame, spots in ready:
             self._report_lost(frame, spots)
-            self._spots_pub.publish(spots_msg(headers.get(frame, Header()), frame, spots))
+            self._spots_pub.publish(spots_msg(headers.get(frame, Header()), frame, spots,
+                                              self._rig))
 
     def _flush_if_idle(self) -> None:
         idle = (self.get_clock().now() - self._last_frame_time).nanoseconds * 1e-9
