@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import yaml
 from sds_model.rig import RigError, load_rig
-from sds_ros.graph_file import GraphFileError, apply_overrides, load_graph
+from sds_ros.graph_file import GraphFileError, apply_overrides, check_plugins, load_graph
 from sds_sim.scenario import ScenarioError, load_scenario
 
 SDS = str(Path(sys.executable).with_name("sds"))
@@ -69,7 +69,7 @@ def test_an_unknown_plugin_is_named_before_any_process_starts(tmp_path: Path) ->
     path = tmp_path / "typo.yaml"
     path.write_text(yaml.safe_dump(graph))
     with pytest.raises(GraphFileError, match=r"no class \w+X in .*did you mean"):
-        load_graph(path)
+        check_plugins(load_graph(path))
     graph["nodes"][1]["plugin"] = "sds_nodes.no_such_module:Node"
     path.write_text(yaml.safe_dump(graph))
     done = sds("graph", str(path))

@@ -22,7 +22,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import IO
 
-from sds_ros.graph_file import NodeEntry
+from sds_ros.graph_file import NodeEntry, check_plugins
 
 _PR_SET_PDEATHSIG = 1
 GRACE_PERIOD_S = 10.0
@@ -98,6 +98,7 @@ class Launcher:
         grace_period_s: float = GRACE_PERIOD_S,
         console: IO[str] | None = None,
     ) -> None:
+        check_plugins(entries)   # a wrong plugin is named before any process starts
         self.processes = group_processes(entries)
         self.env = env
         self.output = output or sys.stdout

@@ -62,10 +62,6 @@ def load_graph(path: str | Path) -> list[NodeEntry]:
     duplicates = sorted({name for name in names if names.count(name) > 1})
     if duplicates:
         raise GraphFileError(f"{path}: node names used twice: {', '.join(duplicates)}")
-    for index, entry in enumerate(entries):
-        missing = _missing_plugin(entry.plugin)
-        if missing:
-            raise GraphFileError(f"{path}: nodes[{index}]: plugin {entry.plugin!r}: {missing}")
     return entries
 
 
@@ -83,9 +79,19 @@ MOVED_PLUGINS = {
 """Plugins of graph files written before the nodes moved into `sds_nodes` (2026-12)."""
 
 
+def check_plugins(entries: list[NodeEntry]) -> None:
+    """GraphFileError naming the first node whose plugin names no node class, found without
+    importing a module: a launcher calls this before it starts any process (reading a graph
+    for its parameters does not need it)."""
+    for entry in entries:
+        missing = _missing_plugin(entry.plugin)
+        if missing:
+            raise GraphFileError(f"node {entry.name!r}: plugin {entry.plugin!r}: {missing}")
+
+
 def _missing_plugin(plugin: str) -> str:
-    """Why 'package.module:Class' names no node class ('' when it does), found without
-    importing the module: the launcher learns it before any process starts."""
+    """Why 'package.module:Class' names no node class ('' when it does), from the module's
+    source."""
     module_name, _, class_name = plugin.partition(":")
     if not module_name or not class_name:
         return "must look like 'package.module:Class'"
