@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import logging
 import os
 import sys
 
@@ -68,10 +67,12 @@ def interrupted() -> int:
 
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the `sds` command: bad input is one line and exit code 2."""
-    # The libraries' warnings (e.g. an unfinished recording read up to its last chunk).
-    logging.basicConfig(format="sds: %(message)s", level=logging.WARNING)
     try:
         args = build_parser().parse_args(argv)
+        # The libraries' warnings (e.g. an unfinished recording read up to its last chunk);
+        # imported here so that `sds --help` does not pay for logging.
+        import logging
+        logging.basicConfig(format="sds: %(message)s", level=logging.WARNING)
         code = args.run(args)
     except KeyboardInterrupt:   # Ctrl-C outside a graph (a graph stops on its own signal)
         code = interrupted()
