@@ -8,6 +8,8 @@ the next frame's spots do, the last one after IDLE_FLUSH_S without spots."""
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sds_model.rig import Rig, RigError, load_rig, rig_document
@@ -22,6 +24,7 @@ from sds_recon.reconstruction import (
 from sds_ros.hosted_node import HostedNode
 from sds_ros.point_cloud import points_to_cloud, stamp_s
 from sds_ros.qos import live_qos, start_when_consumed, stream_qos
+from sds_ros.shedding import LiveShedding, lag_s
 from sds_ros.static_tf import TF_STATIC_TOPIC, rig_transforms, static_tf_qos
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import String
@@ -61,7 +64,7 @@ def surface_fit_msg(msg: LaserSpotArray, points: SurfacePoints, fits: SurfaceFit
 
 
 PARAMETERS = {"rig": "", "beam_weight": 0.5, "default_sigma_px": 0.1, "frame_id": "world",
-              "wait_for_consumers": 0, "wait_for_fit_consumers": 0}
+              "wait_for_consumers": 0, "wait_for_fit_consumers": 0, "live_max_lag_s": 0.1}
 """The node's parameters and defaults (config/params/recon.yaml documents each)."""
 
 
@@ -82,6 +85,8 @@ class ReconstructionNode(HostedNode):
         self._unfitted: dict[int, tuple[LaserSpotArray, SurfacePoints]] = {}
         self._last_spots = self.get_clock().now()
         self.create_timer(0.25, self._fit_if_idle)
+        self._shedding = LiveShedding("points_live", float(p["live_max_lag_s"]))
+        self.create_timer(1.0, self._report_shedding)
         self._beam_weight = float(p["beam_weight"])
         self._default_sigma = float(p["default_sigma_px"])
         self._frame_id = p["frame_id"]
@@ -127,13 +132,20 @@ class ReconstructionNode(HostedNode):
         return sample_offsets_s(self._rig, points)
 
     def _on_live_spots(self, msg: LaserSpotArray) -> None:
-        """At once, as measured: flagged by this frame's own fits."""
+        """At once, as measured: flagged by this frame's own fits (shed when late)."""
+        if not self._shedding.keep(lag_s(self, msg.header)):
+            return
         points = self._frame_points(msg)
         fits = fit_surface(points, self._rig.container.radius_mm)
         header = msg.header
         header.frame_id = self._frame_id
         self._live_pub.publish(points_to_cloud(header, points, fits.rejected,
                                                self._sample_offsets_s(points)))
+
+    def _report_shedding(self) -> None:
+        line = self._shedding.report(time.monotonic())
+        if line:
+            self.get_logger().warning(line)
 
     def _on_spots(self, msg: LaserSpotArray) -> None:
         points = self._frame_points(msg)

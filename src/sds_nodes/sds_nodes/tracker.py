@@ -6,6 +6,7 @@ to close (hampel_window // 2 frames later)."""
 
 from __future__ import annotations
 
+import time
 from collections import deque
 
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -13,6 +14,7 @@ from sds_model.rig import Rig, load_rig
 from sds_ros.hosted_node import HostedNode
 from sds_ros.image_msg import msg_to_image
 from sds_ros.qos import live_qos, start_when_consumed, stream_qos
+from sds_ros.shedding import LiveShedding, lag_s
 from sds_tracker.spots import LOST
 from sds_tracker.tracker import (
     TRACKING_PARAMETERS,
@@ -47,7 +49,7 @@ def spots_msg(header: Header, frame: int, spots: list[TrackedSpot], rig: Rig
 
 
 PARAMETERS = {"rig": "", "ack": True, **TRACKING_PARAMETERS, "lost_report_frames": 15,
-              "wait_for_consumers": 0}
+              "wait_for_consumers": 0, "live_max_lag_s": 0.1}
 """The node's parameters and defaults: the tracking ones from `sds_tracker.tracker` (shared with
 `sds process`), and the node's own (config/params/tracker.yaml documents each)."""
 
@@ -83,7 +85,9 @@ class TrackerNode(HostedNode):
         self._last_frame_time = self.get_clock().now()
         self._flushed = True
         self._lost_streak: dict[int, int] = {}
+        self._shedding = LiveShedding("spots_live", float(self._p["live_max_lag_s"]))
         self.create_timer(0.25, self._flush_if_idle)
+        self.create_timer(1.0, self._report_shedding)
         # No frame is taken before the spots have their consumers: none is lost to them.
         start_when_consumed(self, [(self._spots_pub, int(self._p["wait_for_consumers"]))],
                             lambda: self._subscribe_inputs(latched, reliable))
@@ -137,7 +141,7 @@ class TrackerNode(HostedNode):
         self._headers.append((frame, msg.header))
         ready, line = self._tracker.process(frame, red, self._offset)
         live = self._tracker.unfiltered(frame)
-        if live:
+        if live and self._shedding.keep(lag_s(self, msg.header)):
             self._live_pub.publish(spots_msg(msg.header, frame, live, self._rig))
         self._publish_spots(ready)
         self._line_pub.publish(LaserLineProfile(
@@ -159,6 +163,11 @@ class TrackerNode(HostedNode):
             self._report_lost(frame, spots)
             self._spots_pub.publish(spots_msg(headers.get(frame, Header()), frame, spots,
                                               self._rig))
+
+    def _report_shedding(self) -> None:
+        line = self._shedding.report(time.monotonic())
+        if line:
+            self.get_logger().warning(line)
 
     def _flush_if_idle(self) -> None:
         idle = (self.get_clock().now() - self._last_frame_time).nanoseconds * 1e-9

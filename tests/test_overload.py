@@ -1,0 +1,95 @@
+"""A chain behind its camera sheds the live previews, says so, and keeps every recorded result."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+from builtin_interfaces.msg import Time
+from ros_helpers import Probe, SdsGraphRun, wait_until
+from sds_model.rig import load_rig
+from sds_ros.qos import live_qos, stream_qos
+from sds_ros.shedding import REPORT_PERIOD_S, LiveShedding
+from sensor_msgs.msg import PointCloud2
+from std_msgs.msg import Header
+
+from sds_msgs.msg import LaserSpot, LaserSpotArray
+
+
+def test_shedding_counts_late_frames_against_the_fastest_and_says_so():
+    shedding = LiveShedding("points_live", max_lag_s=0.1)
+    # Stamps on another clock: a constant 100 s offset is no lateness.
+    assert all(shedding.keep(100.0 + jitter) for jitter in (0.02, 0.0, 0.05, 0.01))
+    assert shedding.report(0.0) is None
+    assert not shedding.keep(100.5) and not shedding.keep(100.3)
+    assert shedding.keep(100.08)
+    started = shedding.report(1.0)
+    assert started is not None and "shedding the frames more than 100 ms late" in started
+    assert "up to 0.50 s" in started
+    for _ in range(8):
+        shedding.keep(101.0)
+    assert shedding.report(2.0) is None          # within the report period: quiet
+    summary = shedding.report(1.0 + REPORT_PERIOD_S)
+    assert summary is not None and "shed 8 of 8 frames" in summary
+    shedding.keep(100.01)
+    ended = shedding.report(12.0)
+    assert ended is not None and "back in time, 10 frames shed" in ended
+    assert shedding.report(13.0) is None
+
+
+@pytest.mark.ros
+def test_recon_sheds_late_live_spots_and_keeps_every_recorded_frame(repo):
+    rig_file = repo / "config" / "rigs" / "stelium.yaml"
+    rig = load_rig(rig_file)
+    pixels = rig.project(np.array([[d.emitter_mm[0], d.emitter_mm[1], 0.0]
+                                   for d in rig.diodes]))
+    probe = Probe("overload_probe")
+    graph = SdsGraphRun("recon.yaml", "--set", f"recon.rig={rig_file}")
+    try:
+        live = probe.collect(PointCloud2, "/recon/points_live", live_qos())
+        clouds = probe.collect(PointCloud2, "/recon/points", stream_qos())
+        live_pub = probe.node.create_publisher(LaserSpotArray, "/tracker/spots_live",
+                                               live_qos())
+        spots_pub = probe.node.create_publisher(LaserSpotArray, "/tracker/spots", stream_qos())
+        assert wait_until(lambda: live_pub.get_subscription_count() > 0
+                          and spots_pub.get_subscription_count() > 0), graph.output()
+
+        def frame(index: int, late_s: float) -> LaserSpotArray:
+            now_ns = time.time_ns() - round(late_s * 1e9)
+            stamp = Time(sec=now_ns // 10**9, nanosec=now_ns % 10**9)
+            return LaserSpotArray(header=Header(stamp=stamp), frame_index=index, spots=[
+                LaserSpot(laser_id=d.laser_id, x_px=x, y_px=y, sigma_px=0.05)
+                for d, (x, y) in zip(rig.diodes, pixels, strict=True)])
+
+        # Until the best-effort live cloud has matched this probe: frames on time, not recorded.
+        warm_up = 100
+        while not live and warm_up < 200:
+            live_pub.publish(frame(warm_up, 0.0))
+            warm_up += 1
+            time.sleep(0.05)
+        assert live, graph.output()
+        live.clear()
+        clouds.clear()
+        # Frames 0-4 on time, 5-9 half a second late (the chain behind its camera).
+        on_time = set()
+        for index in range(10):
+            message = frame(index, 0.0 if index < 5 else 0.5)
+            if index < 5:
+                on_time.add(stamp_ns(message.header))
+            live_pub.publish(message)
+            spots_pub.publish(message)
+            time.sleep(0.05)
+        assert wait_until(lambda: len(clouds) == 10), graph.output()
+        graph.wait_for_line("points_live: shedding the frames more than 100 ms late", 10.0)
+        time.sleep(0.5)   # any live cloud of a late frame would have come by now
+    finally:
+        probe.close()
+        graph.stop()
+    # Every frame's recorded cloud came; the live ones only for the frames on time.
+    assert len({stamp_ns(m.header) for m in clouds}) == 10
+    assert {stamp_ns(m.header) for m in live} == on_time
+
+
+def stamp_ns(header: Header) -> int:
+    return header.stamp.sec * 10**9 + header.stamp.nanosec
