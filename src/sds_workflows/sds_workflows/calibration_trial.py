@@ -326,12 +326,29 @@ def _normalised_errors(result: RigCalibration, nominal: Rig, true: Rig,
     return NormalisedErrors(rms(camera), rms(beams), rms(surfaces))
 
 
-def as_built_trial(seed: int, rig_file: Path, scale: float = 1.0,
-                   as_built: AsBuilt | None = None, drop: bool = True) -> dict[str, Any]:
-    """Calibrate a random rig as built (seeded) by the README's protocol, with its tolerances
-    declared, with them declared ten times too tight, and as today's model (emitters and the
-    table exact); check each on an unseen series about the diagonal and (with `drop`) the
-    declared one on a 1 g sloshing drop."""
+@dataclass(frozen=True)
+class FirstUse:
+    """A random rig as built, what its user has (the rig file, the protocol's readings and
+    images) and its calibration by the README's protocol with the tolerances declared."""
+
+    true: Rig
+    nominal: Rig
+    readings: list[KnownSurface]
+    truths: list[KnownSurface]
+    series: TiltSeries
+    result: RigCalibration
+    found: CalibrationImages
+
+    @property
+    def calibrated(self) -> Rig:
+        """The rig the calibration gives, as `sds calibrate rig` writes it."""
+        return calibrated_rig(self.nominal, self.result)
+
+
+def first_use(seed: int, rig_file: Path, scale: float = 1.0, as_built: AsBuilt | None = None
+              ) -> FirstUse:
+    """A random rig as built (seeded: layout, leans, camera pose, emitters, camera file off by
+    its σ, the table's readings off by their accuracy) calibrated by the README's protocol."""
     as_built = as_built or AsBuilt()
     rng = np.random.default_rng(seed)
     base = load_rig(rig_file)
@@ -342,11 +359,24 @@ def as_built_trial(seed: int, rig_file: Path, scale: float = 1.0,
     readings = protocol_readings()
     truths = true_surfaces(readings, as_built.readings, rng)
     series = render_surfaces(true, truths, scale, seed)
-    camera = base.camera.scaled(scale)
-    nominal = replace(designed, camera=camera,
+    nominal = replace(designed, camera=base.camera.scaled(scale),
                       tolerances=Tolerances(emitter_mm=as_built.declared_emitter_mm))
     result, found = calibrate_images(nominal, series.images, declared(readings,
                                                                      as_built.readings))
+    return FirstUse(true, nominal, readings, truths, series, result, found)
+
+
+def as_built_trial(seed: int, rig_file: Path, scale: float = 1.0,
+                   as_built: AsBuilt | None = None, drop: bool = True) -> dict[str, Any]:
+    """Calibrate a random rig as built (seeded) by the README's protocol, with its tolerances
+    declared, with them declared ten times too tight, and as today's model (emitters and the
+    table exact); check each on an unseen series about the diagonal and (with `drop`) the
+    declared one on a 1 g sloshing drop."""
+    as_built = as_built or AsBuilt()
+    first = first_use(seed, rig_file, scale, as_built)
+    true, nominal, readings, truths, series = (first.true, first.nominal, first.readings,
+                                               first.truths, first.series)
+    result, found = first.result, first.found
     tight, _ = calibrate_images(nominal, series.images,
                                 declared(readings, as_built.readings, factor=0.1))
     today, _ = calibrate_images(replace(nominal, tolerances=Tolerances(), camera_sigma={}),
@@ -356,7 +386,7 @@ def as_built_trial(seed: int, rig_file: Path, scale: float = 1.0,
                if sum(t.visible[i] for t in series.truths) >= 3]
     other = render_surfaces(true, diagonal_surfaces(), scale, seed + 1000)
     scaled_true = replace(true, camera=true.camera.scaled(scale))
-    rigs = {"declared": calibrated_rig(nominal, result), "today": calibrated_rig(
+    rigs = {"declared": first.calibrated, "today": calibrated_rig(
         replace(nominal, tolerances=Tolerances(), camera_sigma={}), today)}
     return {"seed": seed, "wrong": wrong, "spots": len(result.diode),
             "calibrated": list(result.laser_ids), "unidentified": dict(result.unidentified),
