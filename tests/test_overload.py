@@ -6,15 +6,18 @@ import time
 
 import numpy as np
 import pytest
+import yaml
 from builtin_interfaces.msg import Time
-from ros_helpers import Probe, SdsGraphRun, wait_until
+from ros_helpers import LATCHED, RELIABLE, Probe, SdsGraphRun, wait_until
 from sds_model.rig import load_rig
+from sds_ros.frame_gaps import FrameGaps
+from sds_ros.image_msg import image_to_msg
 from sds_ros.qos import live_qos, stream_qos
 from sds_ros.shedding import REPORT_PERIOD_S, LiveShedding
-from sensor_msgs.msg import PointCloud2
+from sensor_msgs.msg import Image, PointCloud2
 from std_msgs.msg import Header
 
-from sds_msgs.msg import LaserSpot, LaserSpotArray
+from sds_msgs.msg import CameraModel, LaserSpot, LaserSpotArray
 
 
 def test_shedding_counts_late_frames_against_the_fastest_and_says_so():
@@ -93,3 +96,52 @@ def test_recon_sheds_late_live_spots_and_keeps_every_recorded_frame(repo):
 
 def stamp_ns(header: Header) -> int:
     return header.stamp.sec * 10**9 + header.stamp.nanosec
+
+
+def test_frame_gaps_count_the_frames_between_two_stamps():
+    gaps = FrameGaps()
+    stamps = [100.0 + k / 30 + (0.002 if k % 2 else 0.0) for k in range(40)]
+    del stamps[25:28]   # three frames never came
+    del stamps[10]      # and one more, before the period is known: not counted
+    missing = [gaps.missed(t) for t in stamps]
+    assert sum(missing) == 3 and missing[24] == 3
+    assert gaps.missed(5.0) == 0 and gaps.missed(5.1) == 0   # a new stream: period relearnt
+
+
+@pytest.mark.ros
+def test_the_tracker_numbers_frames_by_their_stamps_and_says_which_never_came(repo, tmp_path):
+    rig_file = repo / "config" / "rigs" / "stelium.yaml"
+    graph_file = tmp_path / "tracker.yaml"
+    graph_file.write_text(yaml.safe_dump({"nodes": [{
+        "name": "tracker", "plugin": "sds_nodes.tracker:TrackerNode",
+        "params": str(repo / "config" / "params" / "tracker.yaml"),
+        "parameters": {"rig": str(rig_file), "ack": False},
+        "remap": {"image": "/camera/image", "camera_model": "/camera/camera_model",
+                  "spots": "/tracker/spots"}}]}))
+    probe = Probe("gaps_probe")
+    graph = SdsGraphRun(str(graph_file))
+    try:
+        spots = probe.collect(LaserSpotArray, "/tracker/spots", stream_qos())
+        model_pub = probe.node.create_publisher(CameraModel, "/camera/camera_model", LATCHED)
+        image_pub = probe.node.create_publisher(Image, "/camera/image", RELIABLE)
+        assert wait_until(lambda: image_pub.get_subscription_count() > 0), graph.output()
+        model_pub.publish(CameraModel(channel="red", full_width=3840, full_height=2160))
+        image = np.zeros((64, 64), np.uint8)
+        sent = [k for k in range(40) if not 25 <= k < 28]   # frames 25-27 never sent
+        for k in sent:
+            image_pub.publish(image_to_msg(image, Time(sec=1000 + k // 30,
+                                                       nanosec=round(k % 30 / 30 * 1e9)),
+                                           "camera_optical"))
+            time.sleep(0.01)
+        graph.wait_for_line("3 frame(s) missing before frame", 15.0)
+        # The Hampel window's last frames come after 1 s without a frame.
+        last = Time(sec=1001, nanosec=round(9 / 30 * 1e9))
+        assert wait_until(lambda: spots and spots[-1].header.stamp == last, 15.0), graph.output()
+    finally:
+        probe.close()
+        graph.stop()
+    # (A volatile reader may miss the very first frame, before the period is known.)
+    numbers = [m.frame_index for m in spots]
+    steps = np.diff(numbers)
+    assert len(numbers) >= len(sent) - 1 and sorted(steps)[-1] == 4 and (steps[:-1] >= 1).all()
+    assert set(steps) == {1, 4}, numbers

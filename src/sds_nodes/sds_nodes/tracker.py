@@ -11,8 +11,10 @@ from collections import deque
 
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sds_model.rig import Rig, load_rig
+from sds_ros.frame_gaps import FrameGaps
 from sds_ros.hosted_node import HostedNode
 from sds_ros.image_msg import msg_to_image
+from sds_ros.point_cloud import stamp_s
 from sds_ros.qos import live_qos, start_when_consumed, stream_qos
 from sds_ros.shedding import LiveShedding, lag_s
 from sds_tracker.spots import LOST
@@ -85,6 +87,7 @@ class TrackerNode(HostedNode):
         self._last_frame_time = self.get_clock().now()
         self._flushed = True
         self._lost_streak: dict[int, int] = {}
+        self._gaps = FrameGaps()
         self._shedding = LiveShedding("spots_live", float(self._p["live_max_lag_s"]))
         self.create_timer(0.25, self._flush_if_idle)
         self.create_timer(1.0, self._report_shedding)
@@ -136,6 +139,14 @@ class TrackerNode(HostedNode):
         assert self._offset is not None   # _on_image keeps frames until the model comes
         image = msg_to_image(msg)
         red = image[..., 2] if image.ndim == 3 else image
+        missing = self._gaps.missed(stamp_s(msg))
+        if missing:   # frames keep the camera's numbers
+            self._frame += missing
+            self.get_logger().warning(
+                f"{missing} frame(s) missing before frame {self._frame}, "
+                f"{self._gaps.missed_in_all} in all (a gap in the frames' stamps: the camera "
+                "or the tracker fell behind); their spots are not in the results",
+                throttle_duration_sec=5.0)
         frame = self._frame
         self._frame += 1
         self._headers.append((frame, msg.header))

@@ -1,0 +1,47 @@
+"""Frames that never reached a subscriber, found from the gaps in their stamps.
+
+A reliable keep-last writer drops a frame its slow reader has not taken once newer frames
+fill its history: the reader then never sees it, and nothing in the stream says so. The
+frames of a camera or a video come at a steady period, so a gap of several periods between
+two stamps is the frames that went missing in between.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+PERIOD_FRAMES = 15
+"""Stamp differences the frame period is the median of."""
+GAP_PERIODS = 1.5
+"""A difference longer than this many periods holds missing frames."""
+
+
+@dataclass
+class FrameGaps:
+    """How many frames are missing before each new stamp, and in all."""
+
+    missed_in_all: int = 0
+    _last_s: float | None = None
+    _periods_s: deque[float] = field(default_factory=lambda: deque(maxlen=PERIOD_FRAMES))
+
+    def missed(self, stamp_s: float) -> int:
+        """The frames missing between the previous stamp and `stamp_s` [s] (0 until the
+        period is known from PERIOD_FRAMES differences; a stamp going back resets it)."""
+        last, self._last_s = self._last_s, stamp_s
+        if last is None or stamp_s <= last:
+            self._periods_s.clear()
+            return 0
+        step_s = stamp_s - last
+        if len(self._periods_s) < PERIOD_FRAMES:
+            self._periods_s.append(step_s)
+            return 0
+        period_s = float(np.median(self._periods_s))
+        if step_s <= GAP_PERIODS * period_s:
+            self._periods_s.append(step_s)
+            return 0
+        missing = round(step_s / period_s) - 1
+        self.missed_in_all += missing
+        return missing
