@@ -145,3 +145,23 @@ def test_the_tracker_numbers_frames_by_their_stamps_and_says_which_never_came(re
     steps = np.diff(numbers)
     assert len(numbers) >= len(sent) - 1 and sorted(steps)[-1] == 4 and (steps[:-1] >= 1).all()
     assert set(steps) == {1, 4}, numbers
+
+
+@pytest.mark.ros
+def test_a_live_viewer_sheds_late_images_and_says_so(tmp_path):
+    graph = SdsGraphRun("view.yaml", "--set", f"viewer.output={tmp_path / 'live.rrd'}",
+                        "--set", "viewer.live=true")
+    probe = Probe("viewer_shedding_probe")
+    try:
+        image_pub = probe.node.create_publisher(Image, "/camera/image", RELIABLE)
+        assert wait_until(lambda: image_pub.get_subscription_count() > 0), graph.output()
+        image = np.zeros((64, 64), np.uint8)
+        for index in range(20):
+            late_ns = time.time_ns() - (0 if index < 10 else 500_000_000)
+            image_pub.publish(image_to_msg(image, Time(sec=late_ns // 10**9,
+                                                       nanosec=late_ns % 10**9), "camera"))
+            time.sleep(0.03)
+        graph.wait_for_line("viewer images: shedding the frames more than 100 ms late", 10.0)
+    finally:
+        probe.close()
+        graph.stop()

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import threading
+import time
 
 import rerun as rr
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sds_model.rig import RigError, load_rig
 from sds_ros.hosted_node import HostedNode
+from sds_ros.shedding import LiveShedding, lag_s
 from sds_viz.messages import log_message
 from sds_viz.scene import RerunScene
 from sensor_msgs.msg import Image, Imu, PointCloud2, Range
@@ -36,7 +38,7 @@ LIVE_TOPICS = {"spots": "spots_live", "points": "points_live"}
 
 
 PARAMETERS = {"rig": "", "output": "", "connect": "", "spawn": False, "image_scale": 0.25,
-              "image_every": 1, "live": False}
+              "image_every": 1, "live": False, "live_max_lag_s": 0.1}
 """The node's parameters and defaults (config/params/viewer.yaml documents each)."""
 
 
@@ -65,6 +67,9 @@ class ViewerNode(HostedNode):
         self._scene = RerunScene(self._stream, rig, float(p["image_scale"]))
         self._image_every = max(1, int(p["image_every"]))
         self._images = 0
+        # Live, a late image costs the CPU its measurements need and shows the past.
+        self._shedding = LiveShedding("viewer images", float(p["live_max_lag_s"])) \
+            if p["live"] else None
         self._lock = threading.Lock()
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -75,6 +80,8 @@ class ViewerNode(HostedNode):
                 topic = LIVE_TOPICS.get(topic, topic)
             self.create_subscription(msg_type, topic, self._logger_for(type_name),
                                      qos_profile_sensor_data)
+        if self._shedding is not None:
+            self.create_timer(1.0, self._report_shedding)
         where = p["output"] or p["connect"] or ("a spawned viewer" if p["spawn"] else "nowhere")
         self.get_logger().info(f"showing the graph in Rerun: {where}")
 
@@ -84,9 +91,18 @@ class ViewerNode(HostedNode):
                 self._images += 1
                 if (self._images - 1) % self._image_every:
                     return
+                if self._shedding is not None and not self._shedding.keep(lag_s(self,
+                                                                               msg.header)):
+                    return
             with self._lock:
                 log_message(self._scene, type_name, msg)
         return log
+
+    def _report_shedding(self) -> None:
+        assert self._shedding is not None
+        line = self._shedding.report(time.monotonic())
+        if line:
+            self.get_logger().warning(line)
 
     def close(self) -> None:
         """Write out what is buffered (the .rrd is complete after this)."""
