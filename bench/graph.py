@@ -15,7 +15,9 @@ Prints, measured in one run on the same file:
   view receives, with the frames it never received;
 - peak memory per process, and resident memory over a `--minutes` real-time run
   (frame source `repeat: 0`; the recorder leaves the images out there to spare the disk);
-- with `--busy`, each real-time run again beside a CPU-bound process (one core's worth).
+- with `--busy`, each real-time run again beside a CPU-bound process (one core's worth);
+  `--hogs 1 2` runs each beside 1, then 2 of them instead (2: the chain gets less than a
+  frame period of CPU per frame); the console's shedding lines come from each run's log.
 """
 
 from __future__ import annotations
@@ -134,7 +136,8 @@ def cpu_s(pid: int) -> float:
 
 
 def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
-              image_subscribers: int = 2, processes: dict[str, str] | None = None):
+              image_subscribers: int = 2, processes: dict[str, str] | None = None,
+              log_file: Path | None = None):
     """The drop graph with a probe on /recon/points and /recon/points_live: receipt times and
     stamps of each, memory, and each process's CPU time between the first and the last
     cloud."""
@@ -224,7 +227,7 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
         finally:   # the graph stops even if the probe fails
             launcher.request_stop()
 
-    with Path(os.devnull).open("w") as log:
+    with Path(log_file or os.devnull).open("w") as log:
         launcher = Launcher(entries, environment, output=log)
         launcher.run(on_started=threading.Thread(target=watch, daemon=True).start)
     per_frame = {name: 1e3 * (v[-1] - v[0]) / max(len(receipts) - 1, 1)
@@ -241,6 +244,9 @@ def main() -> None:
                         help="frames the flooding source may have unacknowledged")
     parser.add_argument("--layouts", nargs="+", choices=list(LAYOUTS), default=list(LAYOUTS),
                         help="which process layouts to measure")
+    parser.add_argument("--hogs", type=int, nargs="+", default=None,
+                        help="run each real-time measurement beside this many CPU-bound "
+                             "processes, for each count given (default 0; --busy: 0 1)")
     parser.add_argument("--busy", action="store_true",
                         help="also run each real-time measurement beside a CPU-bound process")
     parser.add_argument("--no-flood", action="store_true",
@@ -269,7 +275,8 @@ def main() -> None:
         recording = scratch / f"flood_{index}.mcap"
         receipts, _, _, memory, cpu = run_graph(
             [*base, f"recorder.output={recording}",
-             f"camera.max_in_flight={args.in_flight}"], frames, None, processes=processes)
+             f"camera.max_in_flight={args.in_flight}", f"tracker.image_depth={args.in_flight}"],
+            frames, None, processes=processes)
         recording.unlink(missing_ok=True)
         graph = (len(receipts) - 1) / (receipts[-1][0] - receipts[0][0])
         print(f"{layout}, flood ({args.in_flight} in flight, images recorded): {graph:.1f} fps, "
@@ -281,25 +288,27 @@ def main() -> None:
         print("  peak memory [MB]: " + ", ".join(f"{k} {v:.0f}" for k, v in peaks.items()))
 
     hampel_ms = HAMPEL_DELAY_FRAMES / scenario.fps * 1e3
-    for index, (layout, busy) in enumerate([(layout, busy) for layout in args.layouts
-                                            for busy in ([False, True] if args.busy
-                                                         else [False])]):
+    hog_counts = args.hogs or ([0, 1] if args.busy else [0])
+    for index, (layout, hogs) in enumerate([(layout, hogs) for layout in args.layouts
+                                            for hogs in hog_counts]):
         processes = LAYOUTS[layout]
         recording = scratch / f"real_time_{index}.mcap"
-        # One core's worth of someone else's work: the graph then shares the other.
-        load = subprocess.Popen([sys.executable, "-c", "while True: pass"]) if busy else None
+        # A core's worth of someone else's work each: the graph shares what is left.
+        loads = [subprocess.Popen([sys.executable, "-c", "while True: pass"])
+                 for _ in range(hogs)]
         try:
             receipts, live, spots_live, memory, cpu = run_graph(
                 [*base, "camera.pacing=realtime", "camera.repeat=0",
                  f"recorder.output={recording}",
                  "recorder.exclude=[/camera/image,/tracker/spots_live,/recon/points_live]"],
-                None, args.minutes, image_subscribers=1, processes=processes)
+                None, args.minutes, image_subscribers=1, processes=processes,
+                log_file=args.out / f"real_time_{index}.log")
         finally:
-            if load is not None:
+            for load in loads:
                 load.kill()
                 load.wait()
             recording.unlink(missing_ok=True)
-        layout = f"{layout}{', beside a busy process' if busy else ''}"
+        layout = f"{layout}{f', beside {len(loads)} busy process(es)' if loads else ''}"
         # Receipt times and stamps [s] of each probe topic, for a look at the run over time.
         np.savez(args.out / f"real_time_{index}.npz", points=np.array(receipts),
                  points_live=np.array(live), spots_live=np.array(spots_live))
@@ -331,6 +340,14 @@ def main() -> None:
             spots_ms = np.array([r - s for r, s in spots_live if s in stamps]) * 1e3
             print(f"  of which frame -> live spots (camera and tracker) [ms]: median "
                   f"{np.median(spots_ms):.1f}, p95 {np.percentile(spots_ms, 95):.1f}")
+        stamps = np.unique([s for _, s in receipts])
+        camera_frames = round((stamps[-1] - stamps[0]) * scenario.fps) + 1
+        print(f"  frames measured: {len(stamps)} of the camera's {camera_frames} in that time "
+              f"({camera_frames - len(stamps)} skipped)")
+        said = [line.strip() for line in (args.out / f"real_time_{index}.log").read_text()
+                .splitlines() if "shed" in line or "missing before" in line]
+        print(f"  the console said, {len(said)} lines" + "".join(
+            f"\n    {line}" for line in said[:2] + said[-2:]))
         print("  CPU per frame [ms]: " + ", ".join(f"{k} {v:.1f}" for k, v in cpu.items()))
         for name, samples in memory.items():
             if name.endswith(" peak") or len(samples) < 4:

@@ -51,7 +51,7 @@ def spots_msg(header: Header, frame: int, spots: list[TrackedSpot], rig: Rig
 
 
 PARAMETERS = {"rig": "", "ack": True, **TRACKING_PARAMETERS, "lost_report_frames": 15,
-              "wait_for_consumers": 0, "live_max_lag_s": 0.1}
+              "wait_for_consumers": 0, "live_max_lag_s": 0.1, "image_depth": 2}
 """The node's parameters and defaults: the tracking ones from `sds_tracker.tracker` (shared with
 `sds process`), and the node's own (config/params/tracker.yaml documents each)."""
 
@@ -93,11 +93,15 @@ class TrackerNode(HostedNode):
         self.create_timer(1.0, self._report_shedding)
         # No frame is taken before the spots have their consumers: none is lost to them.
         start_when_consumed(self, [(self._spots_pub, int(self._p["wait_for_consumers"]))],
-                            lambda: self._subscribe_inputs(latched, reliable))
+                            lambda: self._subscribe_inputs(latched))
 
-    def _subscribe_inputs(self, latched: QoSProfile, reliable: QoSProfile) -> None:
+    def _subscribe_inputs(self, latched: QoSProfile) -> None:
         self.create_subscription(CameraModel, "camera_model", self._on_model, latched)
-        self.create_subscription(Image, "image", self._on_image, reliable)
+        # The newest frames only: a tracker behind its camera skips the older ones (counted
+        # from the gaps in the stamps) instead of falling further behind. A flooding source
+        # waits for each frame's ack, so it never has more frames waiting than this.
+        self.create_subscription(Image, "image", self._on_image, QoSProfile(
+            depth=int(self._p["image_depth"]), reliability=ReliabilityPolicy.RELIABLE))
 
     def _report_lost(self, frame: int, spots) -> None:
         """Say which lasers are not found: at the first frame, and after a long loss."""
