@@ -235,6 +235,22 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
     return receipts, live, spots_live, memory, per_frame
 
 
+def recorded_frames(recording: Path, fps: float) -> tuple[int, int]:
+    """Frames a recording holds, and how many the camera published from its first to its last
+    (their stamps, read from each image's CDR header, come every 1/fps: the camera never skips
+    one)."""
+    from mcap.reader import make_reader
+
+    stamps = []
+    with recording.open("rb") as stream:
+        for _, _, message in make_reader(stream).iter_messages(topics=["/camera/image"]):
+            sec, nanosec = np.frombuffer(message.data[4:12], dtype="<u4")
+            stamps.append(int(sec) + int(nanosec) * 1e-9)
+    if not stamps:
+        return 0, 0
+    return len(set(stamps)), round((max(stamps) - min(stamps)) * fps) + 1
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seconds", type=float, default=4.7)
@@ -249,6 +265,9 @@ def main() -> None:
                              "processes, for each count given (default 0; --busy: 0 1)")
     parser.add_argument("--busy", action="store_true",
                         help="also run each real-time measurement beside a CPU-bound process")
+    parser.add_argument("--record-images", action="store_true",
+                        help="the real-time runs record the frames too, as drop.yaml does, "
+                             "and count them against the camera's")
     parser.add_argument("--no-flood", action="store_true",
                         help="measure the real-time runs only")
     args = parser.parse_args()
@@ -300,14 +319,16 @@ def main() -> None:
             receipts, live, spots_live, memory, cpu = run_graph(
                 [*base, "camera.pacing=realtime", "camera.repeat=0",
                  f"recorder.output={recording}",
-                 "recorder.exclude=[/camera/image,/tracker/spots_live,/recon/points_live]"],
-                None, args.minutes, image_subscribers=1, processes=processes,
-                log_file=args.out / f"real_time_{index}.log")
+                 "recorder.exclude=[/tracker/spots_live,/recon/points_live"
+                 + ("]" if args.record_images else ",/camera/image]")],
+                None, args.minutes, image_subscribers=2 if args.record_images else 1,
+                processes=processes, log_file=args.out / f"real_time_{index}.log")
         finally:
             for load in loads:
                 load.kill()
                 load.wait()
-            recording.unlink(missing_ok=True)
+        images = recorded_frames(recording, scenario.fps) if args.record_images else None
+        recording.unlink(missing_ok=True)
         layout = f"{layout}{f', beside {len(loads)} busy process(es)' if loads else ''}"
         # Receipt times and stamps [s] of each probe topic, for a look at the run over time.
         np.savez(args.out / f"real_time_{index}.npz", points=np.array(receipts),
@@ -344,6 +365,9 @@ def main() -> None:
         camera_frames = round((stamps[-1] - stamps[0]) * scenario.fps) + 1
         print(f"  frames measured: {len(stamps)} of the camera's {camera_frames} in that time "
               f"({camera_frames - len(stamps)} skipped)")
+        if images is not None:
+            print(f"  frames recorded: {images[0]} of the camera's {images[1]} from the first "
+                  "recorded to the last")
         said = [line.strip() for line in (args.out / f"real_time_{index}.log").read_text()
                 .splitlines() if "shed" in line or "missing before" in line]
         print(f"  the console said, {len(said)} lines" + "".join(
