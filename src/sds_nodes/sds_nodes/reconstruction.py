@@ -12,6 +12,7 @@ import time
 
 import numpy as np
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.subscription import MessageInfo
 from sds_model.rig import Rig, RigError, load_rig, rig_document
 from sds_recon.instant import InstantFits, InstantFrame, sample_offsets_s
 from sds_recon.reconstruction import (
@@ -24,7 +25,7 @@ from sds_recon.reconstruction import (
 from sds_ros.hosted_node import HostedNode
 from sds_ros.point_cloud import points_to_cloud, stamp_s
 from sds_ros.qos import live_qos, start_when_consumed, stream_qos
-from sds_ros.shedding import LiveShedding, lag_s
+from sds_ros.shedding import LiveShedding, waited_s
 from sds_ros.static_tf import TF_STATIC_TOPIC, rig_transforms, static_tf_qos
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import String
@@ -131,9 +132,9 @@ class ReconstructionNode(HostedNode):
             return None
         return sample_offsets_s(self._rig, points)
 
-    def _on_live_spots(self, msg: LaserSpotArray) -> None:
+    def _on_live_spots(self, msg: LaserSpotArray, info: MessageInfo) -> None:
         """At once, as measured: flagged by this frame's own fits (shed when late)."""
-        if not self._shedding.keep(lag_s(self, msg.header)):
+        if not self._shedding.keep(waited_s(info)):
             return
         points = self._frame_points(msg)
         fits = fit_surface(points, self._rig.container.radius_mm)

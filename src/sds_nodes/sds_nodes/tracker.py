@@ -10,13 +10,14 @@ import time
 from collections import deque
 
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.subscription import MessageInfo
 from sds_model.rig import Rig, load_rig
 from sds_ros.frame_gaps import FrameGaps
 from sds_ros.hosted_node import HostedNode
 from sds_ros.image_msg import msg_to_image
 from sds_ros.point_cloud import stamp_s
 from sds_ros.qos import live_qos, start_when_consumed, stream_qos
-from sds_ros.shedding import LiveShedding, lag_s
+from sds_ros.shedding import LiveShedding, waited_s
 from sds_tracker.spots import LOST
 from sds_tracker.tracker import (
     TRACKING_PARAMETERS,
@@ -81,7 +82,7 @@ class TrackerNode(HostedNode):
         self._line_pub = self.create_publisher(LaserLineProfile, "line", stream_qos())
         self._ack_pub = self.create_publisher(Header, "frame_ack", reliable)
         self._offset: tuple[int, int] | None = None
-        self._waiting: deque[Image] = deque(maxlen=WAITING_FRAMES)
+        self._waiting: deque[tuple[Image, MessageInfo]] = deque(maxlen=WAITING_FRAMES)
         self._headers: deque[tuple[int, Header]] = deque(maxlen=64)
         self._frame = 0
         self._last_frame_time = self.get_clock().now()
@@ -122,9 +123,9 @@ class TrackerNode(HostedNode):
             self.get_logger().error(f"frames carry channel {msg.channel!r}; the tracker needs "
                                     "'red' (mono8) or 'bgr'")
         while self._waiting:   # frames that arrived before the model, in order (acked)
-            self._track(self._waiting.popleft(), acknowledge=False)
+            self._track(*self._waiting.popleft(), acknowledge=False)
 
-    def _on_image(self, msg: Image) -> None:
+    def _on_image(self, msg: Image, info: MessageInfo) -> None:
         if self._offset is None:
             # The latched camera_model can arrive after the first frames (a replay plays it
             # where the recorder logged it): keep them, and acknowledge them now, or a
@@ -133,12 +134,12 @@ class TrackerNode(HostedNode):
                 self.get_logger().warning("no camera_model: region offset unknown, oldest "
                                           "waiting frame dropped", throttle_duration_sec=5.0)
                 self._waiting.popleft()
-            self._waiting.append(msg)
+            self._waiting.append((msg, info))
             self._acknowledge(msg)
             return
-        self._track(msg)
+        self._track(msg, info)
 
-    def _track(self, msg: Image, acknowledge: bool = True) -> None:
+    def _track(self, msg: Image, info: MessageInfo, acknowledge: bool = True) -> None:
         """Track one frame (the camera model, and so the region's offset, is known)."""
         assert self._offset is not None   # _on_image keeps frames until the model comes
         image = msg_to_image(msg)
@@ -156,7 +157,7 @@ class TrackerNode(HostedNode):
         self._headers.append((frame, msg.header))
         ready, line = self._tracker.process(frame, red, self._offset)
         live = self._tracker.unfiltered(frame)
-        if live and self._shedding.keep(lag_s(self, msg.header)):
+        if live and self._shedding.keep(waited_s(info)):
             self._live_pub.publish(spots_msg(msg.header, frame, live, self._rig))
         self._publish_spots(ready)
         self._line_pub.publish(LaserLineProfile(

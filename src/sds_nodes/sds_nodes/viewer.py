@@ -7,9 +7,10 @@ import time
 
 import rerun as rr
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.subscription import MessageInfo
 from sds_model.rig import RigError, load_rig
 from sds_ros.hosted_node import HostedNode
-from sds_ros.shedding import LiveShedding, lag_s
+from sds_ros.shedding import LiveShedding, waited_s
 from sds_viz.messages import log_message
 from sds_viz.scene import RerunScene
 from sensor_msgs.msg import Image, Imu, PointCloud2, Range
@@ -86,13 +87,12 @@ class ViewerNode(HostedNode):
         self.get_logger().info(f"showing the graph in Rerun: {where}")
 
     def _logger_for(self, type_name: str):
-        def log(msg) -> None:
+        def log(msg, info: MessageInfo) -> None:
             if type_name == "sensor_msgs/msg/Image":
                 self._images += 1
                 if (self._images - 1) % self._image_every:
                     return
-                if self._shedding is not None and not self._shedding.keep(lag_s(self,
-                                                                               msg.header)):
+                if self._shedding is not None and not self._shedding.keep(waited_s(info)):
                     return
             with self._lock:
                 log_message(self._scene, type_name, msg)

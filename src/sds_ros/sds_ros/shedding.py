@@ -8,10 +8,10 @@ need, and what it shows is already old. The recorded topics are never shed.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 
-from rclpy.node import Node
-from std_msgs.msg import Header
+from rclpy.subscription import MessageInfo
 
 REPORT_PERIOD_S = 10.0
 """While shedding goes on, how often the console hears how much was shed [s]."""
@@ -21,16 +21,18 @@ REPORT_PERIOD_S = 10.0
 class LiveShedding:
     """Whether a frame's live preview is still worth making, by how late the frame comes.
 
-    A frame's lateness is its lag (the receiving clock minus its stamp) beyond the smallest
-    lag seen so far: stamps on another clock with a constant offset (a replay's) work alike,
-    and the chain's own fastest path counts as on time. A frame later than `max_lag_s` is shed.
+    A message's lateness is how long it waited since it was published (`waited_s`) beyond the
+    shortest wait seen so far (another machine's clock, a constant offset, counts as on time).
+    Not its stamp: a flooding source's frames carry the video's times, hours before or after
+    the clock, and a slow source lags its stamps whatever the chain does. A message later than
+    `max_lag_s` is shed.
     `keep` counts; `report` gives the console's line when shedding starts, every
     REPORT_PERIOD_S while it goes on, and when it ends.
     """
 
     what: str                         # the preview, as the console names it
     max_lag_s: float
-    baseline_s: float = math.inf      # the smallest lag seen [s]
+    baseline_s: float = math.inf      # the shortest wait seen [s]
     shed: int = 0                     # since the last report
     made: int = 0                     # since the last report
     worst_late_s: float = 0.0         # since the last report
@@ -38,10 +40,11 @@ class LiveShedding:
     last_report_s: float = -math.inf
     shed_in_all: int = 0
 
-    def keep(self, lag_s: float) -> bool:
-        """True if the preview of a frame that came `lag_s` after its stamp is to be made."""
-        self.baseline_s = min(self.baseline_s, lag_s)
-        late_s = lag_s - self.baseline_s
+    def keep(self, waited_s: float) -> bool:
+        """True if the preview of a message handled `waited_s` after it was published is to
+        be made."""
+        self.baseline_s = min(self.baseline_s, waited_s)
+        late_s = waited_s - self.baseline_s
         if late_s > self.max_lag_s:
             self.shed += 1
             self.shed_in_all += 1
@@ -72,7 +75,7 @@ class LiveShedding:
         return line
 
 
-def lag_s(node: Node, header: Header) -> float:
-    """How long after its stamp a message is handled [s], on the node's clock."""
-    return (node.get_clock().now().nanoseconds
-            - (header.stamp.sec * 1_000_000_000 + header.stamp.nanosec)) * 1e-9
+def waited_s(info: MessageInfo) -> float:
+    """How long ago a received message was published [s] (the middleware's source timestamp,
+    on the system clock)."""
+    return (time.time_ns() - info["source_timestamp"]) * 1e-9
