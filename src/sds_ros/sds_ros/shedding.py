@@ -38,7 +38,8 @@ class LiveShedding:
     worst_late_s: float = 0.0         # since the last report
     shedding_since_s: float | None = None
     last_report_s: float = -math.inf
-    shed_in_all: int = 0
+    last_shed_s: float = -math.inf    # the last report call that found something shed
+    episode_shed: int = 0             # since shedding started
 
     def keep(self, waited_s: float) -> bool:
         """True if the preview of a message handled `waited_s` after it was published is to
@@ -47,22 +48,28 @@ class LiveShedding:
         late_s = waited_s - self.baseline_s
         if late_s > self.max_lag_s:
             self.shed += 1
-            self.shed_in_all += 1
+            self.episode_shed += 1
             self.worst_late_s = max(self.worst_late_s, late_s)
             return False
         self.made += 1
         return True
 
     def report(self, now_s: float) -> str | None:
-        """The console's line about shedding at `now_s` [s, any monotonic clock], or None."""
+        """The console's line about shedding at `now_s` [s, any monotonic clock], or None:
+        when shedding starts, every REPORT_PERIOD_S while it goes on, and once nothing was
+        shed for REPORT_PERIOD_S."""
+        if self.shed:
+            self.last_shed_s = now_s
         if self.shed and self.shedding_since_s is None:
             self.shedding_since_s = self.last_report_s = now_s
+            self.episode_shed = self.shed
             line = (f"{self.what}: shedding the frames more than {self.max_lag_s * 1e3:.0f} ms "
                     f"late (up to {self.worst_late_s:.2f} s): the chain is behind its camera; "
                     "the recorded measurements are complete")
-        elif self.shedding_since_s is not None and not self.shed and self.made:
-            line = (f"{self.what}: back in time, {self.shed_in_all} frames shed over "
-                    f"{now_s - self.shedding_since_s:.1f} s")
+        elif (self.shedding_since_s is not None and not self.shed
+              and now_s - self.last_shed_s >= REPORT_PERIOD_S):
+            line = (f"{self.what}: back in time, {self.episode_shed} frames shed over "
+                    f"{self.last_shed_s - self.shedding_since_s:.1f} s")
             self.shedding_since_s = None
         elif self.shed and now_s - self.last_report_s >= REPORT_PERIOD_S:
             self.last_report_s = now_s
