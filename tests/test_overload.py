@@ -8,8 +8,10 @@ import numpy as np
 import pytest
 import yaml
 from builtin_interfaces.msg import Time
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from ros_helpers import LATCHED, RELIABLE, Probe, SdsGraphRun, wait_until
 from sds_model.rig import load_rig
+from sds_record.mcap_files import header_stamp_ns, read_messages
 from sds_ros.frame_gaps import FrameGaps
 from sds_ros.image_msg import image_to_msg
 from sds_ros.qos import live_qos, stream_qos
@@ -153,3 +155,32 @@ def test_a_live_viewer_behind_its_images_sheds_them_and_says_so(tmp_path):
     finally:
         probe.close()
         graph.stop()
+
+
+@pytest.mark.ros
+def test_the_recorder_says_how_many_messages_never_reached_it(tmp_path):
+    output = tmp_path / "burst.mcap"
+    recorder = SdsGraphRun("record.yaml", "--set", f"recorder.output={output}",
+                           "--set", "recorder.topics=[/test/image]")
+    probe = Probe("recorder_gaps_probe")
+    try:
+        # A writer that keeps one message: a burst outruns the recorder's writing.
+        images = probe.node.create_publisher(Image, "/test/image", QoSProfile(
+            depth=1, reliability=ReliabilityPolicy.RELIABLE))
+        assert wait_until(lambda: images.get_subscription_count() > 0), recorder.output()
+        recorder.wait_for_line("recording /test/image", 10.0)
+        image = np.random.default_rng(0).integers(0, 255, (1080, 1920), np.uint8)
+        for index in range(60):
+            images.publish(image_to_msg(image, Time(sec=index), "camera"))
+        time.sleep(2.0)
+    finally:
+        probe.close()
+        recorder.stop()
+    recorded = [m for m in read_messages(output) if m.topic == "/test/image"]
+    lost = 60 - len(recorded)
+    assert lost > 0, "the burst did not outrun the recorder: the test proves nothing"
+    said = recorder.wait_for_line("never reached the recorder, so not in it", 1.0)
+    # Every frame after the first recorded one is either in the file or counted.
+    first = min(header_stamp_ns(m.data) for m in recorded) // 10**9
+    assert f"{60 - first - len(recorded)} of /test/image" in said, recorder.output()
+    assert "never reached the recorder (it fell behind" in recorder.output()

@@ -7,9 +7,11 @@ from datetime import datetime
 from pathlib import Path
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.subscription import MessageInfo
 from rclpy.time import Time
 from sds_record.mcap_files import McapRecorder, header_stamp_ns
 from sds_record.schemas import SchemaError
+from sds_ros.frame_gaps import PublisherGaps
 from sds_ros.hosted_node import HostedNode
 from std_msgs.msg import Header
 
@@ -61,6 +63,7 @@ class RecorderNode(HostedNode):
             self.finished.set()
             return
         self._recorded: dict[str, object] = {}
+        self._gaps: dict[str, PublisherGaps] = {}
         self._ack_pub = self.create_publisher(
             Header, "frame_ack", QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
         self._failed: set[str] = set()
@@ -114,9 +117,15 @@ class RecorderNode(HostedNode):
 
     def _writer_for(self, topic: str):
         acks = topic in self._ack_for
+        gaps = self._gaps.setdefault(topic, PublisherGaps())
 
-        def write(data: bytes, info) -> None:
+        def write(data: bytes, info: MessageInfo) -> None:
             now_ns = self.get_clock().now().nanoseconds
+            if gaps.missed(info):
+                self.get_logger().warning(
+                    f"{gaps.missed_in_all} message(s) of {topic} never reached the recorder "
+                    "(it fell behind their publisher): they are not in the recording",
+                    throttle_duration_sec=5.0)
             self._recorder.write(topic, data, now_ns, int(info["source_timestamp"]))
             if acks:
                 stamp = Time(nanoseconds=header_stamp_ns(data)).to_msg()
@@ -129,6 +138,12 @@ class RecorderNode(HostedNode):
             self._recorder.close()
             self.get_logger().info(f"wrote {self._recorder.message_count} messages to "
                                    f"{self.output}")
+            lost = {topic: gaps.missed_in_all for topic, gaps in self._gaps.items()
+                    if gaps.missed_in_all}
+            if lost:
+                self.get_logger().warning(
+                    "never reached the recorder, so not in it: " + ", ".join(
+                        f"{count} of {topic}" for topic, count in lost.items()))
 
 
 def main(args: list[str] | None = None) -> None:

@@ -1,9 +1,12 @@
-"""Frames that never reached a subscriber, found from the gaps in their stamps.
+"""Messages that never reached a subscriber: frames from the gaps in their stamps, any
+message from the gaps in its publisher's sequence numbers.
 
-A reliable keep-last writer drops a frame its slow reader has not taken once newer frames
+A reliable keep-last writer drops a message its slow reader has not taken once newer ones
 fill its history: the reader then never sees it, and nothing in the stream says so. The
 frames of a camera or a video come at a steady period, so a gap of several periods between
-two stamps is the frames that went missing in between.
+two stamps is the frames that went missing in between, wherever they were lost (the camera's
+driver, or the way to this reader); the middleware numbers every message a publisher writes,
+so a gap in those numbers is exactly what was lost on the way to this reader.
 """
 
 from __future__ import annotations
@@ -12,6 +15,7 @@ from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
+from rclpy.subscription import MessageInfo
 
 PERIOD_FRAMES = 15
 """Stamp differences the frame period is the median of."""
@@ -43,5 +47,28 @@ class FrameGaps:
             self._periods_s.append(step_s)
             return 0
         missing = round(step_s / period_s) - 1
+        self.missed_in_all += missing
+        return missing
+
+
+class PublisherGaps:
+    """Messages a subscriber never got, from the gaps in each publisher's sequence numbers."""
+
+    def __init__(self) -> None:
+        self.missed_in_all = 0
+        self._last: dict[bytes, int] = {}
+
+    def missed(self, info: MessageInfo) -> int:
+        """Messages of this one's publisher missing since its previous one (0 at the first
+        from a publisher: what came before this subscriber matched is not counted)."""
+        sequence = info.get("publication_sequence_number")
+        gid = info.get("publisher_gid")
+        if sequence is None or gid is None:
+            return 0
+        key = bytes(gid["data"])
+        last, self._last[key] = self._last.get(key), sequence
+        if last is None or sequence <= last:
+            return 0
+        missing = sequence - last - 1
         self.missed_in_all += missing
         return missing
