@@ -255,3 +255,13 @@ def test_a_video_without_telemetry_says_so_in_one_line(clip, probe):
                         "camera.rate=8.0")
     assert graph.wait(timeout=60) == 0, graph.output()
     assert "has no camera IMU" in graph.output() and not messages
+
+
+def test_a_file_played_behind_real_time_says_so(clip):
+    # 1000 times real time: the frames' times run ahead of what decoding can give.
+    graph = SdsGraphRun("camera.yaml", "--set", f"camera.source={clip}",
+                        "--set", "camera.rate=1000.0", "--set", "camera.repeat=10",
+                        "--set", "camera.wait_for_subscribers=0")
+    assert graph.wait(timeout=120) == 0, graph.output()
+    assert "behind real time (decoding and the graph need more CPU" in graph.output()
+    assert "published 300 frames, up to" in graph.output()

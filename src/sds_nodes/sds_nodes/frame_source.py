@@ -37,6 +37,8 @@ from std_msgs.msg import Header
 
 from sds_msgs.msg import CameraModel, SyncEvent
 
+BEHIND_REPORT_S = 0.5
+"""A file played in real time this far behind its frames' times is said on the console [s]."""
 PACINGS = ("realtime", "flood")
 IMU_HISTORY = 2000
 """Camera IMU messages kept for late subscribers (about 3 s of a GoPro's 600 per second)."""
@@ -62,6 +64,7 @@ class FrameSourceNode(HostedNode):
     def __init__(self, node_name: str = "frame_source", **node_kwargs) -> None:
         super().__init__(node_name, **node_kwargs)
         self.published = 0
+        self.behind_s = 0.0   # the furthest a file played in real time fell behind [s]
         values = self.declare_parameter_table(PARAMETERS)
         self._stop = threading.Event()
         self._queue: queue.Queue[Frame | _EndOfStream] = queue.Queue(maxsize=3)
@@ -274,6 +277,12 @@ class FrameSourceNode(HostedNode):
                 delay = start + item.time_ns * 1e-9 / p["rate"] - time.monotonic()
                 if delay > 0:
                     time.sleep(delay)
+                elif -delay > BEHIND_REPORT_S:
+                    self.behind_s = max(self.behind_s, -delay)
+                    self.get_logger().warning(
+                        f"playing {-delay:.1f} s behind real time (decoding and the graph need "
+                        "more CPU than there is): frames come late, none is skipped",
+                        throttle_duration_sec=10.0)
             stamp_ns = origin_ns + item.time_ns
             if flow_control:
                 self._credit.wait(p["max_in_flight"] - 1)
@@ -312,7 +321,9 @@ class FrameSourceNode(HostedNode):
         if error is not None:
             self._fail(f"{error}; the {self.published} frames published before stay valid")
             return
-        self.get_logger().info(f"end of {self._p['source']}: published {self.published} frames")
+        behind = f", up to {self.behind_s:.1f} s behind real time" if self.behind_s else ""
+        self.get_logger().info(f"end of {self._p['source']}: published {self.published} "
+                               f"frames{behind}")
         # The consumers' last outputs: the tracker publishes the frames its Hampel window held
         # back once the stream has been idle for 1 s, the chain behind it follows.
         self._stop.wait(self._p["linger_s"])
