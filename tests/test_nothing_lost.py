@@ -76,10 +76,18 @@ def kick(tmp_path_factory) -> SimulationOutput:
     return simulate(scenario, tmp_path_factory.mktemp("kick") / "sim", progress=False)
 
 
+def interruptible(command: list[str], **options) -> subprocess.Popen:
+    """`command` with SIGINT's default action, whatever this test runs under: a job started
+    in the background of a shell without job control inherits SIGINT ignored, and Python
+    then never raises KeyboardInterrupt."""
+    return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+                            **options)
+
+
 def process(video: Path, out: Path, *extra: str) -> subprocess.Popen:
-    return subprocess.Popen([SDS, "process", "--video", str(video), "--rig", RIG, "--out",
-                             str(out), "--no-progress", *extra],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return interruptible([SDS, "process", "--video", str(video), "--rig", RIG, "--out",
+                          str(out), "--no-progress", *extra])
 
 
 def interrupt_when(run: subprocess.Popen, frames: int | None, after_s: float) -> str:
@@ -118,9 +126,8 @@ def test_process_interrupted_at_any_moment_keeps_the_earlier_results(
     # Start-up, tracking (early and late), the analysis and its figures.
     outcomes = []
     for frames, after_s in ((None, 1.0), (2, 0.0), (15, 0.0), (29, 0.0), (30, 0.5)):
-        run = subprocess.Popen([SDS, "process", "--video", str(kick.video), "--rig", RIG,
-                                "--out", str(out), "--overwrite"],
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        run = interruptible([SDS, "process", "--video", str(kick.video), "--rig", RIG,
+                             "--out", str(out), "--overwrite"])
         stderr = interrupt_when(run, frames, after_s)
         outcomes.append(run.returncode)
         assert run.returncode in (0, 130), stderr
@@ -172,9 +179,8 @@ def test_a_video_cut_in_half_keeps_the_frames_before_the_cut(kick: SimulationOut
 def test_ctrl_c_during_the_demos_graph_is_an_interruption_not_a_failure(tmp_path: Path) -> None:
     """Ctrl-C (SIGINT to the terminal's process group) while the graph runs: exit 130, said
     in one line, no export or analysis of a partial run."""
-    demo = subprocess.Popen([SDS, "demo", "--seconds", "1", "--out", str(tmp_path)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
+    demo = interruptible([SDS, "demo", "--seconds", "1", "--out", str(tmp_path)],
+                         start_new_session=True)
     assert demo.stdout is not None and demo.stderr is not None
     for line in demo.stdout:
         if line.startswith("running the graph"):
