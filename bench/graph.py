@@ -239,16 +239,12 @@ def recorded_frames(recording: Path, fps: float) -> tuple[int, int]:
     """Frames a recording holds, and how many the camera published from its first to its last
     (their stamps, read from each image's CDR header, come every 1/fps: the camera never skips
     one)."""
-    from mcap.reader import make_reader
+    from sds_record.mcap_files import header_stamp_ns, read_messages
 
-    stamps = []
-    with recording.open("rb") as stream:
-        for _, _, message in make_reader(stream).iter_messages(topics=["/camera/image"]):
-            sec, nanosec = np.frombuffer(message.data[4:12], dtype="<u4")
-            stamps.append(int(sec) + int(nanosec) * 1e-9)
-    if not stamps:
+    stamps_ns = {header_stamp_ns(m.data) for m in read_messages(recording, ["/camera/image"])}
+    if not stamps_ns:
         return 0, 0
-    return len(set(stamps)), round((max(stamps) - min(stamps)) * fps) + 1
+    return len(stamps_ns), round((max(stamps_ns) - min(stamps_ns)) * 1e-9 * fps) + 1
 
 
 def main() -> None:

@@ -8,8 +8,6 @@ the next frame's spots do, the last one after IDLE_FLUSH_S without spots."""
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.subscription import MessageInfo
@@ -25,7 +23,7 @@ from sds_recon.reconstruction import (
 from sds_ros.hosted_node import HostedNode
 from sds_ros.point_cloud import points_to_cloud, stamp_s
 from sds_ros.qos import live_qos, start_when_consumed, stream_qos
-from sds_ros.shedding import LiveShedding, waited_s
+from sds_ros.shedding import LiveShedding, report_on_console, waited_s
 from sds_ros.static_tf import TF_STATIC_TOPIC, rig_transforms, static_tf_qos
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import String
@@ -87,7 +85,7 @@ class ReconstructionNode(HostedNode):
         self._last_spots = self.get_clock().now()
         self.create_timer(0.25, self._fit_if_idle)
         self._shedding = LiveShedding("points_live", float(p["live_max_lag_s"]))
-        self.create_timer(1.0, self._report_shedding)
+        report_on_console(self, self._shedding)
         self._beam_weight = float(p["beam_weight"])
         self._default_sigma = float(p["default_sigma_px"])
         self._frame_id = p["frame_id"]
@@ -142,11 +140,6 @@ class ReconstructionNode(HostedNode):
         header.frame_id = self._frame_id
         self._live_pub.publish(points_to_cloud(header, points, fits.rejected,
                                                self._sample_offsets_s(points)))
-
-    def _report_shedding(self) -> None:
-        line = self._shedding.report(time.monotonic())
-        if line:
-            self.get_logger().warning(line)
 
     def _on_spots(self, msg: LaserSpotArray) -> None:
         points = self._frame_points(msg)

@@ -6,7 +6,6 @@ to close (hampel_window // 2 frames later)."""
 
 from __future__ import annotations
 
-import time
 from collections import deque
 
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -17,7 +16,7 @@ from sds_ros.hosted_node import HostedNode
 from sds_ros.image_msg import msg_to_image
 from sds_ros.point_cloud import stamp_s
 from sds_ros.qos import live_qos, start_when_consumed, stream_qos
-from sds_ros.shedding import LiveShedding, waited_s
+from sds_ros.shedding import LiveShedding, report_on_console, waited_s
 from sds_tracker.spots import LOST
 from sds_tracker.tracker import (
     TRACKING_PARAMETERS,
@@ -90,8 +89,8 @@ class TrackerNode(HostedNode):
         self._lost_streak: dict[int, int] = {}
         self._gaps = FrameGaps()
         self._shedding = LiveShedding("spots_live", float(self._p["live_max_lag_s"]))
+        report_on_console(self, self._shedding)
         self.create_timer(0.25, self._flush_if_idle)
-        self.create_timer(1.0, self._report_shedding)
         # No frame is taken before the spots have their consumers: none is lost to them.
         start_when_consumed(self, [(self._spots_pub, int(self._p["wait_for_consumers"]))],
                             lambda: self._subscribe_inputs(latched))
@@ -179,11 +178,6 @@ class TrackerNode(HostedNode):
             self._report_lost(frame, spots)
             self._spots_pub.publish(spots_msg(headers.get(frame, Header()), frame, spots,
                                               self._rig))
-
-    def _report_shedding(self) -> None:
-        line = self._shedding.report(time.monotonic())
-        if line:
-            self.get_logger().warning(line)
 
     def _flush_if_idle(self) -> None:
         idle = (self.get_clock().now() - self._last_frame_time).nanoseconds * 1e-9

@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import threading
-import time
 
 import rerun as rr
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.subscription import MessageInfo
 from sds_model.rig import RigError, load_rig
 from sds_ros.hosted_node import HostedNode
-from sds_ros.shedding import LiveShedding, waited_s
+from sds_ros.shedding import LiveShedding, report_on_console, waited_s
 from sds_viz.messages import log_message
 from sds_viz.scene import RerunScene
 from sensor_msgs.msg import Image, Imu, PointCloud2, Range
@@ -82,7 +81,7 @@ class ViewerNode(HostedNode):
             self.create_subscription(msg_type, topic, self._logger_for(type_name),
                                      qos_profile_sensor_data)
         if self._shedding is not None:
-            self.create_timer(1.0, self._report_shedding)
+            report_on_console(self, self._shedding)
         where = p["output"] or p["connect"] or ("a spawned viewer" if p["spawn"] else "nowhere")
         self.get_logger().info(f"showing the graph in Rerun: {where}")
 
@@ -97,12 +96,6 @@ class ViewerNode(HostedNode):
             with self._lock:
                 log_message(self._scene, type_name, msg)
         return log
-
-    def _report_shedding(self) -> None:
-        assert self._shedding is not None
-        line = self._shedding.report(time.monotonic())
-        if line:
-            self.get_logger().warning(line)
 
     def close(self) -> None:
         """Write out what is buffered (the .rrd is complete after this)."""

@@ -10,11 +10,15 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from functools import partial
 
+from rclpy.node import Node
 from rclpy.subscription import MessageInfo
 
 REPORT_PERIOD_S = 10.0
 """While shedding goes on, how often the console hears how much was shed [s]."""
+REPORT_CHECK_S = 1.0
+"""How often a node asks its LiveShedding for a console line [s]."""
 
 
 @dataclass
@@ -86,3 +90,14 @@ def waited_s(info: MessageInfo) -> float:
     """How long ago a received message was published [s] (the middleware's source timestamp,
     on the system clock)."""
     return (time.time_ns() - info["source_timestamp"]) * 1e-9
+
+
+def report_on_console(node: Node, shedding: LiveShedding) -> None:
+    """Log `shedding`'s lines as `node`'s warnings (asked every REPORT_CHECK_S)."""
+    node.create_timer(REPORT_CHECK_S, partial(_log_report, node, shedding))
+
+
+def _log_report(node: Node, shedding: LiveShedding) -> None:
+    line = shedding.report(time.monotonic())
+    if line:
+        node.get_logger().warning(line)
