@@ -8,7 +8,7 @@ VENV_ABS := $(abspath $(VENV))
 BIN := $(VENV_ABS)/bin
 STAMPS := $(VENV_ABS)/.sds-stamps
 BUILD := build
-PY_PACKAGES := sds_model sds_ros sds_recon sds_sloshing sds_arduino sds_sim sds_camera sds_tracker sds_record sds_viz sds_nodes sds_bringup sds_workflows sds_cli
+PY_PACKAGES := sds_model sds_ros sds_recon sds_sloshing sds_lateral sds_arduino sds_sim sds_camera sds_tracker sds_record sds_viz sds_nodes sds_bringup sds_workflows sds_cli
 
 .PHONY: setup test test-unit lint demo bench clean distclean
 

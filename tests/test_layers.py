@@ -15,7 +15,7 @@ import pytest
 SRC = Path(__file__).resolve().parents[1] / "src"
 LAYERS = {
     "sds_arduino": 0, "sds_camera": 0, "sds_model": 0, "sds_recon": 0, "sds_sim": 0,
-    "sds_sloshing": 0, "sds_tracker": 0,
+    "sds_sloshing": 0, "sds_tracker": 0, "sds_lateral": 0,
     "sds_ros": 1, "sds_record": 1, "sds_viz": 1,
     "sds_nodes": 2,
     "sds_bringup": 3, "sds_workflows": 3,

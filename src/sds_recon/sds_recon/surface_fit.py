@@ -99,7 +99,7 @@ def fit_modes(points_mm: ArrayLike, radius_mm: float,
     """Mean level plus J_m(ξ r/R)/J_m(ξ) · (cos mθ, sin mθ) per mode (cos alone for m = 0);
     weighted by `weights` where given (RMSE stays the plain one)."""
     points, weight = _finite_weighted(points_mm, weights)
-    design, names = _modal_design(points, radius_mm, modes)
+    design, names = modal_design(points, radius_mm, modes)
     if len(points) < design.shape[1]:
         raise ValueError(f"{design.shape[1]} modal terms need as many points, got {len(points)}")
     root = np.sqrt(weight)
@@ -112,7 +112,7 @@ def modal_heights(fit: ModalFit, xy_mm: ArrayLike, radius_mm: float,
                   modes: tuple[tuple[int, int], ...] = DEFAULT_MODES) -> np.ndarray:
     """The fitted modal surface's heights [mm] at world (x, y) [mm] (N×2)."""
     xy = np.atleast_2d(np.asarray(xy_mm, dtype=float))
-    design, names = _modal_design(np.column_stack([xy, np.zeros(len(xy))]), radius_mm, modes)
+    design, names = modal_design(np.column_stack([xy, np.zeros(len(xy))]), radius_mm, modes)
     if tuple(names) != tuple(fit.names):
         raise ValueError(f"the fit has the terms {fit.names}, not {tuple(names)}")
     return design @ np.asarray(fit.amplitudes_mm, dtype=float)
@@ -136,9 +136,10 @@ def _leave_one_out(design: np.ndarray, heights: np.ndarray, rejected: np.ndarray
     return result
 
 
-def _modal_design(points: np.ndarray, radius_mm: float, modes: tuple[tuple[int, int], ...]
+def modal_design(points: np.ndarray, radius_mm: float, modes: tuple[tuple[int, int], ...]
                   ) -> tuple[np.ndarray, list[str]]:
-    """The modal fit's design matrix (one column per term) at the points, and the terms' names."""
+    """The modal fit's design matrix (one column per term) at the points (N×2 or N×3 mm: x, y
+    are used), and the terms' names."""
     columns, names = [np.ones(len(points))], ["mean"]
     for order, index in modes:
         for label, azimuth in (("cos", 0.0), ("sin", np.pi / 2)):
@@ -191,7 +192,7 @@ def surface_outliers(points_mm: ArrayLike, height_sigma_mm: ArrayLike, radius_mm
     sigma = np.hypot(measured, MODEL_ERROR_MM)
     plane = np.column_stack([np.ones(len(points)), points[:, :2]])
     # Plane and modes together: a tilt table's steep plane or a sloshing surface alike.
-    surface = np.column_stack([plane, _modal_design(points, radius_mm, DEFAULT_MODES)[0][:, 1:]])
+    surface = np.column_stack([plane, modal_design(points, radius_mm, DEFAULT_MODES)[0][:, 1:]])
     def judged(excluded: np.ndarray) -> np.ndarray:
         """σ-normalised leave-one-out residuals with the points in `excluded` left out: each
         point against the surface fitted to the others (e / (1 − h) is exactly that)."""

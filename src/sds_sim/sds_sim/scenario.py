@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -115,6 +115,27 @@ class CameraImuSpec:
 
 
 @dataclass(frozen=True)
+class LateralSpec:
+    """The side camera as built (seed Sec. 3: a second camera, 125 fps), against its view file
+    (`sds_lateral.view`, what the user states): where it truly stands and looks, its clock,
+    its intrinsics off the file, the checkerboard off its stated place, its image's levels."""
+
+    view_file: str = "../lateral/stelium_side.yaml"   # relative to the scenario file
+    position_mm: tuple[float, float, float] = (0.0, -400.0, -20.0)
+    look_at_mm: tuple[float, float, float] = (0.0, 0.0, -5.0)
+    roll_deg: float = 0.0
+    clock_offset_s: float = -0.137    # its frame 0 on the top camera's clock [s]
+    clock_drift_ppm: float = 15.0     # its clock runs fast by this much
+    intrinsics_off_sigmas: float = 0.0   # each intrinsic off its file by this many of its σ
+    board_offset_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)   # true − stated place
+    background: float = 205.0         # the back-light seen through the empty container
+    liquid: float = 28.0              # the opaque liquid behind the wall
+    read_noise: float = 2.0
+    psf_sigma_px: float = 0.7
+    led_position_px: tuple[float, float] = (468.0, 44.0)
+
+
+@dataclass(frozen=True)
 class Scenario:
     """A reproducible simulated run."""
 
@@ -139,6 +160,7 @@ class Scenario:
     events: Events = field(default_factory=Events)
     arduino: ArduinoSpec = field(default_factory=ArduinoSpec)
     camera_imu: CameraImuSpec = field(default_factory=CameraImuSpec)
+    lateral: LateralSpec | None = None   # None: no side camera
 
     @property
     def frame_count(self) -> int:
@@ -222,6 +244,10 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
     sections = {"optics": Optics, "sensor": Sensor, "disturbances": Disturbances,
                 "events": Events, "arduino": ArduinoSpec, "camera_imu": CameraImuSpec}
     parts = {key: _build(cls, content.pop(key, None), key) for key, cls in sections.items()}
+    lateral = content.pop("lateral", None)
+    if lateral is not None:
+        spec = _build(LateralSpec, lateral, "lateral")
+        parts["lateral"] = replace(spec, view_file=str((path.parent / spec.view_file).resolve()))
     modes = content.pop("modes", []) or []
     if not isinstance(modes, list):
         raise ScenarioError(f"{path}: modes must be a list")

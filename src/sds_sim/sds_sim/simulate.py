@@ -13,13 +13,19 @@ the top-left pixel at (0, 0); world frame of the rig file):
   y_exposure_px (centroid over the exposure), X_mm, Y_mm, Z_mm, visible, reflection x/y.
 - truth/frames.csv: per frame: time, LED, tilt, every modal coordinate [mm], vibration [rad].
 - truth/line.npz: line_x_px (frames × image rows, NaN off the line), line_mm (frames × rays × 3).
+With a side camera (the scenario's `lateral:` section, sds_sim.lateral):
+- lateral/video.mp4 (H.264 at the view file's rate): what the side camera records;
+  lateral/board.png: its image of the checkerboard that places it.
+- truth/lateral.csv: per side frame: its time on its own clock and on the top camera's, LED;
+  truth/lateral_edges.npz: edge_row_px (side frames × image columns, NaN outside the
+  container): the contact line's row as drawn.
 """
 
 from __future__ import annotations
 
 import csv
 import json
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +38,7 @@ from tqdm import tqdm
 
 from sds_sim.arduino import arduino_records
 from sds_sim.camera_imu import camera_imu
+from sds_sim.lateral import LateralRenderer, LateralTruth
 from sds_sim.render import FrameRenderer, FrameTruth
 from sds_sim.scenario import Scenario
 
@@ -51,6 +58,8 @@ class SimulationOutput:
     spots: Path
     frames: Path
     line: Path
+    lateral_video: Path | None = None
+    lateral_board: Path | None = None
 
 
 class _FrameSink:
@@ -102,6 +111,9 @@ def simulate(scenario: Scenario, directory: Path, codec: str = "h264",
     output = SimulationOutput(directory, sink.path, arduino / "serial.txt", arduino / "SDS_LOG.TXT",
                               truth / "run.json", truth / "spots.csv", truth / "frames.csv",
                               truth / "line.npz")
+    lateral: dict[str, Any] | None = None
+    if scenario.lateral is not None:
+        output, lateral = _simulate_lateral(scenario, output, codec, progress)
     lines = "".join(format_record(r) for r in arduino_records(scenario))
     output.serial.write_text(lines, newline="")
     output.sd_log.write_text(lines, newline="")
@@ -111,8 +123,58 @@ def simulate(scenario: Scenario, directory: Path, codec: str = "h264",
     imu = camera_imu(scenario)
     if imu is not None:
         write_sidecar(imu, sidecar_path(output.video))
-    output.run.write_text(json.dumps(_run_description(scenario, renderer, output), indent=2) + "\n")
+    description = _run_description(scenario, renderer, output)
+    if lateral is not None:
+        description["lateral"] = lateral
+    output.run.write_text(json.dumps(description, indent=2) + "\n")
     return output
+
+
+def _simulate_lateral(scenario: Scenario, output: SimulationOutput, codec: str, progress: bool
+                      ) -> tuple[SimulationOutput, dict[str, Any]]:
+    """The side camera's video, board image and truth; run.json's `lateral` entry."""
+    renderer = LateralRenderer(scenario)
+    folder = output.directory / "lateral"
+    folder.mkdir(parents=True, exist_ok=True)
+    board = folder / "board.png"
+    cv2.imwrite(str(board), renderer.board_image())
+    sink = _FrameSink(folder, "h264" if codec == "png" else codec, renderer.width,
+                      renderer.height, renderer.fps)
+    truths: list[LateralTruth] = []
+    try:
+        for index in tqdm(range(renderer.frame_count), desc="side view", unit="frame",
+                          disable=not progress):
+            frame, truth = renderer.render(index)
+            sink.write(frame)
+            truths.append(truth)
+    finally:
+        sink.close()
+    truth_folder = output.directory / "truth"
+    with (truth_folder / "lateral.csv").open("w", newline="") as file:
+        writer = csv.writer(file)
+        writer.writerow(["frame", "lateral_time_s", "time_s", "led_on"])
+        for truth in truths:
+            writer.writerow([truth.index, f"{truth.lateral_time_s:.9f}", f"{truth.time_s:.9f}",
+                             int(truth.led_on)])
+    np.savez_compressed(truth_folder / "lateral_edges.npz",
+                        edge_row_px=np.array([t.edge_row_px for t in truths]))
+    spec = scenario.lateral
+    assert spec is not None
+    description = {
+        "view_file": spec.view_file, "fps": renderer.fps, "frame_count": renderer.frame_count,
+        "image_size": [renderer.width, renderer.height],
+        "camera": renderer.camera.to_dict(),
+        "position_mm": list(spec.position_mm), "look_at_mm": list(spec.look_at_mm),
+        "roll_deg": spec.roll_deg,
+        "world_to_camera": {"rotation": renderer.pose.rotation.tolist(),
+                            "translation_mm": renderer.pose.translation_mm.tolist()},
+        "clock_offset_s": spec.clock_offset_s, "clock_drift_ppm": spec.clock_drift_ppm,
+        "board_offset_mm": list(spec.board_offset_mm),
+        "files": {"video": str(sink.path.relative_to(output.directory)),
+                  "board": str(board.relative_to(output.directory)),
+                  "truth": "truth/lateral.csv", "edges": "truth/lateral_edges.npz"},
+    }
+    return replace(output, lateral_video=sink.path, lateral_board=board), description
 
 
 def _write_spots(scenario: Scenario, truths: list[FrameTruth], path: Path) -> None:

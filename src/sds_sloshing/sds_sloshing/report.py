@@ -310,3 +310,20 @@ def summary_lines(result: dict[str, Any]) -> list[str]:
                              f"{_sigma(e['frequency_sigma_hz'])} Hz  {damping}{error}")
             lines += [f"{'':16s} note: {note}" for note in mode["notes"]]
     return lines
+
+
+def add_report_section(directory: str | Path, heading: str, lines: list[str],
+                       figure: Path | None, key: str, content: dict[str, Any]) -> None:
+    """Append a section (a heading, one paragraph per line, a figure) to the report.html that
+    `write_report` wrote in `directory`, and `content` to its analysis.json under `key`."""
+    directory = Path(directory)
+    html_path, json_path = directory / "report.html", directory / "analysis.json"
+    section = f"<h2>{html.escape(heading)}</h2>" + "".join(
+        f"<p>{html.escape(line)}</p>" for line in lines) + (_image(figure) if figure else "")
+    page = html_path.read_text() if html_path.exists() else (
+        "<!doctype html><meta charset=utf-8><title>SDS sloshing analysis</title>"
+        "<body style='font-family:sans-serif;max-width:1100px'></body>\n")
+    html_path.write_text(page.replace("</body>", section + "</body>", 1))
+    result = json.loads(json_path.read_text()) if json_path.exists() else {}
+    result[key] = content
+    json_path.write_text(json.dumps(_json_safe(result), indent=2) + "\n")

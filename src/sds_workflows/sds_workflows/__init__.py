@@ -18,6 +18,8 @@ The main entry points:
   `calibrate_line_plane` (`line_plane_calibration.py`): the line laser's plane from a checkerboard;
 - `analyse_recording` (`analyze.py`): frequencies and damping of a recording or a table;
 - `link_clocks` (`clock_link.py`): a camera's clock against the Arduino's;
+- `LateralInput` (`lateral.py`): a side camera's video, view file and board image, given to
+  `process_video(..., lateral=...)`: its wall profile and the top surface checked against it;
 - `run_demo`, `run_live` (`demo.py`): the whole graph on a simulated drop or a video, given the
   launcher's `sds_bringup.chain.run_chain` (the workflows start no graph themselves).
 """
@@ -25,11 +27,12 @@ The main entry points:
 from sds_workflows.analyze import analyse_recording
 from sds_workflows.clock_link import link_clocks
 from sds_workflows.export import export_results
+from sds_workflows.lateral import LateralInput
 from sds_workflows.line_plane_calibration import calibrate_line_plane
 from sds_workflows.pipeline import FramePipeline, mcap_frames, video_frames
 from sds_workflows.process import process_inputs, process_recording, process_video
 from sds_workflows.rig_calibration import calibrate_rig
 
-__all__ = ["FramePipeline", "analyse_recording", "calibrate_line_plane", "calibrate_rig",
-           "export_results", "link_clocks", "mcap_frames", "process_inputs",
+__all__ = ["FramePipeline", "LateralInput", "analyse_recording", "calibrate_line_plane",
+           "calibrate_rig", "export_results", "link_clocks", "mcap_frames", "process_inputs",
            "process_recording", "process_video", "video_frames"]

@@ -27,11 +27,18 @@ from sds_sloshing.report import REPORT_FILES
 from tqdm import tqdm
 
 from sds_workflows.errors import input_errors
+from sds_workflows.lateral import (
+    LATERAL_FILES,
+    LateralInput,
+    LateralRun,
+    place_lateral,
+    process_lateral,
+)
 from sds_workflows.pipeline import FramePipeline, RedFrame, mcap_frames, video_frames
 from sds_workflows.rig_calibration import calibrate_rig
 from sds_workflows.run_tables import RunAnalysis, RunTables, finish_analysis
 
-RUN_FILES = (*TABLE_FILES, *REPORT_FILES)
+RUN_FILES = (*TABLE_FILES, *REPORT_FILES, *LATERAL_FILES)
 """What a run of `sds process` or `sds export` writes into its folder: all of it is replaced
 together (`staging.staged_folder`)."""
 
@@ -83,27 +90,33 @@ class ProcessedRun:
     frames: int
     analysis: RunAnalysis
     broken: str = ""   # the reader's error when the input broke off after `frames` frames
+    lateral: LateralRun | None = None   # the side camera, where one was given
 
     def summary(self) -> str:
-        """One line for the console."""
+        """The console's lines: the run, then the side camera's."""
         note = self.analysis.note
         return (f"sds process: {self.frames} frames of {self.source} -> {self.out}"
                 + (f" ({note})" if note else "")
                 + (f"; INPUT INCOMPLETE, results cover the frames read: {self.broken}"
-                   if self.broken else ""))
+                   if self.broken else "")
+                + "".join(f"\nsds process: {line}" for line in
+                          (self.lateral.lines() if self.lateral else [])))
 
 
 def process_video(video: Path, rig: Rig, out: Path, fps: float = 0.0,
                   gravity_m_s2: float | None = None, overwrite: bool = False,
-                  progress: bool = True, stills: bool | None = None) -> ProcessedRun:
+                  progress: bool = True, stills: bool | None = None,
+                  lateral: LateralInput | None = None) -> ProcessedRun:
     """A video (or an image folder at `fps`) taken with `rig`: result files, the camera's own
     IMU where the video has one, the analysis report, all in `out` (refused if it holds
     results, unless `overwrite`). `stills` (default: for an image folder) tracks each image on
     its own: images of different surfaces are no video, and a temporal filter across them
-    would replace right spots."""
+    would replace right spots. With `lateral`, the side camera's wall profile and its check
+    of the top surface (`lateral.process_lateral`) join them."""
     stills = video.is_dir() if stills is None else stills
     if not overwrite:
         refuse_results(out)
+    side_setup = place_lateral(lateral, rig) if lateral is not None else None
     with staged_folder(out, RUN_FILES) as staging:
         tables = RunTables(ResultsWriter(staging), rig)
         count, ending = process_frames(video_frames(video, rig, fps), rig, tables, progress,
@@ -113,7 +126,9 @@ def process_video(video: Path, rig: Rig, out: Path, fps: float = 0.0,
             tables.add_camera_imu(imu)
         analysis = finish_analysis(tables, _source_name(video, ending), staging,
                                    AnalysisOptions(gravity_m_s2=gravity_m_s2))
-    return ProcessedRun(video, out, count, analysis, ending.broken)
+        side = (process_lateral(side_setup, rig, video, staging, progress)
+                if side_setup is not None else None)
+    return ProcessedRun(video, out, count, analysis, ending.broken, side)
 
 
 def _source_name(source: Path, ending: FramesRead) -> str:
@@ -141,15 +156,20 @@ def process_recording(recording: Path, out: Path, rig: Rig | None = None,
 
 def process_input(source: Path, is_video: bool, rig_file: Path | None, out: Path,
                   fps: float = 0.0, gravity_m_s2: float | None = None,
-                  overwrite: bool = False, progress: bool = True, sequence: bool = False
-                  ) -> ProcessedRun:
-    """One video (needs `rig_file`) or recording (`rig_file` default: the one it carries);
-    an image folder is stills unless `sequence` (a video's frames)."""
+                  overwrite: bool = False, progress: bool = True, sequence: bool = False,
+                  lateral: LateralInput | None = None) -> ProcessedRun:
+    """One video (needs `rig_file`; `lateral`: its side camera) or recording (`rig_file`
+    default: the one it carries); an image folder is stills unless `sequence` (a video's
+    frames)."""
     if is_video:
         if rig_file is None:
             raise ValueError(f"{source}: a video needs a rig file (the rig it was taken with)")
         return process_video(source, load_rig(rig_file), out, fps, gravity_m_s2, overwrite,
-                             progress, stills=source.is_dir() and not sequence)
+                             progress, stills=source.is_dir() and not sequence,
+                             lateral=lateral)
+    if lateral is not None:
+        raise ValueError(f"{source}: the side camera is processed with a top video "
+                         "(--video), not a recording")
     return process_recording(source, out, recording_rig(source, rig_file), gravity_m_s2,
                              overwrite, progress)
 

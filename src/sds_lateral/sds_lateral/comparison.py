@@ -1,0 +1,166 @@
+"""The top camera's surface along the wall, against the side camera's contact line.
+
+The top camera's modal fit of each frame (mean level, lateral and axisymmetric modes:
+`sds_recon.surface_fit`) is a surface over the whole disc; at the wall (r = R) it is evaluated
+at the azimuths the side camera measured, at the side frame's time on the top clock (each
+amplitude interpolated between top frames by a cubic spline: linear interpolation of a 3 Hz
+wave sampled at 30 fps would be off by 5 % of its amplitude). The fit's σ there comes from
+its own covariance: (Aᵀ W A)⁻¹ scaled by its weighted residuals' variance, so a frame whose
+points the modes do not explain (higher modes, a wrong point) claims less.
+
+The difference side − top has a mean that neither fit is meant to remove: the meniscus (the
+contact line stands above the surface the top fit extrapolates to the wall) and the side
+camera's pose (its σ, the same in every frame). It is reported with the pose's σ; the
+difference's scatter about it is what the side's image noise, the top fit's σ and the clock
+link's σ (times the surface's rate of change: 2.3 ms of a 3 Hz, 4 mm wave is 0.17 mm) predict.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+from sds_recon.surface_fit import DEFAULT_MODES, HEIGHT_SIGMA_FLOOR_MM, modal_design
+
+LINE_LASER_ID = 65535
+MIN_TOP_FRAMES = 4
+"""Top frames with a modal fit needed before the top surface can be interpolated in time."""
+
+
+@dataclass(frozen=True)
+class TopSurfaceSeries:
+    """The top camera's modal fits over time: times [s], amplitudes (frames × terms, mm), the
+    terms' names and each frame's amplitude covariance (frames × terms × terms, mm²)."""
+
+    time_s: np.ndarray
+    amplitudes_mm: np.ndarray
+    names: tuple[str, ...]
+    covariance_mm2: np.ndarray
+    radius_mm: float
+
+    @cached_property
+    def _spline(self) -> CubicSpline:
+        return CubicSpline(self.time_s, self.amplitudes_mm, axis=0)
+
+    def wall(self, time_s: float, azimuth_rad: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The fitted surface at the wall at the azimuths and a time: its height [mm] (NaN
+        outside the fits' time span), its σ [mm] (the nearest top frame's covariance) and its
+        rate of change [mm/s] (what a clock error turns into a height error)."""
+        nan = np.full(len(azimuth_rad), np.nan)
+        if not self.time_s[0] <= time_s <= self.time_s[-1]:
+            return nan, nan, nan
+        wall_xy = self.radius_mm * np.column_stack([np.cos(azimuth_rad), np.sin(azimuth_rad)])
+        design, _ = modal_design(wall_xy, self.radius_mm, DEFAULT_MODES)
+        nearest = int(np.argmin(np.abs(self.time_s - time_s)))
+        variance = np.einsum("ij,jk,ik->i", design, self.covariance_mm2[nearest], design)
+        return (design @ self._spline(time_s), np.sqrt(np.maximum(variance, 0.0)),
+                design @ self._spline(time_s, 1))
+
+
+def top_surface_series(fits: np.ndarray, points: np.ndarray, radius_mm: float
+                       ) -> TopSurfaceSeries:
+    """The top run's modal fits (`fits` table) with each frame's covariance from its points
+    (`points` table: the laser spots that were not rejected, weighted as the fit weighs them:
+    1/σ² with σ floored at HEIGHT_SIGMA_FLOOR_MM). ValueError with too few fitted frames."""
+    probe, names = modal_design(np.zeros((1, 2)), radius_mm, DEFAULT_MODES)
+    columns = [f"{name}_mm" for name in names]
+    missing = [c for c in columns if c not in (fits.dtype.names or ())]
+    if missing:
+        raise ValueError(f"the top camera's fits have no modal amplitudes {missing}")
+    amplitudes = np.column_stack([fits[c] for c in columns])
+    spots = points[(points["laser_id"] != LINE_LASER_ID) & (points["rejected"] == 0)]
+    order = np.argsort(spots["frame"], kind="stable")
+    spots = spots[order]
+    starts = np.searchsorted(spots["frame"], fits["frame"], side="left")
+    ends = np.searchsorted(spots["frame"], fits["frame"], side="right")
+    terms = probe.shape[1]
+    covariance = np.full((len(fits), terms, terms), np.nan)
+    for row, (start, end) in enumerate(zip(starts, ends, strict=True)):
+        frame = spots[start:end]
+        if end - start <= terms or not np.all(np.isfinite(amplitudes[row])):
+            continue
+        xyz = np.column_stack([frame["X_mm"], frame["Y_mm"], frame["Z_mm"]])
+        design, _ = modal_design(xyz, radius_mm, DEFAULT_MODES)
+        weight = np.maximum(frame["sigma_Z_mm"], HEIGHT_SIGMA_FLOOR_MM) ** -2.0
+        residual = xyz[:, 2] - design @ amplitudes[row]
+        scale = float(weight @ residual**2) / (len(frame) - terms)
+        covariance[row] = np.linalg.inv(design.T @ (design * weight[:, None])) * scale
+    fitted = np.all(np.isfinite(amplitudes), axis=1) & np.all(np.isfinite(covariance),
+                                                                  axis=(1, 2))
+    if np.count_nonzero(fitted) < MIN_TOP_FRAMES:
+        raise ValueError(f"{np.count_nonzero(fitted)} top frames with a modal fit, too few "
+                         "to compare with the side camera")
+    return TopSurfaceSeries(fits["t_s"][fitted], amplitudes[fitted], tuple(names),
+                            covariance[fitted], radius_mm)
+
+
+@dataclass(frozen=True)
+class FrameComparison:
+    """One side frame against the top surface: the side's heights and their σ from the image
+    and from the pose, the top's heights and σ at the same wall points [mm] (NaN where the top
+    has no surface then), and the σ the clock link's error gives there [mm] (its σ times the
+    top surface's rate of change)."""
+
+    side_mm: np.ndarray
+    side_sigma_mm: np.ndarray
+    side_pose_sigma_mm: np.ndarray
+    top_mm: np.ndarray
+    top_sigma_mm: np.ndarray
+    clock_sigma_mm: np.ndarray
+
+    @property
+    def difference_mm(self) -> np.ndarray:
+        """Side minus top at each wall point [mm]."""
+        return self.side_mm - self.top_mm
+
+    @property
+    def predicted_sigma_mm(self) -> np.ndarray:
+        """What the side's image noise, the top fit and the clock predict for the difference's
+        scatter at each point [mm]."""
+        return np.sqrt(self.side_sigma_mm**2 + self.top_sigma_mm**2 + self.clock_sigma_mm**2)
+
+
+@dataclass(frozen=True)
+class ComparisonSummary:
+    """Over a run: the points compared, the mean of side − top [mm] and the pose's σ of it
+    [mm], its RMS [mm], its RMS about the mean [mm], and what both σ predict for that scatter
+    [mm]: the side's image noise, the top fit's σ and the clock's."""
+
+    points: int
+    frames: int
+    mean_difference_mm: float
+    pose_sigma_mm: float
+    rms_difference_mm: float
+    scatter_mm: float
+    predicted_mm: float
+
+    def summary(self) -> str:
+        """One line for the console and the report."""
+        return (f"top surface at the wall against the side camera, {self.frames} frames: "
+                f"side − top {self.mean_difference_mm:+.3f} mm on average (the meniscus, and "
+                f"the side camera's pose: σ {self.pose_sigma_mm:.3f} mm), RMS "
+                f"{self.rms_difference_mm:.3f} mm; about the mean {self.scatter_mm:.3f} mm "
+                f"where both σ predict {self.predicted_mm:.3f} mm")
+
+
+def summarise(frames: list[FrameComparison]) -> ComparisonSummary:
+    """The run's summary over every wall point compared."""
+    if not frames:
+        frames = [FrameComparison(*(np.array([]),) * 6)]
+    difference = np.concatenate([f.difference_mm for f in frames])
+    sigma = np.concatenate([f.predicted_sigma_mm for f in frames])
+    pose = np.concatenate([f.side_pose_sigma_mm for f in frames])
+    used = np.isfinite(difference) & np.isfinite(sigma)
+    difference, sigma, pose = difference[used], sigma[used], pose[used]
+    if not difference.size:
+        return ComparisonSummary(0, 0, *(float("nan"),) * 5)
+    mean = float(np.mean(difference))
+    return ComparisonSummary(int(difference.size),
+                             sum(bool(np.isfinite(f.difference_mm).any()) for f in frames),
+                             mean, float(np.sqrt(np.mean(pose**2))),
+                             float(np.sqrt(np.mean(difference**2))),
+                             float(np.sqrt(np.mean((difference - mean) ** 2))),
+                             float(np.sqrt(np.mean(sigma**2))))
