@@ -23,7 +23,7 @@ from scipy.spatial.transform import Rotation
 from sds_camera.camera_imu import read_camera_imu
 from sds_model.rig import load_rig
 from sds_recon.results import load_results
-from sds_record.mcap_files import McapRecorder, read_messages
+from sds_record.mcap_files import McapRecorder, decoded_messages, read_messages
 from sds_record.recorded_series import recorded_rig
 from sds_ros.qos import stream_qos
 from sds_ros.static_tf import static_tf_qos
@@ -70,8 +70,9 @@ class DropRun:
 @pytest.fixture(scope="module")
 def drop_run(repo, tmp_path_factory) -> DropRun:
     tmp_path = tmp_path_factory.mktemp("drop")
+    # With a side camera (config/lateral/stelium_side.yaml) for `sds run --lateral`.
     scenario = load_scenario(repo / "config" / "scenarios" / "ground_kick.yaml",
-                             {"duration_s": 1.0})
+                             {"duration_s": 1.0, "lateral": {"intrinsics_off_sigmas": 1.0}})
     output = simulate(scenario, tmp_path / "sim", progress=False)
     rig_file = repo / "config" / "rigs" / "stelium.yaml"
     rig = load_rig(rig_file)
@@ -453,12 +454,32 @@ def test_the_sync_led_is_found_in_the_video(drop_run: DropRun) -> None:
                         (SyncEvent.KIND_LED_OFF, stamps[led[-1] + 1])], drop_run.log
 
 
-def test_sds_run_measures_a_recorded_video_with_the_whole_graph(drop_run: DropRun) -> None:
-    """`sds run --video`: the chain (with the bridge waiting on a port nobody plugs in)."""
+def test_sds_run_measures_a_recorded_video_with_the_whole_graph(repo: Path,
+                                                               drop_run: DropRun) -> None:
+    """`sds run --video`: the chain (with the bridge waiting on a port nobody plugs in), with
+    the side camera's video beside it: every side frame recorded and shown, then checked."""
     out = drop_run.folder / "run"
-    done = sds("run", "--video", str(drop_run.output.video), "--rig", str(drop_run.rig_file),
-               "--out", str(out), "--port", str(out / "no_arduino"))
+    output = drop_run.output
+    led_x, led_y = (int(v) for v in load_scenario(
+        repo / "config" / "scenarios" / "ground_kick.yaml").events.led_position_px)
+    done = sds("run", "--video", str(output.video), "--rig", str(drop_run.rig_file),
+               "--out", str(out), "--port", str(out / "no_arduino"),
+               "--lateral", str(output.lateral_video), "--lateral-view",
+               str(repo / "config" / "lateral" / "stelium_side.yaml"), "--lateral-board",
+               str(output.lateral_board), "--led-roi", str(led_x - 12), str(led_y - 12), "24",
+               "24", "--arduino-log", str(output.sd_log))
     assert done.returncode == 0, done.stdout + done.stderr
+    side_frames = sum(1 for _ in csv.DictReader((output.directory / "truth" /
+                                                 "lateral.csv").open()))
+    side = [msg for _, msg in decoded_messages(out / "recording.mcap", ["/lateral/image"])]
+    assert len(side) == side_frames       # every side frame recorded
+    assert {msg.header.frame_id for msg in side} == {"lateral_optical"}
+    entities = rrd_entities(out / "recording.rrd")
+    assert "/lateral/image" in entities and "/camera/image" in entities
+    rows = list(csv.DictReader((out / "results" / "lateral.csv").open()))
+    assert len(rows) == side_frames
+    assert "Side camera" in (out / "analysis" / "report.html").read_text()
+    assert "side clock: top − side" in done.stdout
     assert (out / "recording.mcap").is_file() and (out / "recording.rrd").is_file()
     assert (out / "analysis" / "report.html").is_file()
     results = load_results(out / "results")

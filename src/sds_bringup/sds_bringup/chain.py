@@ -49,20 +49,24 @@ def live_view() -> bool:
     return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
-def graph_entries(overrides: list[str], viewer: bool) -> list[NodeEntry]:
-    """The chain: drop.yaml and arduino.yaml, with view.yaml if `viewer`, with overrides (the
-    viewer's are left out without it)."""
-    graphs = GRAPHS if viewer else tuple(g for g in GRAPHS if g != "view.yaml")
+def graph_entries(overrides: list[str], viewer: bool, extra: tuple[str, ...] = ()
+                  ) -> list[NodeEntry]:
+    """The chain: drop.yaml and arduino.yaml, with view.yaml if `viewer`, and the `extra`
+    graph files (e.g. lateral.yaml), with overrides (the viewer's are left out without it)."""
+    graphs = (*GRAPHS, *extra) if viewer else tuple(g for g in (*GRAPHS, *extra)
+                                                    if g != "view.yaml")
     entries = [e for name in graphs for e in load_graph(CONFIG / "graphs" / name)]
     return apply_overrides(entries, [o for o in overrides
                                      if viewer or not o.startswith("viewer.")])
 
 
 def run_chain(overrides: list[str], out: Path, expected_frames: int | None,
-              serial_lines: list[bytes] | None = None, port: Path | None = None) -> RunOutputs:
-    """Run the chain until `expected_frames` fits were made (or Ctrl-C for a live camera),
-    with a progress bar; node logs go to out/graph.log. The recorder refuses an existing
-    recording unless the overrides say `recorder.overwrite=true`."""
+              serial_lines: list[bytes] | None = None, port: Path | None = None,
+              graphs: tuple[str, ...] = ()) -> RunOutputs:
+    """Run the chain (with the extra graph files `graphs`) until `expected_frames` fits were
+    made (or Ctrl-C for a live camera), with a progress bar; node logs go to out/graph.log.
+    The recorder refuses an existing recording unless the overrides say
+    `recorder.overwrite=true`."""
     outputs = RunOutputs(out / "recording.mcap", out / "recording.rrd", out / "graph.log")
     domain_id = graph_domain_id(None)
     environment = graph_environment(domain_id)
@@ -77,7 +81,9 @@ def run_chain(overrides: list[str], out: Path, expected_frames: int | None,
                              f"tracker.wait_for_consumers={3 + extra}",
                              f"recon.wait_for_consumers={1 + extra}",
                              f"recon.wait_for_fit_consumers={2 + extra}",
-                             f"sloshing.wait_for_consumers={1 + extra}"], viewer)
+                             f"sloshing.wait_for_consumers={1 + extra}",
+                             *([f"lateral.wait_for_subscribers={1 + extra}"]
+                               if "lateral.yaml" in graphs else [])], viewer, graphs)
     cable = plug_in(port) if serial_lines is not None and port is not None else None
     with outputs.log.open("w") as log:
         launcher = Launcher(entries, environment, output=log, console=sys.stderr)

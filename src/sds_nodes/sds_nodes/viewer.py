@@ -33,12 +33,15 @@ SUBSCRIPTIONS = (("image", Image, "sensor_msgs/msg/Image"),
                  ("imu", Imu, "sensor_msgs/msg/Imu"),
                  ("tof", Range, "sensor_msgs/msg/Range"))
 """Relative topic, message class and type name of everything the viewer shows."""
+SIDE_IMAGES = "lateral_image"
+"""The side camera's frames (config/graphs/lateral.yaml), thinned on their own."""
 LIVE_TOPICS = {"spots": "spots_live", "points": "points_live"}
 """With `live`, the spots and points as measured (before the Hampel filter, at once) instead."""
 
 
 PARAMETERS = {"rig": "", "output": "", "connect": "", "spawn": False, "image_scale": 0.25,
-              "image_every": 1, "live": False, "live_max_lag_s": 0.1}
+              "image_every": 1, "lateral_image_every": 4, "live": False,
+              "live_max_lag_s": 0.1}
 """The node's parameters and defaults (config/params/viewer.yaml documents each)."""
 
 
@@ -65,8 +68,9 @@ class ViewerNode(HostedNode):
         else:
             self.get_logger().warning("no output, connect or spawn: nothing will be shown")
         self._scene = RerunScene(self._stream, rig, float(p["image_scale"]))
-        self._image_every = max(1, int(p["image_every"]))
-        self._images = 0
+        self._every = {"image": max(1, int(p["image_every"])),
+                       SIDE_IMAGES: max(1, int(p["lateral_image_every"]))}
+        self._images = {"image": 0, SIDE_IMAGES: 0}
         # Live, a late image costs the CPU its measurements need and shows the past.
         self._shedding = LiveShedding("viewer images", float(p["live_max_lag_s"])) \
             if p["live"] else None
@@ -75,21 +79,23 @@ class ViewerNode(HostedNode):
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.create_subscription(CameraModel, "camera_model", self._logger_for(
             "sds_msgs/msg/CameraModel"), latched)
-        for topic, msg_type, type_name in SUBSCRIPTIONS:
+        for topic, msg_type, type_name in (*SUBSCRIPTIONS,
+                                           (SIDE_IMAGES, Image, "sensor_msgs/msg/Image")):
+            stream = topic
             if p["live"]:
                 topic = LIVE_TOPICS.get(topic, topic)
-            self.create_subscription(msg_type, topic, self._logger_for(type_name),
+            self.create_subscription(msg_type, topic, self._logger_for(type_name, stream),
                                      qos_profile_sensor_data)
         if self._shedding is not None:
             report_on_console(self, self._shedding)
         where = p["output"] or p["connect"] or ("a spawned viewer" if p["spawn"] else "nowhere")
         self.get_logger().info(f"showing the graph in Rerun: {where}")
 
-    def _logger_for(self, type_name: str):
+    def _logger_for(self, type_name: str, stream: str = ""):
         def log(msg, info: MessageInfo) -> None:
             if type_name == "sensor_msgs/msg/Image":
-                self._images += 1
-                if (self._images - 1) % self._image_every:
+                self._images[stream] += 1
+                if (self._images[stream] - 1) % self._every[stream]:
                     return
                 if self._shedding is not None and not self._shedding.keep(waited_s(info)):
                     return

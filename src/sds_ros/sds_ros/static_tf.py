@@ -22,6 +22,9 @@ TF_STATIC_TOPIC = "/tf_static"
 TF_MESSAGE_TYPE = "tf2_msgs/msg/TFMessage"
 WORLD_FRAME = "world"
 CAMERA_FRAME = "camera_optical"
+LATERAL_FRAME = "lateral_optical"
+"""The side camera's optical frame (config/graphs/lateral.yaml): a recording tells its frames
+and camera model from the top camera's by it."""
 ARDUINO_FRAME = "arduino"
 
 

@@ -36,13 +36,14 @@ def mcap_to_rrd(recording: str | Path, output: str | Path, rig: Rig | None = Non
         stream = rr.RecordingStream("sds", recording_id=Path(recording).stem)
         stream.save(str(staging))
         scene = RerunScene(stream, rig, image_scale)
-        shown = skipped = images = 0
+        shown = skipped = 0
+        images: dict[str, int] = {}   # per camera (frame_id): each is thinned on its own
         try:
             for recorded, msg in decoded_messages(recording):
                 type_name = recorded.type_name
                 if type_name == "sensor_msgs/msg/Image":
-                    images += 1
-                    if (images - 1) % image_every:
+                    count = images[msg.header.frame_id] = images.get(msg.header.frame_id, 0) + 1
+                    if (count - 1) % image_every:
                         continue
                 if log_message(scene, type_name, msg):
                     shown += 1

@@ -6,6 +6,7 @@ import numpy as np
 from sds_recon.reconstruction import LINE_LASER_ID
 from sds_ros.image_msg import msg_to_image
 from sds_ros.point_cloud import read_cloud, stamp_s
+from sds_ros.static_tf import LATERAL_FRAME
 
 from sds_msgs.msg import LaserSpot
 from sds_viz.scene import RerunScene
@@ -14,6 +15,8 @@ from sds_viz.scene import RerunScene
 def log_message(scene: RerunScene, type_name: str, msg) -> bool:
     """Log one message by its type ('package/msg/Type'); False for a type the scene ignores."""
     if type_name == "sds_msgs/msg/CameraModel":
+        if msg.header.frame_id == LATERAL_FRAME:   # the side camera's: no region, no beams
+            return True
         scene.roi_offset = np.array([msg.roi.x_offset, msg.roi.y_offset], dtype=float)
         scene.log_beam_paths()
         return True
@@ -26,7 +29,10 @@ def log_message(scene: RerunScene, type_name: str, msg) -> bool:
 
 
 def _image(scene: RerunScene, msg) -> None:
-    scene.log_image(msg_to_image(msg), tuple(scene.roi_offset.astype(int)))
+    if msg.header.frame_id == LATERAL_FRAME:
+        scene.log_side_image("lateral/image", msg_to_image(msg))
+    else:
+        scene.log_image(msg_to_image(msg), tuple(scene.roi_offset.astype(int)))
 
 
 def _spots(scene: RerunScene, msg) -> None:

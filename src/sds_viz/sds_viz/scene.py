@@ -3,6 +3,8 @@
 Entity paths:
 - camera/image (downscaled), camera/image/spots, camera/image/beam_paths (static),
   camera/image/line — pixels of the full frame scaled to the logged image;
+- lateral/image — the side camera's frames (frame_id lateral_optical) as they are, on the
+  same timeline;
 - world/container (static: rim at the fill level, bottom, wall), world/beams (static),
   world/points, world/line_points, world/fitted_plane — mm in the rig's world frame;
 - series/height/<laser_id>, series/plane/<tilt_x_deg|tilt_y_deg|p00_mm|rmse_mm>,
@@ -93,6 +95,12 @@ class RerunScene:
         if image.ndim == 3:
             image = cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
         self.stream.log("camera/image", rr.Image(image))
+
+    def log_side_image(self, entity: str, image: np.ndarray) -> None:
+        """A second camera's frame (mono or BGR) at `entity`, as it is (a side view is small)."""
+        if image.ndim == 3:
+            image = cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+        self.stream.log(entity, rr.Image(image))
 
     def log_spots(self, ids: np.ndarray, pixels: np.ndarray, lost: np.ndarray) -> None:
         """Tracked spots (full-frame px); lost ones grey."""

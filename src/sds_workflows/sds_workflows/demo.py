@@ -29,6 +29,7 @@ from sds_sloshing.surface_series import RecordingError
 from sds_viz.from_mcap import mcap_to_rrd
 
 from sds_workflows.export import export_recording
+from sds_workflows.lateral import LateralInput, place_lateral, process_lateral
 from sds_workflows.run_tables import RunTables, finish_analysis
 
 DEMO_SCENARIO = CONFIG / "scenarios" / "drop_4p7s.yaml"
@@ -56,11 +57,12 @@ class ChainOutputs(Protocol):
 
 class ChainRunner(Protocol):
     """Runs the measuring chain with graph overrides until `expected_frames` were tracked
-    (None: until Ctrl-C), feeding `serial_lines` to a stand-in Arduino at `port` if given."""
+    (None: until Ctrl-C), feeding `serial_lines` to a stand-in Arduino at `port` if given,
+    with the nodes of the extra graph files `graphs` (config/graphs/, e.g. lateral.yaml)."""
 
     def __call__(self, overrides: list[str], out: Path, expected_frames: int | None,
-                 serial_lines: list[bytes] | None = None, port: Path | None = None
-                 ) -> ChainOutputs: ...
+                 serial_lines: list[bytes] | None = None, port: Path | None = None,
+                 graphs: tuple[str, ...] = ()) -> ChainOutputs: ...
 
 
 def height_errors(truth_spots: Path, points: np.ndarray) -> np.ndarray:
@@ -180,11 +182,15 @@ def print_summary(out: Path, scenario, simulation, outputs: ChainOutputs, result
 
 
 def run_live(source: str, rig_file: Path, out: Path, port: str | None,
-             gravity: float | None, run_chain: ChainRunner, overwrite: bool = False) -> int:
+             gravity: float | None, run_chain: ChainRunner, overwrite: bool = False,
+             lateral: LateralInput | None = None) -> int:
     """`sds run`: a video file or a camera through the whole chain, then the analysis (the
-    caller checked `overwrite` against an earlier run in `out`)."""
+    caller checked `overwrite` against an earlier run in `out`). With `lateral`, the side
+    camera's video runs beside it (config/graphs/lateral.yaml: recorded, shown), and after
+    the run its wall profile checks the top surface (`sds process --lateral`'s files)."""
     out.mkdir(parents=True, exist_ok=True)
     rig = load_rig(rig_file)
+    side = place_lateral(lateral, rig) if lateral is not None else None
     overrides = [f"recorder.overwrite={str(overwrite).lower()}", f"camera.source={source}",
                  f"camera.roi={list(rig.container_region_px(rig.camera))}",
                  f"tracker.rig={rig_file.resolve()}", f"recon.rig={rig_file.resolve()}",
@@ -193,13 +199,21 @@ def run_live(source: str, rig_file: Path, out: Path, port: str | None,
         overrides.append(f"camera.camera_model={rig.camera_file}")
     if port:
         overrides.append(f"arduino.port={port}")
+    graphs: tuple[str, ...] = ()
+    if side is not None:
+        graphs = ("lateral.yaml",)
+        overrides += [f"lateral.source={side.inputs.video.resolve()}",
+                      f"lateral.camera_model={side.view.camera_file}",
+                      f"lateral.led_roi={list(side.view.led_roi_px)}"]
+        if side.inputs.top_led_roi is not None:
+            overrides.append(f"camera.led_roi={list(side.inputs.top_led_roi)}")
     is_file = Path(source).is_file()
     frames = None
     if is_file:
         from sds_camera.frame_source import VideoFileSource
 
         frames = VideoFileSource(Path(source)).announced_frames
-    outputs = run_chain(overrides, out, frames)
+    outputs = run_chain(overrides, out, frames, graphs=graphs)
     if outputs.interrupted and is_file:   # a live camera's run ends with Ctrl-C
         return interrupted("sds run", outputs)
     if outputs.failure or not outputs.recording.is_file():
@@ -211,4 +225,11 @@ def run_live(source: str, rig_file: Path, out: Path, port: str | None,
           f"  report {out / 'analysis' / 'report.html'}\n  results {out / 'results'}/")
     for line in summary_lines(result):
         print(f"    {line}")
+    if side is not None and is_file:
+        run = process_lateral(side, rig, Path(source), out / "results", progress=False,
+                              report=out / "analysis")
+        print("\n".join(f"  {line}" for line in run.lines()))
+    elif side is not None:
+        print("  side camera: recorded (/lateral/image); its check of the top surface needs "
+              "the two videos: sds process --video TOP --lateral SIDE ...")
     return 0

@@ -14,6 +14,7 @@ from sds_recon.results import TABLE_FILES, ResultsWriter, refuse_results
 from sds_record.mcap_files import decoded_messages
 from sds_record.recorded_series import recording_rig
 from sds_ros.point_cloud import CloudPoints, read_cloud, stamp_s
+from sds_ros.static_tf import LATERAL_FRAME
 from sds_sloshing.analysis import AnalysisOptions
 from sds_sloshing.report import REPORT_FILES
 from sds_sloshing.surface_series import RecordingError
@@ -50,8 +51,8 @@ def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:
     sensors: list[tuple[float, str, Any]] = []   # the Arduino's IMU and ToF: stamp, topic
     for recorded, msg in decoded_messages(path):
         name = recorded.type_name
-        if not hasattr(msg, "header"):
-            continue
+        if not hasattr(msg, "header") or msg.header.frame_id == LATERAL_FRAME:
+            continue    # the side camera's frames are not the top camera's
         stamp = stamp_s(msg)
         if first is None and name in ("sensor_msgs/msg/Image", "sds_msgs/msg/LaserSpotArray",
                                       "sds_msgs/msg/LaserLineProfile"):

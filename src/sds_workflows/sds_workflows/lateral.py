@@ -154,9 +154,9 @@ def place_lateral(inputs: LateralInput, rig: Rig) -> LateralSetup:
 
 
 def process_lateral(setup: LateralSetup, rig: Rig, top_video: Path, out: Path,
-                    progress: bool = True) -> LateralRun:
+                    progress: bool = True, report: Path | None = None) -> LateralRun:
     """The placed side camera against a processed top run in `out` (its fits and points):
-    writes LATERAL_FILES there and a section into its report."""
+    writes LATERAL_FILES there and a section into the report in `report` (default: `out`)."""
     inputs, view, board = setup.inputs, setup.view, setup.board
     times, profiles, side_on, fps = _side_frames(inputs.video, setup.profiler, view.led_roi_px,
                                                  progress)
@@ -180,7 +180,8 @@ def process_lateral(setup: LateralSetup, rig: Rig, top_video: Path, out: Path,
     (out / "lateral.json").write_text(json.dumps(description, indent=2) + "\n")
     figure = out / "lateral.png"
     _plot(figure, clock.top_time_s(np.array(times)), profiles, comparisons)
-    add_report_section(out, "Side camera", [*run.lines()], figure, "lateral", description)
+    add_report_section(report or out, "Side camera", [*run.lines()], figure, "lateral",
+                       description)
     return run
 
 

@@ -36,6 +36,7 @@ from sds_record.mcap_files import decoded_messages, recorded_topics
 from sds_ros.graph_file import node_parameters
 from sds_ros.image_msg import msg_to_image
 from sds_ros.point_cloud import stamp_s
+from sds_ros.static_tf import LATERAL_FRAME
 from sds_sloshing.surface_series import RecordingError
 from sds_tracker.line import LineProfile
 from sds_tracker.spots import LOST
@@ -106,6 +107,8 @@ def _recorded_frames(path: Path) -> Iterator[RedFrame]:
     index = 0
     for recorded, msg in decoded_messages(path):
         name = recorded.type_name
+        if getattr(msg, "header", None) is not None and msg.header.frame_id == LATERAL_FRAME:
+            continue    # the side camera's frames and model are not the top camera's
         if name == "sds_msgs/msg/CameraModel":
             offset = (int(msg.roi.x_offset), int(msg.roi.y_offset))
         elif name == "sensor_msgs/msg/Image":

@@ -10,9 +10,12 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
     """Register `sds graph`."""
     parser = commands.add_parser(
         "graph", help="start the nodes of a graph file as processes",
-        description="Start a graph (config/graphs/*.yaml); Ctrl-C or SIGTERM stops every node.",
+        description="Start a graph (config/graphs/*.yaml; several files make one graph, e.g. "
+                    "drop.yaml lateral.yaml); Ctrl-C or SIGTERM stops every node.",
     )
-    parser.add_argument("graph_file", type=Path, help="a graph file, e.g. config/graphs/drop.yaml")
+    parser.add_argument("graph_files", type=Path, nargs="+", metavar="graph_file",
+                        help="graph files, e.g. config/graphs/drop.yaml (and "
+                             "config/graphs/lateral.yaml for the side camera)")
     parser.add_argument("--set", dest="overrides", action="append", default=[],
                         metavar="NODE.PARAM=VALUE", help="override a node parameter (YAML value)")
     parser.add_argument("--compose", action="store_true",
@@ -32,13 +35,22 @@ def run(args: argparse.Namespace) -> int:
     from sds_bringup.ros_env import graph_domain_id, graph_environment
     from sds_ros.graph_file import apply_overrides, composed, load_graph
 
-    entries = apply_overrides(load_graph(args.graph_file), args.overrides)
+    from sds_cli.commands import CommandError
+
+    entries = [entry for path in args.graph_files for entry in load_graph(path)]
+    names = [entry.name for entry in entries]
+    twice = sorted({name for name in names if names.count(name) > 1})
+    if twice:
+        raise CommandError(f"the graph files name the node(s) {', '.join(twice)} more than "
+                           "once")
+    entries = apply_overrides(entries, args.overrides)
     if args.compose:
         entries = composed(entries)
     domain_id = graph_domain_id(args.domain_id, args.network)
     environment = graph_environment(domain_id, network=args.network)
     peers = environment.get("ROS_STATIC_PEERS", "")
-    print(f"sds graph: {args.graph_file} on ROS_DOMAIN_ID={domain_id}, discovery "
+    print(f"sds graph: {' + '.join(str(p) for p in args.graph_files)} on "
+          f"ROS_DOMAIN_ID={domain_id}, discovery "
           f"{environment['ROS_AUTOMATIC_DISCOVERY_RANGE']}" + (f" + peers {peers}" if peers
                                                               else ""))
     return Launcher(entries, environment).run()
