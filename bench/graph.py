@@ -17,7 +17,10 @@ Prints, measured in one run on the same file:
   (frame source `repeat: 0`; the recorder leaves the images out there to spare the disk);
 - with `--busy`, each real-time run again beside a CPU-bound process (one core's worth);
   `--hogs 1 2` runs each beside 1, then 2 of them instead (2: the chain gets less than a
-  frame period of CPU per frame); the console's shedding lines come from each run's log.
+  frame period of CPU per frame); the console's shedding lines come from each run's log;
+- with `--lateral`, the side camera runs beside the chain (config/graphs/lateral.yaml, the
+  simulator's 512x512 side view at 125 fps, in real time, repeated like the top video), and
+  with `--record-images` its frames recorded are counted against those it published.
 """
 
 from __future__ import annotations
@@ -54,14 +57,19 @@ recorder apart (config/graphs/drop.yaml); all in one; camera and recorder in one
 reconstruction in another. The niced sloshing node keeps its own process in each."""
 
 
-def simulate_once(out: Path, seconds: float):
+def simulate_once(out: Path, seconds: float, lateral: bool = False):
+    """The drop (with the side view if `lateral`), simulated once per --out."""
     from sds_sim.scenario import load_scenario
     from sds_sim.simulate import simulate
 
-    scenario = load_scenario(SCENARIO, {"duration_s": seconds})
-    video = out / "sim" / "video.mp4"
+    overrides: dict = {"duration_s": seconds}
+    if lateral:
+        overrides["lateral"] = {}
+    scenario = load_scenario(SCENARIO, overrides)
+    folder = out / ("sim_lateral" if lateral else "sim")
+    video = folder / "video.mp4"
     if not video.is_file():
-        simulate(scenario, out / "sim", progress=False)
+        simulate(scenario, folder, progress=False)
     return scenario, video
 
 
@@ -137,7 +145,7 @@ def cpu_s(pid: int) -> float:
 
 def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
               image_subscribers: int = 2, processes: dict[str, str] | None = None,
-              log_file: Path | None = None):
+              log_file: Path | None = None, graphs: tuple[str, ...] = ("drop.yaml",)):
     """The drop graph with a probe on /recon/points and /recon/points_live: receipt times and
     stamps of each, memory, and each process's CPU time between the first and the last
     cloud."""
@@ -158,7 +166,8 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
 
     from sds_msgs.msg import LaserSpotArray
 
-    entries = apply_overrides(load_graph(REPO / "config" / "graphs" / "drop.yaml"),
+    entries = apply_overrides([e for name in graphs
+                               for e in load_graph(REPO / "config" / "graphs" / name)],
                               [*overrides, f"camera.wait_for_subscribers={image_subscribers}",
                                "tracker.wait_for_consumers=3", "recon.wait_for_consumers=1"])
     entries = [replace(e, process=(processes or {}).get(e.name, e.process)) for e in entries]
@@ -235,13 +244,14 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
     return receipts, live, spots_live, memory, per_frame
 
 
-def recorded_frames(recording: Path, fps: float) -> tuple[int, int]:
+def recorded_frames(recording: Path, fps: float, topic: str = "/camera/image"
+                    ) -> tuple[int, int]:
     """Frames a recording holds, and how many the camera published from its first to its last
     (their stamps, read from each image's CDR header, come every 1/fps: the camera never skips
     one)."""
     from sds_record.mcap_files import header_stamp_ns, read_messages
 
-    stamps_ns = {header_stamp_ns(m.data) for m in read_messages(recording, ["/camera/image"])}
+    stamps_ns = {header_stamp_ns(m.data) for m in read_messages(recording, [topic])}
     if not stamps_ns:
         return 0, 0
     return len(stamps_ns), round((max(stamps_ns) - min(stamps_ns)) * 1e-9 * fps) + 1
@@ -266,14 +276,26 @@ def main() -> None:
                              "and count them against the camera's")
     parser.add_argument("--no-flood", action="store_true",
                         help="measure the real-time runs only")
+    parser.add_argument("--lateral", action="store_true",
+                        help="the real-time runs have the side camera beside the chain")
     args = parser.parse_args()
     sys.stdout.reconfigure(line_buffering=True)   # each result shows as soon as measured
     args.out.mkdir(parents=True, exist_ok=True)
-    scenario, video = simulate_once(args.out, args.seconds)
+    scenario, video = simulate_once(args.out, args.seconds, args.lateral)
     rig, rig_file = scenario.rig, scenario.rig_file.resolve()
     region = list(rig.container_region_px(rig.camera))
     base = [f"camera.source={video}", f"camera.roi={region}", f"tracker.rig={rig_file}",
             f"recon.rig={rig_file}"]
+    side: list[str] = []
+    side_fps = 0.0
+    if args.lateral:
+        from sds_lateral.view import load_lateral_view
+
+        view = load_lateral_view(scenario.lateral.view_file)
+        side_fps = view.fps
+        side = [f"lateral.source={video.parent / 'lateral' / 'video.mp4'}", "lateral.repeat=0",
+                f"lateral.camera_model={view.camera_file}",
+                f"lateral.wait_for_subscribers={1 if args.record_images else 0}"]
     # Each run records into a folder of its own under --out (nothing there is replaced), and
     # its recording is deleted once measured (a flood run's holds the 4K frames).
     scratch = Path(tempfile.mkdtemp(prefix="recordings_", dir=args.out))
@@ -313,17 +335,20 @@ def main() -> None:
                  for _ in range(hogs)]
         try:
             receipts, live, spots_live, memory, cpu = run_graph(
-                [*base, "camera.pacing=realtime", "camera.repeat=0",
+                [*base, *side, "camera.pacing=realtime", "camera.repeat=0",
                  f"recorder.output={recording}",
                  "recorder.exclude=[/tracker/spots_live,/recon/points_live"
-                 + ("]" if args.record_images else ",/camera/image]")],
+                 + ("]" if args.record_images else ",/camera/image,/lateral/image]")],
                 None, args.minutes, image_subscribers=2 if args.record_images else 1,
-                processes=processes, log_file=args.out / f"real_time_{index}.log")
+                processes=processes, log_file=args.out / f"real_time_{index}.log",
+                graphs=("drop.yaml", "lateral.yaml") if args.lateral else ("drop.yaml",))
         finally:
             for load in loads:
                 load.kill()
                 load.wait()
         images = recorded_frames(recording, scenario.fps) if args.record_images else None
+        side_images = (recorded_frames(recording, side_fps, "/lateral/image")
+                       if args.record_images and args.lateral else None)
         recording.unlink(missing_ok=True)
         layout = f"{layout}{f', beside {len(loads)} busy process(es)' if loads else ''}"
         # Receipt times and stamps [s] of each probe topic, for a look at the run over time.
@@ -364,6 +389,9 @@ def main() -> None:
         if images is not None:
             print(f"  frames recorded: {images[0]} of the camera's {images[1]} from the first "
                   "recorded to the last")
+        if side_images is not None:
+            print(f"  side frames recorded: {side_images[0]} of the side camera's "
+                  f"{side_images[1]} from the first recorded to the last")
         said = [line.strip() for line in (args.out / f"real_time_{index}.log").read_text()
                 .splitlines() if "shed" in line or "missing before" in line]
         print(f"  the console said, {len(said)} lines" + "".join(

@@ -8,7 +8,7 @@ pose, emitters, camera file off by its σ, the table's readings off by their acc
 calibrated by the README's protocol from its tilt images. A random side camera stands beside
 it: its centre off the view file's drawing by up to ±5 mm across, ±10 mm in distance, ±3 mm
 in height, looking up to ±3 mm off, turned up to ±1° about its axis; its intrinsics off their
-file by one σ each; the checkerboard off its stated place by its placement σ per axis; its
+file by one σ each; the checkerboard off its stated places by its placement σ per axis; its
 clock started at a random time before the LED's blink and running 15 ppm fast; the blink at
 a random phase of the top camera's frames. The 1 g kick
 (6 s) and the microgravity drop (4.7 s) are rendered whole, the top view in 4K (30 fps) and
@@ -90,11 +90,11 @@ def one_run(folder: Path, name: str, seed: int, first: FirstUse, rng: np.random.
     spec = side_camera(rng, events.led_on_s)
     scenario = replace(scenario, rig=first.true, lateral=spec, events=events)
     simulation = simulate(scenario, folder / "sim", progress=False)
-    assert simulation.lateral_video is not None and simulation.lateral_board is not None
+    assert simulation.lateral_video is not None and simulation.lateral_boards
     run = process_video(simulation.video, first.calibrated, folder / "results", progress=False,
                         overwrite=True,
                         lateral=LateralInput(simulation.lateral_video, VIEW_FILE,
-                                             simulation.lateral_board, TOP_LED_ROI,
+                                             simulation.lateral_boards, TOP_LED_ROI,
                                              simulation.sd_log))
     assert run.lateral is not None
     clock, summary = run.lateral.clock, run.lateral.summary

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 import subprocess
 import sys
 from dataclasses import replace
@@ -18,7 +19,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from sds_lateral.board import BoardError, camera_pose_from_board
+from sds_lateral.board import BoardError, camera_pose_from_boards
 from sds_lateral.clock import ClockError, link_lateral_clock
 from sds_lateral.comparison import top_surface_series
 from sds_lateral.view import LateralViewError, load_lateral_view
@@ -52,26 +53,27 @@ def renderer() -> LateralRenderer:
 
 def test_the_view_file_reads_and_bad_ones_name_the_field(tmp_path: Path) -> None:
     view = load_lateral_view(VIEW_FILE)
-    assert view.fps == 125.0 and view.camera.width_px == 512 and view.board.inner_corners == (9, 6)
-    corners = view.board.corners_mm()
+    assert view.fps == 125.0 and view.camera.width_px == 512 and len(view.boards) == 2
+    corners = view.boards[0].corners_mm()
     assert corners.shape == (54, 3)
-    assert np.allclose(corners[1] - corners[0], [10.0, 0.0, 0.0])     # along a row: +X
-    assert np.allclose(corners[9] - corners[0], [0.0, 0.0, -10.0])    # down a column: −Z
+    assert np.allclose(corners[1] - corners[0], [7.0, 0.0, 0.0])     # along a row: +X
+    assert np.allclose(corners[9] - corners[0], [0.0, 0.0, -7.0])    # down a column: −Z
     text = VIEW_FILE.read_text().replace("../cameras/", str(REPO / "config" / "cameras") + "/")
     cases = {"led_roi_px: [452, 28, 32, 32]": ("led_roi_px: [500, 28, 32, 32]", "led_roi_px"),
              "fps: 125.0": ("fps: -1", "fps"),
-             "square_mm: 10.0": ("square_mm: 10.0\n  colour: red", "board: unknown keys")}
+             "    placement_sigma_mm: 0.1       #": (
+                 "    colour: red\n    placement_sigma_mm: 0.1  #", "boards[0]: unknown keys")}
     for original, (changed, named) in cases.items():
         path = tmp_path / "view.yaml"
         path.write_text(text.replace(original, changed))
-        with pytest.raises(LateralViewError, match=named) as error:
+        with pytest.raises(LateralViewError, match=re.escape(named)) as error:
             load_lateral_view(path)
         assert str(path) in str(error.value) and "\n" not in str(error.value)
 
 
-def test_the_board_places_the_camera_within_its_sigma(renderer: LateralRenderer) -> None:
-    board = camera_pose_from_board(renderer.board_image(), renderer.view.board,
-                                   renderer.view.camera, renderer.view.camera_sigma)
+def test_the_boards_place_the_camera_within_its_sigma(renderer: LateralRenderer) -> None:
+    board = camera_pose_from_boards(renderer.board_images(), renderer.view.boards,
+                                    renderer.view.camera, renderer.view.camera_sigma)
     assert board.reprojection_rms_px < 0.3
     # The camera file is off by one σ in every intrinsic and the board off its stated place:
     # the centre lands off the truth, and its σ must say by about how much.
@@ -79,7 +81,7 @@ def test_the_board_places_the_camera_within_its_sigma(renderer: LateralRenderer)
     assert np.all(np.abs(error) < 3 * board.position_sigma_mm + 0.05), (error,
                                                                           board.position_sigma_mm)
     # Told the true intrinsics and the board's true place, the pose is right to a tenth of mm.
-    exact = camera_pose_from_board(renderer.board_image(), renderer.board, renderer.camera)
+    exact = camera_pose_from_boards(renderer.board_images(), renderer.boards, renderer.camera)
     assert np.linalg.norm(exact.camera_position_mm - renderer.centre_mm) < 0.2
     rotation_error = exact.world_to_camera.rotation @ renderer.pose.rotation.T
     assert np.degrees(np.arccos(np.clip((np.trace(rotation_error) - 1) / 2, -1, 1))) < 0.02
@@ -87,13 +89,16 @@ def test_the_board_places_the_camera_within_its_sigma(renderer: LateralRenderer)
 
 def test_an_image_without_the_board_is_refused(renderer: LateralRenderer) -> None:
     frame, _ = renderer.render(0)
-    with pytest.raises(BoardError, match="9x6 inner corners"):
-        camera_pose_from_board(frame, renderer.view.board, renderer.view.camera)
+    images = renderer.board_images()
+    with pytest.raises(BoardError, match="board image 2: no checkerboard of 9x6 inner corners"):
+        camera_pose_from_boards([images[0], frame], renderer.view.boards, renderer.view.camera)
+    with pytest.raises(BoardError, match="1 board images for the view file's 2"):
+        camera_pose_from_boards(images[:1], renderer.view.boards, renderer.view.camera)
 
 
 def test_the_wall_profile_follows_the_true_contact_line(renderer: LateralRenderer) -> None:
-    board = camera_pose_from_board(renderer.board_image(), renderer.view.board,
-                                   renderer.view.camera, renderer.view.camera_sigma)
+    board = camera_pose_from_boards(renderer.board_images(), renderer.view.boards,
+                                    renderer.view.camera, renderer.view.camera_sigma)
     profiler = WallProfiler(renderer.view.camera, board.world_to_camera, renderer.radius_mm,
                             board)
     scenario, radius = renderer.scenario, renderer.radius_mm
@@ -204,7 +209,7 @@ def side_run(tmp_path_factory: pytest.TempPathFactory):
     rig = load_rig(REPO / "config" / "rigs" / "stelium.yaml")
     rig = replace(rig, camera=rig.camera.scaled(TOP_SCALE))
     led = round(220 * TOP_SCALE)
-    inputs = LateralInput(simulation.lateral_video, VIEW_FILE, simulation.lateral_board,
+    inputs = LateralInput(simulation.lateral_video, VIEW_FILE, simulation.lateral_boards,
                           (led - 5, led - 5, 10, 10), simulation.sd_log)
     run = process_video(simulation.video, rig, folder / "results", progress=False,
                         lateral=inputs)
@@ -259,9 +264,10 @@ def test_a_bad_side_input_fails_before_any_work_in_one_line(side_run, tmp_path: 
     cv2.imwrite(str(no_board), np.full((512, 512), 128, np.uint8))
     done = subprocess.run([SDS, *base, str(tmp_path / "b"), "--lateral",
                            str(simulation.lateral_video), "--lateral-view", str(VIEW_FILE),
-                           "--lateral-board", str(no_board), "--led-roi", "45", "45", "20",
-                           "20"], capture_output=True, text=True, timeout=120)
-    one_line_error(done, "no_board.png: no checkerboard of 9x6 inner corners")
+                           "--lateral-board", str(simulation.lateral_boards[0]), str(no_board),
+                           "--led-roi", "45", "45", "20", "20"], capture_output=True, text=True,
+                          timeout=120)
+    one_line_error(done, "no_board.png: board image 2: no checkerboard of 9x6 inner corners")
     assert not (tmp_path / "b").exists()
 
 

@@ -1,4 +1,5 @@
-"""The lateral camera's pose in the rig's world frame, from one image of its checkerboard."""
+"""The lateral camera's pose in the rig's world frame, from images of its checkerboard placed
+at known places (one image each; at two depths they are a 3D target)."""
 
 from __future__ import annotations
 
@@ -9,8 +10,9 @@ import cv2
 import numpy as np
 from sds_model.camera.model import CameraModel
 from sds_model.geometry import RigidTransform
+from sds_recon.calibration.board import detect_corners
 
-from sds_lateral.view import Checkerboard
+from sds_lateral.view import BoardPlacement
 
 POSE_STEP = 1e-5
 """Finite-difference step of the pose's six parameters [rad, mm] for its Jacobian."""
@@ -30,8 +32,9 @@ class BoardPose:
     [deg]."""
 
     world_to_camera: RigidTransform
-    board: Checkerboard
-    corners_px: np.ndarray
+    boards: tuple[BoardPlacement, ...]
+    corners_px: np.ndarray            # every board's corners, in order (N×2)
+    corners_mm: np.ndarray            # where they are (N×3, world)
     reprojection_rms_px: float
     covariance: np.ndarray
     camera_sigma: Mapping[str, float]
@@ -44,17 +47,15 @@ class BoardPose:
         return self.world_to_camera.inverse().translation_mm
 
 
-def board_corners_px(image: np.ndarray, board: Checkerboard) -> np.ndarray:
-    """The board's inner corners (N×2 px, OpenCV's sector-based detector, sub-pixel), in the
-    order of `Checkerboard.corners_mm`: rows to the image's right, columns down."""
-    grey = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
-    columns, rows = board.inner_corners
-    found, corners = cv2.findChessboardCornersSB(
-        grey, (columns, rows), flags=cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY)
-    if not found:
-        raise BoardError(f"no checkerboard of {columns}x{rows} inner corners found (the view "
-                         "file's board.inner_corners)")
-    grid = corners.reshape(rows, columns, 2).astype(float)
+def board_corners_px(image: np.ndarray, placement: BoardPlacement) -> np.ndarray:
+    """The board's inner corners (N×2 px, `sds_recon.calibration.board.detect_corners`), in
+    the order of `BoardPlacement.corners_mm`: rows to the image's right, columns down."""
+    board = placement.board
+    corners = detect_corners(image, board)
+    if corners is None:
+        raise BoardError(f"no checkerboard of {board.columns}x{board.rows} inner corners "
+                         "found (the view file's inner_corners)")
+    grid = corners.reshape(board.rows, board.columns, 2).astype(float)
     if np.mean(np.diff(grid[:, :, 0], axis=1)) < 0:     # rows run to the left: turn them
         grid = grid[:, ::-1]
     if np.mean(np.diff(grid[:, :, 1], axis=0)) < 0:     # columns run up: turn them
@@ -66,18 +67,18 @@ def _pose(parameters: np.ndarray) -> RigidTransform:
     return RigidTransform.from_rotation_vector(parameters[:3], parameters[3:])
 
 
-def solve_pose(corners_px: np.ndarray, board: Checkerboard, camera: CameraModel
+def solve_pose(corners_px: np.ndarray, corners_mm: np.ndarray, camera: CameraModel
                ) -> RigidTransform:
-    """World → camera from the board's corners (PnP on the camera model's own normalised rays,
-    so any model of the one interface works; Levenberg–Marquardt refined)."""
-    object_mm = board.corners_mm()
+    """World → camera from corners seen [px] at known places [mm, world] (PnP on the camera
+    model's own normalised rays, so any model of the one interface works; planar or not;
+    Levenberg–Marquardt refined)."""
     rays = camera.pixel_to_ray(corners_px)
     normalised = rays[:, :2] / rays[:, 2:]
-    ok, rotation_vector, translation = cv2.solvePnP(object_mm, normalised, np.eye(3), None,
+    ok, rotation_vector, translation = cv2.solvePnP(corners_mm, normalised, np.eye(3), None,
                                                     flags=cv2.SOLVEPNP_ITERATIVE)
     if not ok:
         raise BoardError("the board's corners give no camera pose")
-    rotation_vector, translation = cv2.solvePnPRefineLM(object_mm, normalised, np.eye(3), None,
+    rotation_vector, translation = cv2.solvePnPRefineLM(corners_mm, normalised, np.eye(3), None,
                                                         rotation_vector, translation)
     return _pose(np.concatenate([rotation_vector.ravel(), translation.ravel()]))
 
@@ -95,19 +96,29 @@ def _centre_and_angles(transform: RigidTransform, reference: RigidTransform) -> 
     return np.concatenate([transform.inverse().translation_mm, angles])
 
 
-def camera_pose_from_board(image: np.ndarray, board: Checkerboard, camera: CameraModel,
-                           camera_sigma: Mapping[str, float] | None = None) -> BoardPose:
-    """The camera's pose from its image of `board`, with its σ: the corners' scatter
-    (Gauss–Newton covariance), each intrinsic of `camera_sigma` (the pose solved again with it
-    moved by its σ), and for the centre the board's placement σ."""
+def camera_pose_from_boards(images: list[np.ndarray], boards: tuple[BoardPlacement, ...],
+                            camera: CameraModel,
+                            camera_sigma: Mapping[str, float] | None = None) -> BoardPose:
+    """The camera's pose from its images of `boards` (one each, in order), with its σ: the
+    corners' scatter (Gauss–Newton covariance), each intrinsic of `camera_sigma` (the pose
+    solved again with it moved by its σ), and for the centre the boards' placement σ."""
+    if len(images) != len(boards):
+        raise BoardError(f"{len(images)} board images for the view file's {len(boards)} board "
+                         "placements (one image each, in the file's order)")
     camera_sigma = dict(camera_sigma or {})
-    corners_px = board_corners_px(image, board)
-    object_mm = board.corners_mm()
-    pose = solve_pose(corners_px, board, camera)
+    found = []
+    for index, (image, board) in enumerate(zip(images, boards, strict=True)):
+        try:
+            found.append(board_corners_px(image, board))
+        except BoardError as error:
+            raise BoardError(f"board image {index + 1}: {error}") from None
+    corners_px = np.concatenate(found)
+    corners_mm = np.concatenate([board.corners_mm() for board in boards])
+    pose = solve_pose(corners_px, corners_mm, camera)
     parameters = np.concatenate([pose.rotation_vector(), pose.translation_mm])
 
     def reprojected(values: np.ndarray) -> np.ndarray:
-        return camera.project(_pose(values).apply(object_mm)).ravel()
+        return camera.project(_pose(values).apply(corners_mm)).ravel()
 
     steps = np.eye(6) * POSE_STEP
     residual = reprojected(parameters) - corners_px.ravel()
@@ -120,11 +131,18 @@ def camera_pose_from_board(image: np.ndarray, board: Checkerboard, camera: Camer
                                 / (2 * POSE_STEP) for step in steps])
     variance = np.diag(transfer @ covariance @ transfer.T).copy()
     for name, sigma in camera_sigma.items():
-        moved = [_centre_and_angles(solve_pose(corners_px, board,
+        moved = [_centre_and_angles(solve_pose(corners_px, corners_mm,
                                                camera.with_intrinsics({name: sign * sigma})),
                                     pose) for sign in (1.0, -1.0)]
         variance += ((moved[0] - moved[1]) / 2) ** 2
     spread = np.sqrt(variance)
-    return BoardPose(pose, board, corners_px, float(np.sqrt(np.mean(residual**2) * 2)),
-                     covariance, camera_sigma, np.hypot(spread[:3], board.placement_sigma_mm),
-                     np.degrees(spread[3:]))
+    return BoardPose(pose, tuple(boards), corners_px, corners_mm,
+                     float(np.sqrt(np.mean(residual**2) * 2)), covariance, camera_sigma,
+                     np.hypot(spread[:3], placement_sigma_mm(boards)), np.degrees(spread[3:]))
+
+
+def placement_sigma_mm(boards: tuple[BoardPlacement, ...]) -> float:
+    """The σ the boards' placements leave on the pose's position [mm, per axis]: their RMS,
+    not shrunk by their number (one holder places the board at each, and its error, a base
+    0.1 mm high, is common to all)."""
+    return float(np.sqrt(np.mean([b.placement_sigma_mm**2 for b in boards])))

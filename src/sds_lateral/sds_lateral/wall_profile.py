@@ -25,7 +25,13 @@ from scipy.ndimage import gaussian_filter1d
 from sds_model.camera.model import CameraModel
 from sds_model.geometry import RigidTransform
 
-from sds_lateral.board import POSE_STEP, BoardPose, perturbed_pose, solve_pose
+from sds_lateral.board import (
+    POSE_STEP,
+    BoardPose,
+    perturbed_pose,
+    placement_sigma_mm,
+    solve_pose,
+)
 
 BAND_MM = 15.0
 """Half-height of the band searched for the contact line around the flat level [mm]."""
@@ -108,7 +114,7 @@ class WallProfiler:
         """σ of each column's wall height at the flat level [mm]: the pose's covariance from
         the corners (its Jacobian by finite differences), each intrinsic's σ (the pose solved
         again with it moved, the rays with it: the two largely cancel) and the board's
-        placement σ (a board placed δ high puts every height δ high)."""
+        placement σ (boards placed δ high put every height δ high)."""
         pixels = np.column_stack([columns, rows])
 
         def heights(camera: CameraModel, transform: RigidTransform) -> np.ndarray:
@@ -125,9 +131,10 @@ class WallProfiler:
             moved = []
             for sign in (1.0, -1.0):
                 camera = self.camera.with_intrinsics({name: sign * sigma})
-                moved.append(heights(camera, solve_pose(pose.corners_px, pose.board, camera)))
+                moved.append(heights(camera, solve_pose(pose.corners_px, pose.corners_mm,
+                                                        camera)))
             variance += ((moved[0] - moved[1]) / 2) ** 2
-        return np.sqrt(np.maximum(variance, 0.0) + pose.board.placement_sigma_mm**2)
+        return np.sqrt(np.maximum(variance, 0.0) + placement_sigma_mm(pose.boards) ** 2)
 
     def profile(self, image: np.ndarray) -> WallProfile:
         """The contact line in one frame (grey or BGR, the camera's full image)."""

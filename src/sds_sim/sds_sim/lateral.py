@@ -19,7 +19,7 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 from scipy.special import ndtr
-from sds_lateral.view import Checkerboard, LateralView, load_lateral_view
+from sds_lateral.view import BoardPlacement, LateralView, load_lateral_view
 from sds_model.camera.model import CameraModel
 from sds_model.geometry import RigidTransform
 
@@ -85,8 +85,9 @@ class LateralRenderer:
         self.camera = true_camera(self.view, self.spec, scenario.seed + 7919)
         self.pose = look_at(np.array(self.spec.position_mm), np.array(self.spec.look_at_mm),
                             self.spec.roll_deg)
-        self.board = replace(self.view.board, first_corner_mm=self.view.board.first_corner_mm
-                             + np.asarray(self.spec.board_offset_mm, float))
+        offset = np.asarray(self.spec.board_offset_mm, float)
+        self.boards = tuple(replace(board, first_corner_mm=board.first_corner_mm + offset)
+                            for board in self.view.boards)
         self.width, self.height = self.camera.width_px, self.camera.height_px
         self.radius_mm = scenario.rig.container.radius_mm
         self.centre_mm = self.pose.inverse().translation_mm
@@ -212,14 +213,14 @@ class LateralRenderer:
         return (np.dstack([grey, grey, grey]),
                 LateralTruth(index, index / self.fps, time_s, edge_rows, led_on))
 
-    def board_image(self) -> np.ndarray:
-        """The checkerboard at its true place in the empty container, as the camera sees it
-        (BGR): white squares and margin, lit from behind like the rest of the scene."""
-        return render_board(self.camera, self.pose, self.board, self.empty, self.rng,
-                            self.spec.read_noise)
+    def board_images(self) -> list[np.ndarray]:
+        """The checkerboard at each of its true places in the empty container, as the camera
+        sees it (BGR): white squares and margin, lit from behind like the rest of the scene."""
+        return [render_board(self.camera, self.pose, board, self.empty, self.rng,
+                             self.spec.read_noise) for board in self.boards]
 
 
-def render_board(camera: CameraModel, pose: RigidTransform, board: Checkerboard,
+def render_board(camera: CameraModel, pose: RigidTransform, placement: BoardPlacement,
                  background: np.ndarray, rng: np.random.Generator, read_noise: float
                  ) -> np.ndarray:
     """A checkerboard with (columns + 1) × (rows + 1) squares and a one-square white margin,
@@ -227,7 +228,8 @@ def render_board(camera: CameraModel, pose: RigidTransform, board: Checkerboard,
     height, width = background.shape
     step = 1.0 / BOARD_SUPERSAMPLING
     offsets = (np.arange(BOARD_SUPERSAMPLING) + 0.5) * step - 0.5
-    columns, rows = board.inner_corners
+    columns, rows = placement.board.columns, placement.board.rows
+    square_mm = placement.board.square_mm
     total = np.zeros((height, width))
     centre = pose.inverse().translation_mm
     for dy in offsets:
@@ -235,12 +237,12 @@ def render_board(camera: CameraModel, pose: RigidTransform, board: Checkerboard,
             grid_y, grid_x = np.mgrid[0:height, 0:width]
             pixels = np.column_stack([grid_x.ravel() + dx, grid_y.ravel() + dy]).astype(float)
             rays = camera.pixel_to_ray(pixels) @ pose.rotation
-            normal = board.normal
+            normal = placement.normal
             with np.errstate(invalid="ignore", divide="ignore"):
-                distance = ((board.first_corner_mm - centre) @ normal) / (rays @ normal)
-            points = centre + distance[:, None] * rays - board.first_corner_mm
-            along = points @ board.row_direction / board.square_mm
-            down = points @ board.column_direction / board.square_mm
+                distance = ((placement.first_corner_mm - centre) @ normal) / (rays @ normal)
+            points = centre + distance[:, None] * rays - placement.first_corner_mm
+            along = points @ placement.row_direction / square_mm
+            down = points @ placement.column_direction / square_mm
             i, j = np.floor(along), np.floor(down)
             on_squares = (i >= -1) & (i < columns) & (j >= -1) & (j < rows)
             on_margin = (i >= -2) & (i < columns + 1) & (j >= -2) & (j < rows + 1)

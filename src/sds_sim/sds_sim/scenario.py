@@ -118,7 +118,7 @@ class CameraImuSpec:
 class LateralSpec:
     """The side camera as built (seed Sec. 3: a second camera, 125 fps), against its view file
     (`sds_lateral.view`, what the user states): where it truly stands and looks, its clock,
-    its intrinsics off the file, the checkerboard off its stated place, its image's levels."""
+    its intrinsics off the file, the checkerboard off its stated places, its image's levels."""
 
     view_file: str = "../lateral/stelium_side.yaml"   # relative to the scenario file
     position_mm: tuple[float, float, float] = (0.0, -400.0, -20.0)
@@ -127,7 +127,7 @@ class LateralSpec:
     clock_offset_s: float = -0.137    # its frame 0 on the top camera's clock [s]
     clock_drift_ppm: float = 15.0     # its clock runs fast by this much
     intrinsics_off_sigmas: float = 0.0   # each intrinsic off its file by this many of its σ
-    board_offset_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)   # true − stated place
+    board_offset_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)   # true − stated places
     background: float = 205.0         # the back-light seen through the empty container
     liquid: float = 28.0              # the opaque liquid behind the wall
     read_noise: float = 2.0

@@ -15,7 +15,7 @@ the top-left pixel at (0, 0); world frame of the rig file):
 - truth/line.npz: line_x_px (frames × image rows, NaN off the line), line_mm (frames × rays × 3).
 With a side camera (the scenario's `lateral:` section, sds_sim.lateral):
 - lateral/video.mp4 (H.264 at the view file's rate): what the side camera records;
-  lateral/board.png: its image of the checkerboard that places it.
+  lateral/board_N.png: its image of the checkerboard at the view file's N-th placement.
 - truth/lateral.csv: per side frame: its time on its own clock and on the top camera's, LED;
   truth/lateral_edges.npz: edge_row_px (side frames × image columns, NaN outside the
   container): the contact line's row as drawn.
@@ -59,7 +59,7 @@ class SimulationOutput:
     frames: Path
     line: Path
     lateral_video: Path | None = None
-    lateral_board: Path | None = None
+    lateral_boards: tuple[Path, ...] = ()
 
 
 class _FrameSink:
@@ -136,8 +136,9 @@ def _simulate_lateral(scenario: Scenario, output: SimulationOutput, codec: str, 
     renderer = LateralRenderer(scenario)
     folder = output.directory / "lateral"
     folder.mkdir(parents=True, exist_ok=True)
-    board = folder / "board.png"
-    cv2.imwrite(str(board), renderer.board_image())
+    boards = tuple(folder / f"board_{index}.png" for index in range(len(renderer.boards)))
+    for path, image in zip(boards, renderer.board_images(), strict=True):
+        cv2.imwrite(str(path), image)
     sink = _FrameSink(folder, "h264" if codec == "png" else codec, renderer.width,
                       renderer.height, renderer.fps)
     truths: list[LateralTruth] = []
@@ -171,10 +172,10 @@ def _simulate_lateral(scenario: Scenario, output: SimulationOutput, codec: str, 
         "clock_offset_s": spec.clock_offset_s, "clock_drift_ppm": spec.clock_drift_ppm,
         "board_offset_mm": list(spec.board_offset_mm),
         "files": {"video": str(sink.path.relative_to(output.directory)),
-                  "board": str(board.relative_to(output.directory)),
+                  "boards": [str(b.relative_to(output.directory)) for b in boards],
                   "truth": "truth/lateral.csv", "edges": "truth/lateral_edges.npz"},
     }
-    return replace(output, lateral_video=sink.path, lateral_board=board), description
+    return replace(output, lateral_video=sink.path, lateral_boards=boards), description
 
 
 def _write_spots(scenario: Scenario, truths: list[FrameTruth], path: Path) -> None:

@@ -1,6 +1,6 @@
 """The side camera in `sds process`: its pose, its clock, the wall profile and the top/side check.
 
-`place_lateral` places the side camera from its checkerboard image (before the top video is
+`place_lateral` places the side camera from its checkerboard images (before the top video is
 read: a bad input fails at once); `process_lateral` reads the side video once (the LED in its
 region, the contact line in every frame), links its clock to the top
 camera's (`sds_lateral.clock`: the LED seen by both, and through the Arduino's LED record and
@@ -31,7 +31,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from sds_camera.frame_source import VideoFileSource
 from sds_camera.led import LedDetector
-from sds_lateral.board import BoardError, BoardPose, camera_pose_from_board
+from sds_lateral.board import BoardError, BoardPose, camera_pose_from_boards
 from sds_lateral.clock import LateralClock, link_lateral_clock
 from sds_lateral.comparison import (
     ComparisonSummary,
@@ -56,12 +56,13 @@ PROFILE_STEP_PX = 4
 
 @dataclass(frozen=True)
 class LateralInput:
-    """The side camera's video, its view file, its checkerboard image; the top camera's LED
-    region (x, y, w, h) and an Arduino log, each optional, for the clock link."""
+    """The side camera's video, its view file, its checkerboard images (one per placement in
+    the view file); the top camera's LED region (x, y, w, h) and an Arduino log, each
+    optional, for the clock link."""
 
     video: Path
     view_file: Path
-    board_image: Path
+    board_images: tuple[Path, ...]
     top_led_roi: tuple[int, int, int, int] | None = None
     arduino_log: Path | None = None
 
@@ -141,14 +142,18 @@ def place_lateral(inputs: LateralInput, rig: Rig) -> LateralSetup:
     view = load_lateral_view(inputs.view_file)
     if not inputs.video.is_file():
         raise ValueError(f"{inputs.video}: no such video (the side camera's, --lateral)")
-    board_image = cv2.imread(str(inputs.board_image))
-    if board_image is None:
-        raise ValueError(f"{inputs.board_image}: not a readable image (the side camera's "
-                         "checkerboard, --lateral-board)")
+    images = []
+    for path in inputs.board_images:
+        image = cv2.imread(str(path))
+        if image is None:
+            raise ValueError(f"{path}: not a readable image (the side camera's checkerboard, "
+                             "--lateral-board)")
+        images.append(image)
     try:
-        board = camera_pose_from_board(board_image, view.board, view.camera, view.camera_sigma)
+        board = camera_pose_from_boards(images, view.boards, view.camera, view.camera_sigma)
     except BoardError as error:
-        raise BoardError(f"{inputs.board_image}: {error}") from None
+        names = ", ".join(str(p) for p in inputs.board_images)
+        raise BoardError(f"{names}: {error}") from None
     profiler = WallProfiler(view.camera, board.world_to_camera, rig.container.radius_mm, board)
     return LateralSetup(inputs, view, board, profiler)
 
@@ -238,7 +243,7 @@ def _description(inputs: LateralInput, run: LateralRun) -> dict[str, Any]:
 
     return {
         "video": str(inputs.video), "view_file": str(inputs.view_file),
-        "board_image": str(inputs.board_image), "frames": run.frames,
+        "board_images": [str(p) for p in inputs.board_images], "frames": run.frames,
         "camera_position_mm": [float(v) for v in run.board.camera_position_mm],
         "camera_position_sigma_mm": [float(v) for v in run.board.position_sigma_mm],
         "camera_angle_sigma_deg": [float(v) for v in run.board.angle_sigma_deg],

@@ -57,8 +57,9 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
     side.add_argument("--lateral-view", type=Path, metavar="FILE",
                       help="its view file (camera file, fps, LED region, board; "
                            "config/lateral/*.yaml)")
-    side.add_argument("--lateral-board", type=Path, metavar="IMAGE",
-                      help="its image of the checkerboard that places it")
+    side.add_argument("--lateral-board", type=Path, nargs="+", metavar="IMAGE",
+                      help="its images of the checkerboard at the view file's placements "
+                           "(one each, in order)")
     side.add_argument("--led-roi", type=int, nargs=4, metavar=("X", "Y", "W", "H"),
                       help="the sync LED's region in the top video (links the clocks)")
     side.add_argument("--arduino", type=Path, metavar="LOG",
@@ -102,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
         if args.led_roi is None and args.arduino is None:
             raise CommandError("--lateral needs --led-roi (the LED in the top video) or "
                                "--arduino (its log) to link the side camera's clock")
-        lateral = LateralInput(args.lateral, args.lateral_view, args.lateral_board,
+        lateral = LateralInput(args.lateral, args.lateral_view, tuple(args.lateral_board),
                                tuple(args.led_roi) if args.led_roi else None, args.arduino)
     inputs = expand_inputs(args.video or args.mcap, VIDEO_SUFFIXES if is_video else (".mcap",))
     if is_video and args.rig is None:
