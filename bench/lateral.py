@@ -60,9 +60,9 @@ def rms(values: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.square(values))))
 
 
-def profile_errors(scenario: Scenario, folder: Path) -> tuple[float, float, int]:
-    """The side profile's height RMSE [mm] against the true surface at the wall, the largest
-    frame's RMSE, and the points compared."""
+def profile_errors(scenario: Scenario, folder: Path) -> tuple[float, float, float, int]:
+    """The side profile's height RMSE [mm] against the true surface at the wall, its mean
+    error [mm], the largest frame's RMSE, and the points compared."""
     truth = {int(row["frame"]): float(row["time_s"])
              for row in csv.DictReader((folder / "sim" / "truth" / "lateral.csv").open())}
     radius = scenario.rig.container.radius_mm
@@ -75,7 +75,8 @@ def profile_errors(scenario: Scenario, folder: Path) -> tuple[float, float, int]
             radius * np.cos(azimuth), radius * np.sin(azimuth), time_s))
         by_frame.setdefault(frame, []).append(float(row["Z_mm"]) - true_mm)
     errors = np.concatenate([np.array(v) for v in by_frame.values()])
-    return rms(errors), max(rms(np.array(v)) for v in by_frame.values()), errors.size
+    return (rms(errors), float(np.mean(errors)),
+            max(rms(np.array(v)) for v in by_frame.values()), errors.size)
 
 
 def one_run(folder: Path, name: str, seed: int, first: FirstUse, rng: np.random.Generator,
@@ -101,17 +102,19 @@ def one_run(folder: Path, name: str, seed: int, first: FirstUse, rng: np.random.
     true_offset = spec.clock_offset_s
     paths = "; ".join(f"{p.name}: {(p.offset_s - true_offset) * 1e3:+.2f} ± "
                       f"{p.sigma_s * 1e3:.2f} ms" for p in clock.paths)
-    profile_rmse, worst_frame, points = profile_errors(scenario, folder)
+    profile_rmse, profile_mean, worst_frame, points = profile_errors(scenario, folder)
     print(f"{name:<12} rig {seed}  clock {(clock.offset_s - true_offset) * 1e3:+6.2f} ± "
           f"{clock.sigma_s * 1e3:.2f} ms ({paths})", flush=True)
-    print(f"{'':<12} profile RMSE {profile_rmse:.3f} mm (worst frame {worst_frame:.3f}, "
-          f"{points} points); side − top {summary.mean_difference_mm:+.3f} mm "
+    print(f"{'':<12} profile RMSE {profile_rmse:.3f} mm (mean {profile_mean:+.3f}, worst "
+          f"frame {worst_frame:.3f}, {points} points); side − top "
+          f"{summary.mean_difference_mm:+.3f} mm "
           f"(pose σ {summary.pose_sigma_mm:.3f}), scatter {summary.scatter_mm:.3f} mm, "
           f"predicted {summary.predicted_mm:.3f} mm (ratio "
           f"{summary.scatter_mm / summary.predicted_mm:.2f}), {summary.frames} frames",
           flush=True)
-    record = {"scenario": name, "clock_error_s": clock.offset_s - true_offset,
+    record = {"scenario": name, "seed": seed, "clock_error_s": clock.offset_s - true_offset,
               "clock_sigma_s": clock.sigma_s, "profile_rmse_mm": profile_rmse,
+              "profile_mean_mm": profile_mean, "pose_sigma_mm": summary.pose_sigma_mm,
               "worst_frame_rmse_mm": worst_frame, "mean_difference_mm":
               summary.mean_difference_mm, "scatter_mm": summary.scatter_mm,
               "predicted_mm": summary.predicted_mm}
