@@ -25,6 +25,7 @@ from sds_model.rig import load_rig
 from sds_recon.results import load_results
 from sds_record.mcap_files import McapRecorder, decoded_messages, read_messages
 from sds_record.recorded_series import recorded_rig
+from sds_ros.point_cloud import stamp_s
 from sds_ros.qos import stream_qos
 from sds_ros.static_tf import static_tf_qos
 from sds_sim.scenario import load_scenario
@@ -474,6 +475,13 @@ def test_sds_run_measures_a_recorded_video_with_the_whole_graph(repo: Path,
     side = [msg for _, msg in decoded_messages(out / "recording.mcap", ["/lateral/image"])]
     assert len(side) == side_frames       # every side frame recorded
     assert {msg.header.frame_id for msg in side} == {"lateral_optical"}
+    # Played on the top camera's clock: the side's frame 0 stamped where it truly was, within
+    # a side frame period (the clock link measured before the run).
+    top = next(msg for _, msg in decoded_messages(out / "recording.mcap", ["/camera/image"]))
+    side_start_s = stamp_s(side[0]) - stamp_s(top)
+    true_start_s = float(next(csv.DictReader((output.directory / "truth" /
+                                              "lateral.csv").open()))["time_s"])
+    assert abs(side_start_s - true_start_s) < 1 / 125, (side_start_s, true_start_s)
     entities = rrd_entities(out / "recording.rrd")
     assert "/lateral/image" in entities and "/camera/image" in entities
     rows = list(csv.DictReader((out / "results" / "lateral.csv").open()))

@@ -47,7 +47,8 @@ EXIT_SOURCE_ERROR = 2
 PARAMETERS = {"source": "", "fps": 0.0, "roi": [0, 0, 0, 0], "channel": "bgr",
               "pacing": "realtime", "rate": 1.0, "stamp": "clock", "frame_id": "camera_optical",
               "camera_model": "", "wait_for_subscribers": 1, "ack_consumers": 1,
-              "max_in_flight": 2, "led_roi": [0, 0, 0, 0], "repeat": 1, "linger_s": 3.0}
+              "max_in_flight": 2, "led_roi": [0, 0, 0, 0], "repeat": 1, "linger_s": 3.0,
+              "follow": False, "stamp_offset_s": 0.0}
 """The node's parameters and defaults (config/params/frame_source.yaml documents each)."""
 
 
@@ -107,6 +108,13 @@ class FrameSourceNode(HostedNode):
         self._credit = AckCredit(p["ack_consumers"], self.resolve_topic_name("frame_ack"),
                                  self.get_logger().warning)
         self.create_subscription(Header, "frame_ack", self._credit.on_ack, reliable)
+        # The stamp of the first frame, for a second camera that plays beside this one.
+        self._origin_pub = self.create_publisher(Header, "origin", latched)
+        self._leader_origin_ns: int | None = None
+        self._leader_seen = threading.Event()
+        if p["follow"] and not self._source.is_live:
+            self._leader_sub = self.create_subscription(Header, "leader_origin",
+                                                        self._on_leader_origin, latched)
         self._publish_camera_model(p)
         self._decode_thread = threading.Thread(target=self._read_frames, name="decode", daemon=True)
         self._publish_thread = threading.Thread(
@@ -257,14 +265,44 @@ class FrameSourceNode(HostedNode):
                                       "5 s; publishing frames anyway")
         return not self._stop.is_set()
 
+    def _on_leader_origin(self, msg: Header) -> None:
+        if self._leader_origin_ns is None:
+            self._leader_origin_ns = msg.stamp.sec * 10**9 + msg.stamp.nanosec
+            self._leader_seen.set()
+
+    def _origin(self) -> tuple[int, float] | None:
+        """The stamp [ns] of media time 0 and the monotonic time [s] it is played at; a
+        follower (a file) takes its leader's first frame's, moved by `stamp_offset_s` (its
+        frame 0 on the leader's clock), and plays from when that arrives, later by the offset
+        if it is positive (frames before the leader's first are not rushed out in a burst
+        that a subscriber's queue would drop: they come that much late); None once
+        stopping."""
+        p = self._p
+        offset_ns = round(p["stamp_offset_s"] * 1e9)
+        if p["follow"] and not self._source.is_live:
+            leader = self.resolve_topic_name("leader_origin")
+            self.get_logger().info(f"waiting for the leading camera's first frame ({leader})")
+            while not self._leader_seen.wait(0.1):
+                if self._stop.is_set():
+                    return None
+            assert self._leader_origin_ns is not None
+            return (self._leader_origin_ns + offset_ns,
+                    time.monotonic() + max(p["stamp_offset_s"], 0.0) / p["rate"])
+        origin_ns = self.get_clock().now().nanoseconds if p["stamp"] == "clock" else 0
+        return origin_ns + offset_ns, time.monotonic()
+
     def _publish_frames(self) -> None:
         """Publish thread: pace, stamp and publish frames until the stream ends."""
         p = self._p
         flow_control = p["pacing"] == "flood" and p["ack_consumers"] > 0
         if not self._source.is_live and not self._wait_for_subscribers():
             return
-        origin_ns = self.get_clock().now().nanoseconds if p["stamp"] == "clock" else 0
-        start = time.monotonic()
+        origin = self._origin()
+        if origin is None:
+            return
+        origin_ns, start = origin
+        self._origin_pub.publish(Header(stamp=Time(nanoseconds=origin_ns).to_msg(),
+                                        frame_id=p["frame_id"]))
         while not self._stop.is_set():
             try:
                 item = self._queue.get(timeout=0.1)

@@ -29,7 +29,12 @@ from sds_sloshing.surface_series import RecordingError
 from sds_viz.from_mcap import mcap_to_rrd
 
 from sds_workflows.export import export_recording
-from sds_workflows.lateral import LateralInput, place_lateral, process_lateral
+from sds_workflows.lateral import (
+    LateralInput,
+    link_side_clock,
+    place_lateral,
+    process_lateral,
+)
 from sds_workflows.run_tables import RunTables, finish_analysis
 
 DEMO_SCENARIO = CONFIG / "scenarios" / "drop_4p7s.yaml"
@@ -200,6 +205,7 @@ def run_live(source: str, rig_file: Path, out: Path, port: str | None,
     if port:
         overrides.append(f"arduino.port={port}")
     graphs: tuple[str, ...] = ()
+    is_file = Path(source).is_file()
     if side is not None:
         graphs = ("lateral.yaml",)
         overrides += [f"lateral.source={side.inputs.video.resolve()}",
@@ -207,7 +213,10 @@ def run_live(source: str, rig_file: Path, out: Path, port: str | None,
                       f"lateral.led_roi={list(side.view.led_roi_px)}"]
         if side.inputs.top_led_roi is not None:
             overrides.append(f"camera.led_roi={list(side.inputs.top_led_roi)}")
-    is_file = Path(source).is_file()
+        if is_file:   # the side file plays on the top camera's clock
+            clock = link_side_clock(side, rig, Path(source))
+            print(f"sds run: {clock.summary()}")
+            overrides.append(f"lateral.stamp_offset_s={clock.offset_s}")
     frames = None
     if is_file:
         from sds_camera.frame_source import VideoFileSource

@@ -116,6 +116,13 @@ def _side_frames(video: Path, profiler: WallProfiler, led_roi: tuple[int, int, i
     return times, profiles, led_on, source.nominal_fps
 
 
+def link_side_clock(setup: LateralSetup, rig: Rig, top_video: Path) -> LateralClock:
+    """The side clock's link to the top camera's before any processing (the LED's pass over
+    the side video alone): what `sds run` stamps the side frames with."""
+    side_on, period = video_led_on_s(setup.inputs.video, setup.view.led_roi_px)
+    return _clock(setup.inputs, rig, top_video, side_on, period)
+
+
 def _clock(inputs: LateralInput, rig: Rig, top_video: Path, side_on_s: list[float],
            side_period_s: float) -> LateralClock:
     """The side clock's link to the top camera's by every path the inputs allow."""
