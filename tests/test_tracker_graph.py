@@ -468,7 +468,7 @@ def test_sds_run_measures_a_recorded_video_with_the_whole_graph(repo: Path,
                "--lateral", str(output.lateral_video), "--lateral-view",
                str(repo / "config" / "lateral" / "stelium_side.yaml"), "--lateral-board",
                *(str(b) for b in output.lateral_boards), "--led-roi", str(led_x - 12),
-               str(led_y - 12), "24", "24", "--arduino-log", str(output.sd_log))
+               str(led_y - 12), "24", "24", "--arduino", str(output.sd_log))
     assert done.returncode == 0, done.stdout + done.stderr
     side_frames = sum(1 for _ in csv.DictReader((output.directory / "truth" /
                                                  "lateral.csv").open()))

@@ -12,7 +12,7 @@ import os
 import sys
 from pathlib import Path
 
-from sds_cli.commands import CommandError, add_overwrite
+from sds_cli.commands import CommandError, add_lateral_options, add_overwrite, lateral_input
 
 VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv", ".m4v")
 
@@ -50,21 +50,9 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
     parser.add_argument("--surfaces", type=Path,
                         help="known surface per image: frame, tilt_x_deg, tilt_y_deg"
                              "[, offset_mm] (frame k = k-th image)")
-    side = parser.add_argument_group(
-        "side camera", "a second, lateral camera of the same drop (one --video): its wall "
-        "profile and the top surface checked against it (lateral.csv, the report)")
-    side.add_argument("--lateral", type=Path, metavar="VIDEO", help="the side camera's video")
-    side.add_argument("--lateral-view", type=Path, metavar="FILE",
-                      help="its view file (camera file, fps, LED region, board; "
-                           "config/lateral/*.yaml)")
-    side.add_argument("--lateral-board", type=Path, nargs="+", metavar="IMAGE",
-                      help="its images of the checkerboard at the view file's placements "
-                           "(one each, in order)")
-    side.add_argument("--led-roi", type=int, nargs=4, metavar=("X", "Y", "W", "H"),
-                      help="the sync LED's region in the top video (links the clocks)")
-    side.add_argument("--arduino", type=Path, metavar="LOG",
-                      help="the Arduino's log (SD card or serial capture): a second clock "
-                           "link, through its LED record and acceleration")
+    add_lateral_options(parser, "a second, lateral camera of the same drop (one --video): its "
+                        "wall profile and the top surface checked against it (lateral.csv, "
+                        "the report)")
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
                         help="inputs processed at once (default: one per core)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -92,19 +80,10 @@ def run(args: argparse.Namespace) -> int:
     from sds_model.rig import load_rig
     from sds_recon.results import refuse_results
     from sds_record.recorded_series import recording_rig
-    from sds_workflows.lateral import LateralInput
     from sds_workflows.process import calibrate_from_images, process_input, process_inputs
 
     is_video = args.video is not None
-    lateral = None
-    if args.lateral is not None:
-        if args.lateral_view is None or args.lateral_board is None:
-            raise CommandError("--lateral needs --lateral-view and --lateral-board")
-        if args.led_roi is None and args.arduino is None:
-            raise CommandError("--lateral needs --led-roi (the LED in the top video) or "
-                               "--arduino (its log) to link the side camera's clock")
-        lateral = LateralInput(args.lateral, args.lateral_view, tuple(args.lateral_board),
-                               tuple(args.led_roi) if args.led_roi else None, args.arduino)
+    lateral = lateral_input(args)
     inputs = expand_inputs(args.video or args.mcap, VIDEO_SUFFIXES if is_video else (".mcap",))
     if is_video and args.rig is None:
         raise CommandError("--video needs --rig (the rig the video was taken with)")

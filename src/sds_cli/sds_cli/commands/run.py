@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from sds_cli.commands import CommandError, add_overwrite, refuse_existing
+from sds_cli.commands import add_lateral_options, add_overwrite, lateral_input, refuse_existing
 
 
 def add_parser(commands: argparse._SubParsersAction) -> None:
@@ -23,19 +23,9 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
     parser.add_argument("--port", help="the Arduino's serial port (default: arduino.yaml's)")
     parser.add_argument("--gravity", type=float, help="gravity for the theory [m/s²]")
     add_overwrite(parser, "replace the recording and results of an earlier run in --out")
-    side = parser.add_argument_group(
-        "side camera", "a second, lateral camera's video run beside the top one "
-        "(config/graphs/lateral.yaml: recorded, shown), then its check of the top surface")
-    side.add_argument("--lateral", type=Path, metavar="VIDEO", help="the side camera's video")
-    side.add_argument("--lateral-view", type=Path, metavar="FILE",
-                      help="its view file (config/lateral/*.yaml)")
-    side.add_argument("--lateral-board", type=Path, nargs="+", metavar="IMAGE",
-                      help="its images of the checkerboard at the view file's placements "
-                           "(one each, in order)")
-    side.add_argument("--led-roi", type=int, nargs=4, metavar=("X", "Y", "W", "H"),
-                      help="the sync LED's region in the top video (links the clocks)")
-    side.add_argument("--arduino-log", type=Path, metavar="LOG",
-                      help="the Arduino's log of the drop: a second clock link")
+    add_lateral_options(parser, "a second, lateral camera's video run beside the top one "
+                        "(config/graphs/lateral.yaml: recorded, shown), then its check of the "
+                        "top surface")
     parser.set_defaults(run=run, command="run")
 
 
@@ -43,17 +33,8 @@ def run(args: argparse.Namespace) -> int:
     """The run; the graph's exit code when a needed node failed."""
     from sds_bringup.chain import run_chain
     from sds_workflows.demo import run_live
-    from sds_workflows.lateral import LateralInput
 
     refuse_existing(args.out / "recording.mcap", args.overwrite)
-    lateral = None
-    if args.lateral is not None:
-        if args.lateral_view is None or args.lateral_board is None:
-            raise CommandError("--lateral needs --lateral-view and --lateral-board")
-        if args.led_roi is None and args.arduino_log is None:
-            raise CommandError("--lateral needs --led-roi (the LED in the top video) or "
-                               "--arduino-log to link the side camera's clock")
-        lateral = LateralInput(args.lateral, args.lateral_view, tuple(args.lateral_board),
-                               tuple(args.led_roi) if args.led_roi else None, args.arduino_log)
+    lateral = lateral_input(args)
     return run_live(args.video or args.camera, args.rig, args.out, args.port, args.gravity,
                     run_chain, args.overwrite, lateral)
