@@ -2,6 +2,7 @@
 
 Usage: python bench/lateral.py [--rigs 3] [--first-seed 8300] [--seconds S]
                                [--out /tmp/bench_lateral]
+       python bench/lateral.py --pose-draws 12 [--first-seed 8400]
 
 For each seed, a random rig as built (`calibration_trial.first_use`: leaning beams, camera
 pose, emitters, camera file off by its σ, the table's readings off by their accuracy) is
@@ -20,6 +21,10 @@ Arduino's SD log. Printed per rig and scenario:
   azimuth and the side frame's true time), and the largest frame's RMSE;
 - the top/side comparison: side − top on average, its scatter about that mean, and what the
   side's image noise and the top fit's σ predict for it.
+
+With `--pose-draws N`, only the side camera's pose is checked, on N random side cameras (as
+above) looking at the flat liquid: the wall heights' mean error against the pose's σ, with
+the view file's two board placements and with the mid-plane board alone.
 """
 
 from __future__ import annotations
@@ -121,6 +126,41 @@ def one_run(folder: Path, name: str, seed: int, first: FirstUse, rng: np.random.
     (folder / "bench.json").write_text(json.dumps(record, indent=2) + "\n")
 
 
+def pose_check(draws: int, first_seed: int) -> None:
+    """The side camera's pose alone: the flat liquid's wall heights on random side cameras,
+    placed by both boards and by the mid-plane board alone; their mean error against σ."""
+    from sds_lateral.board import camera_pose_from_boards
+    from sds_lateral.wall_profile import WallProfiler
+    from sds_sim.lateral import LateralRenderer
+
+    errors: dict[str, list[tuple[float, float]]] = {"both boards": [], "mid-plane board": []}
+    for seed in range(first_seed, first_seed + draws):
+        rng = np.random.default_rng(seed)
+        scenario = load_scenario(REPO / "config" / "scenarios" / "ground_kick.yaml",
+                                 {"duration_s": 0.2})
+        renderer = LateralRenderer(replace(scenario, lateral=side_camera(rng, 0.3), seed=seed))
+        view, images = renderer.view, renderer.board_images()
+        frame, truth = renderer.render(0)
+        for label, chosen in (("both boards", slice(None)), ("mid-plane board", slice(1, 2))):
+            pose = camera_pose_from_boards(images[chosen], view.boards[chosen], view.camera,
+                                           view.camera_sigma)
+            profile = WallProfiler(view.camera, pose.world_to_camera, renderer.radius_mm,
+                                   pose).profile(frame)
+            valid = profile.valid
+            azimuth = profile.azimuth_rad[valid]
+            true_mm = scenario.surface_at(truth.time_s).height(
+                renderer.radius_mm * np.cos(azimuth), renderer.radius_mm * np.sin(azimuth),
+                truth.time_s)
+            error = float(np.mean(profile.wall_mm[valid, 2] - true_mm))
+            errors[label].append((error, rms(profile.pose_sigma_z_mm[valid])))
+    for label, values in errors.items():
+        error, sigma = np.array(values).T
+        print(f"{label}: wall height's mean error RMS {rms(error):.3f} mm, max "
+              f"{np.max(np.abs(error)):.3f} mm; pose σ RMS {rms(sigma):.3f} mm; error/σ RMS "
+              f"{rms(error / sigma):.2f} ({draws} side cameras, seeds {first_seed}-"
+              f"{first_seed + draws - 1})")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--rigs", type=int, default=3)
@@ -128,7 +168,12 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=None,
                         help="scenario length [s] (default: the whole scenario)")
     parser.add_argument("--out", type=Path, default=Path("/tmp/bench_lateral"))
+    parser.add_argument("--pose-draws", type=int, default=0,
+                        help="check only the side camera's pose, on this many random cameras")
     args = parser.parse_args()
+    if args.pose_draws:
+        pose_check(args.pose_draws, args.first_seed)
+        return
     for seed in range(args.first_seed, args.first_seed + args.rigs):
         first = first_use(seed, REPO / "config" / "rigs" / "stelium.yaml")
         print(f"rig {seed}: {len(first.result.laser_ids)} diodes calibrated, chi2/dof "
