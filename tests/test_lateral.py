@@ -245,6 +245,11 @@ def test_process_writes_the_side_view_its_clock_and_the_check(side_run) -> None:
     assert summary.frames > 0.8 * len(frames)
     assert 0.5 < summary.scatter_mm / summary.predicted_mm < 2.0, summary
     assert 0.3 < summary.mean_difference_mm < 1.3    # the 0.8 mm meniscus at the wall
+    # The wave's own timing finds what the LED clock missed, within its σ.
+    wave_error_s = side.clock.offset_s + summary.wave_shift_s - scenario.lateral.clock_offset_s
+    assert abs(wave_error_s) < 3 * summary.wave_shift_sigma_s + 2e-4, (wave_error_s, summary)
+    assert summary.wave_shift_sigma_s < side.clock.sigma_s
+    assert 0.5 < summary.aligned_scatter_mm / summary.aligned_predicted_mm < 2.0, summary
     report = (results / "report.html").read_text()
     assert "Side camera" in report and "side clock" in report
     analysis = json.loads((results / "analysis.json").read_text())

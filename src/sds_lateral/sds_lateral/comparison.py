@@ -13,6 +13,10 @@ contact line stands above the surface the top fit extrapolates to the wall) and 
 camera's pose (its σ, the same in every frame). It is reported with the pose's σ; the
 difference's scatter about it is what the side's image noise, the top fit's σ and the clock
 link's σ (times the surface's rate of change: 2.3 ms of a 3 Hz, 4 mm wave is 0.17 mm) predict.
+
+The same comparison times the two cameras a third way: the shift of the side frames that best
+lays the top surface's motion over the side's. Its difference from the LED clock, in their σ,
+checks the LED link; once shifted, what is left is the heights' own disagreement.
 """
 
 from __future__ import annotations
@@ -44,6 +48,10 @@ class TopSurfaceSeries:
     def _spline(self) -> CubicSpline:
         return CubicSpline(self.time_s, self.amplitudes_mm, axis=0)
 
+    def nearest_frame(self, time_s: float) -> int:
+        """The index of the top frame nearest a time (among the fitted ones)."""
+        return int(np.argmin(np.abs(self.time_s - time_s)))
+
     def wall(self, time_s: float, azimuth_rad: np.ndarray
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The fitted surface at the wall at the azimuths and a time: its height [mm] (NaN
@@ -54,7 +62,7 @@ class TopSurfaceSeries:
             return nan, nan, nan
         wall_xy = self.radius_mm * np.column_stack([np.cos(azimuth_rad), np.sin(azimuth_rad)])
         design, _ = modal_design(wall_xy, self.radius_mm, DEFAULT_MODES)
-        nearest = int(np.argmin(np.abs(self.time_s - time_s)))
+        nearest = self.nearest_frame(time_s)
         variance = np.einsum("ij,jk,ik->i", design, self.covariance_mm2[nearest], design)
         return (design @ self._spline(time_s), np.sqrt(np.maximum(variance, 0.0)),
                 design @ self._spline(time_s, 1))
@@ -100,16 +108,18 @@ def top_surface_series(fits: np.ndarray, points: np.ndarray, radius_mm: float
 @dataclass(frozen=True)
 class FrameComparison:
     """One side frame against the top surface: the side's heights and their σ from the image
-    and from the pose, the top's heights and σ at the same wall points [mm] (NaN where the top
-    has no surface then), and the σ the clock link's error gives there [mm] (its σ times the
-    top surface's rate of change)."""
+    and from the pose, the top's heights, σ and rate of change at the same wall points [mm,
+    mm/s] (NaN where the top has no surface then), the clock link's σ [s] and the nearest top
+    frame (whose fit the top's errors share)."""
 
     side_mm: np.ndarray
     side_sigma_mm: np.ndarray
     side_pose_sigma_mm: np.ndarray
     top_mm: np.ndarray
     top_sigma_mm: np.ndarray
-    clock_sigma_mm: np.ndarray
+    top_rate_mm_s: np.ndarray
+    clock_sigma_s: float
+    top_frame: int
 
     @property
     def difference_mm(self) -> np.ndarray:
@@ -117,17 +127,27 @@ class FrameComparison:
         return self.side_mm - self.top_mm
 
     @property
+    def aligned_sigma_mm(self) -> np.ndarray:
+        """What the side's image noise and the top fit predict for the difference's scatter
+        at each point once the clock is right [mm]."""
+        return np.hypot(self.side_sigma_mm, self.top_sigma_mm)
+
+    @property
     def predicted_sigma_mm(self) -> np.ndarray:
-        """What the side's image noise, the top fit and the clock predict for the difference's
-        scatter at each point [mm]."""
-        return np.sqrt(self.side_sigma_mm**2 + self.top_sigma_mm**2 + self.clock_sigma_mm**2)
+        """What the side's image noise, the top fit and the clock link's σ (times the
+        surface's rate of change) predict for the difference's scatter at each point [mm]."""
+        return np.hypot(self.aligned_sigma_mm, self.top_rate_mm_s * self.clock_sigma_s)
 
 
 @dataclass(frozen=True)
 class ComparisonSummary:
     """Over a run: the points compared, the mean of side − top [mm] and the pose's σ of it
     [mm], its RMS [mm], its RMS about the mean [mm], and what both σ predict for that scatter
-    [mm]: the side's image noise, the top fit's σ and the clock's."""
+    [mm]: the side's image noise, the top fit's σ and the clock's. Then the wave's own clock:
+    the time shift [s] of the side frames that best lays the top surface's motion over the
+    side's (weighted least squares of the difference on the surface's rate of change, its σ
+    robust to the errors each top frame's fit shares), and the scatter left once shifted
+    against what the side's noise and the top fit alone predict [mm]."""
 
     points: int
     frames: int
@@ -136,6 +156,10 @@ class ComparisonSummary:
     rms_difference_mm: float
     scatter_mm: float
     predicted_mm: float
+    wave_shift_s: float
+    wave_shift_sigma_s: float
+    aligned_scatter_mm: float
+    aligned_predicted_mm: float
 
     def summary(self) -> str:
         """One line for the console and the report."""
@@ -145,22 +169,56 @@ class ComparisonSummary:
                 f"{self.rms_difference_mm:.3f} mm; about the mean {self.scatter_mm:.3f} mm "
                 f"where both σ predict {self.predicted_mm:.3f} mm")
 
+    def wave_summary(self, clock_sigma_s: float) -> str:
+        """One line: the wave's clock check, and the scatter once the wave aligns the two."""
+        pull = self.wave_shift_s / np.hypot(self.wave_shift_sigma_s, clock_sigma_s)
+        return (f"the wave's own timing: the side frames {self.wave_shift_s * 1e3:+.2f} ± "
+                f"{self.wave_shift_sigma_s * 1e3:.2f} ms from the LED clock ({pull:+.1f} σ of "
+                f"both); so shifted, side − top scatters {self.aligned_scatter_mm:.3f} mm "
+                f"about its mean where the side's noise and the top fit predict "
+                f"{self.aligned_predicted_mm:.3f} mm")
+
 
 def summarise(frames: list[FrameComparison]) -> ComparisonSummary:
     """The run's summary over every wall point compared."""
-    if not frames:
-        frames = [FrameComparison(*(np.array([]),) * 6)]
-    difference = np.concatenate([f.difference_mm for f in frames])
-    sigma = np.concatenate([f.predicted_sigma_mm for f in frames])
-    pose = np.concatenate([f.side_pose_sigma_mm for f in frames])
-    used = np.isfinite(difference) & np.isfinite(sigma)
-    difference, sigma, pose = difference[used], sigma[used], pose[used]
-    if not difference.size:
-        return ComparisonSummary(0, 0, *(float("nan"),) * 5)
+    nan = float("nan")
+    rows = [(f, np.isfinite(f.difference_mm) & np.isfinite(f.predicted_sigma_mm)) for f in frames]
+    rows = [(f, used) for f, used in rows if used.any()]
+    if not rows:
+        return ComparisonSummary(0, 0, *(nan,) * 9)
+
+    def joined(name: str) -> np.ndarray:
+        return np.concatenate([getattr(f, name)[used] for f, used in rows])
+
+    difference, sigma, pose = (joined(n) for n in ("difference_mm", "predicted_sigma_mm",
+                                                  "side_pose_sigma_mm"))
+    aligned, rate = joined("aligned_sigma_mm"), joined("top_rate_mm_s")
+    cluster = np.concatenate([np.full(np.count_nonzero(used), f.top_frame) for f, used in rows])
     mean = float(np.mean(difference))
-    return ComparisonSummary(int(difference.size),
-                             sum(bool(np.isfinite(f.difference_mm).any()) for f in frames),
-                             mean, float(np.sqrt(np.mean(pose**2))),
+    shift, shift_sigma, residual = _wave_shift(difference, rate, aligned, cluster)
+    return ComparisonSummary(int(difference.size), len(rows), mean,
+                             float(np.sqrt(np.mean(pose**2))),
                              float(np.sqrt(np.mean(difference**2))),
                              float(np.sqrt(np.mean((difference - mean) ** 2))),
-                             float(np.sqrt(np.mean(sigma**2))))
+                             float(np.sqrt(np.mean(sigma**2))), shift, shift_sigma,
+                             float(np.sqrt(np.mean(residual**2))),
+                             float(np.sqrt(np.mean(aligned**2))))
+
+
+def _wave_shift(difference: np.ndarray, rate: np.ndarray, sigma: np.ndarray,
+                cluster: np.ndarray) -> tuple[float, float, np.ndarray]:
+    """The time shift [s] in difference = mean + rate · shift (weighted by 1/σ²), its σ [s]
+    (cluster-robust by top frame: the points of one top fit share its error), and the
+    residuals [mm]."""
+    design = np.column_stack([np.ones_like(rate), rate])
+    weight = sigma**-2.0
+    normal = design.T @ (design * weight[:, None])
+    solution = np.linalg.solve(normal, design.T @ (weight * difference))
+    residual = difference - design @ solution
+    scores = design * (weight * residual)[:, None]
+    groups = np.unique(cluster, return_inverse=True)[1]
+    per_cluster = np.zeros((groups.max() + 1, 2))
+    np.add.at(per_cluster, groups, scores)
+    inverse = np.linalg.inv(normal)
+    covariance = inverse @ (per_cluster.T @ per_cluster) @ inverse
+    return float(solution[1]), float(np.sqrt(covariance[1, 1])), residual

@@ -11,7 +11,8 @@ the side's profile. It writes, into the run's folder:
   side's image noise, the top fit's σ and the clock's σ predict for its scatter;
 - lateral_profile.csv: one row per side frame and wall point (every PROFILE_STEP_PX-th
   column): azimuth, X, Y, Z of the side's contact line, its height's σ from the image and
-  from the camera's pose (one error for the whole run), the top's height and σ there;
+  from the camera's pose (one error for the whole run), the top's height, σ and rate of
+  change there;
 - lateral.json and a "Side camera" section in report.html (analysis.json's `lateral`).
 """
 
@@ -91,7 +92,8 @@ class LateralRun:
         position = self.board.camera_position_mm
         return [f"side camera at ({position[0]:.1f}, {position[1]:.1f}, {position[2]:.1f}) mm "
                 f"from its board (corners {self.board.reprojection_rms_px:.2f} px RMS), "
-                f"{self.frames} frames", self.clock.summary(), self.summary.summary()]
+                f"{self.frames} frames", self.clock.summary(), self.summary.summary(),
+                self.summary.wave_summary(self.clock.sigma_s)]
 
 
 def _side_frames(video: Path, profiler: WallProfiler, led_roi: tuple[int, int, int, int],
@@ -179,11 +181,11 @@ def process_lateral(setup: LateralSetup, rig: Rig, top_video: Path, out: Path,
     top = top_surface_series(results.fits, results.points, rig.container.radius_mm)
     comparisons = []
     for time_s, profile in zip(times, profiles, strict=True):
-        top_mm, top_sigma, top_rate = top.wall(float(clock.top_time_s(time_s)),
-                                               profile.azimuth_rad)
+        top_time_s = float(clock.top_time_s(time_s))
+        top_mm, top_sigma, top_rate = top.wall(top_time_s, profile.azimuth_rad)
         comparisons.append(FrameComparison(profile.wall_mm[:, 2], profile.sigma_z_mm,
-                                           profile.pose_sigma_z_mm, top_mm, top_sigma,
-                                           np.abs(top_rate) * clock.sigma_s))
+                                           profile.pose_sigma_z_mm, top_mm, top_sigma, top_rate,
+                                           clock.sigma_s, top.nearest_frame(top_time_s)))
     summary = summarise(comparisons)
     run = LateralRun(board, clock, len(times), summary)
     _write_frames(out / "lateral.csv", times, clock, comparisons)
@@ -230,7 +232,8 @@ def _write_profiles(path: Path, times: list[float], clock: LateralClock,
     with path.open("w", newline="") as file:
         writer = csv.writer(file)
         writer.writerow(["frame", "t_s", "column_px", "azimuth_deg", "X_mm", "Y_mm", "Z_mm",
-                         "sigma_Z_mm", "pose_sigma_Z_mm", "top_Z_mm", "top_sigma_Z_mm"])
+                         "sigma_Z_mm", "pose_sigma_Z_mm", "top_Z_mm", "top_sigma_Z_mm",
+                         "top_rate_mm_s"])
         for index, (time_s, profile, comparison) in enumerate(
                 zip(times, profiles, comparisons, strict=True)):
             t_s = f"{float(clock.top_time_s(time_s)):.6f}"
@@ -240,7 +243,8 @@ def _write_profiles(path: Path, times: list[float], clock: LateralClock,
                                  *(_cell(v) for v in profile.wall_mm[k]),
                                  _cell(profile.sigma_z_mm[k]), _cell(profile.pose_sigma_z_mm[k]),
                                  _cell(comparison.top_mm[k]),
-                                 _cell(comparison.top_sigma_mm[k])])
+                                 _cell(comparison.top_sigma_mm[k]),
+                                 _cell(comparison.top_rate_mm_s[k], 2)])
 
 
 def _description(inputs: LateralInput, run: LateralRun) -> dict[str, Any]:
