@@ -208,12 +208,14 @@ def run_live(source: str, rig_file: Path, out: Path, port: str | None,
     is_file = Path(source).is_file()
     if side is not None:
         graphs = ("lateral.yaml",)
-        overrides += [f"lateral.source={side.inputs.video.resolve()}",
+        side_source = side.inputs.video
+        side_spec = side_source.resolve() if side_source.is_file() else side_source
+        overrides += [f"lateral.source={side_spec}",
                       f"lateral.camera_model={side.view.camera_file}",
                       f"lateral.led_roi={list(side.view.led_roi_px)}"]
         if side.inputs.top_led_roi is not None:
             overrides.append(f"camera.led_roi={list(side.inputs.top_led_roi)}")
-        if is_file:   # the side file plays on the top camera's clock
+        if is_file and side_source.is_file():   # the side file plays on the top camera's clock
             clock = link_side_clock(side, rig, Path(source))
             print(f"sds run: {clock.summary()}")
             overrides.append(f"lateral.stamp_offset_s={clock.offset_s}")
@@ -234,7 +236,7 @@ def run_live(source: str, rig_file: Path, out: Path, port: str | None,
           f"  report {out / 'analysis' / 'report.html'}\n  results {out / 'results'}/")
     for line in summary_lines(result):
         print(f"    {line}")
-    if side is not None and is_file:
+    if side is not None and is_file and side.inputs.video.is_file():
         run = process_lateral(side, rig, Path(source), out / "results", progress=False,
                               report=out / "analysis")
         print("\n".join(f"  {line}" for line in run.lines()))

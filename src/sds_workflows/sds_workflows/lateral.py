@@ -146,11 +146,10 @@ def _clock(inputs: LateralInput, rig: Rig, top_video: Path, side_on_s: list[floa
 
 
 def place_lateral(inputs: LateralInput, rig: Rig) -> LateralSetup:
-    """Read the view file and place the side camera from its board image (before any frame
-    is read, so that a bad input fails at once); ValueError-family errors name the file."""
+    """Read the view file and place the side camera from its board images (before any frame
+    is read, so that a bad input fails at once); ValueError-family errors name the file. The
+    video may be a live camera's device here (`sds run`); `process_lateral` needs a file."""
     view = load_lateral_view(inputs.view_file)
-    if not inputs.video.is_file():
-        raise ValueError(f"{inputs.video}: no such video (the side camera's, --lateral)")
     images = []
     for path in inputs.board_images:
         image = cv2.imread(str(path))
@@ -172,6 +171,8 @@ def process_lateral(setup: LateralSetup, rig: Rig, top_video: Path, out: Path,
     """The placed side camera against a processed top run in `out` (its fits and points):
     writes LATERAL_FILES there and a section into the report in `report` (default: `out`)."""
     inputs, view, board = setup.inputs, setup.view, setup.board
+    if not inputs.video.is_file():
+        raise ValueError(f"{inputs.video}: no such video (the side camera's, --lateral)")
     times, profiles, side_on, fps = _side_frames(inputs.video, setup.profiler, view.led_roi_px,
                                                  progress)
     clock = _clock(inputs, rig, top_video, side_on, 1.0 / (fps or view.fps))

@@ -116,7 +116,11 @@ def process_video(video: Path, rig: Rig, out: Path, fps: float = 0.0,
     stills = video.is_dir() if stills is None else stills
     if not overwrite:
         refuse_results(out)
-    side_setup = place_lateral(lateral, rig) if lateral is not None else None
+    side_setup = None
+    if lateral is not None:
+        if not lateral.video.is_file():
+            raise ValueError(f"{lateral.video}: no such video (the side camera's, --lateral)")
+        side_setup = place_lateral(lateral, rig)
     with staged_folder(out, RUN_FILES) as staging:
         tables = RunTables(ResultsWriter(staging), rig)
         count, ending = process_frames(video_frames(video, rig, fps), rig, tables, progress,
