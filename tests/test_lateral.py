@@ -250,6 +250,8 @@ def test_process_writes_the_side_view_its_clock_and_the_check(side_run) -> None:
     assert abs(wave_error_s) < 3 * summary.wave_shift_sigma_s + 2e-4, (wave_error_s, summary)
     assert summary.wave_shift_sigma_s < side.clock.sigma_s
     assert 0.5 < summary.aligned_scatter_mm / summary.aligned_predicted_mm < 2.0, summary
+    # Both cameras told the true rig at 1 g: no tilt between the two surfaces beyond 0.1°.
+    assert max(abs(v) for v in summary.tilt_deg) < 0.1, summary
     report = (results / "report.html").read_text()
     assert "Side camera" in report and "side clock" in report
     analysis = json.loads((results / "analysis.json").read_text())

@@ -107,11 +107,12 @@ def top_surface_series(fits: np.ndarray, points: np.ndarray, radius_mm: float
 
 @dataclass(frozen=True)
 class FrameComparison:
-    """One side frame against the top surface: the side's heights and their σ from the image
-    and from the pose, the top's heights, σ and rate of change at the same wall points [mm,
-    mm/s] (NaN where the top has no surface then), the clock link's σ [s] and the nearest top
-    frame (whose fit the top's errors share)."""
+    """One side frame against the top surface at its wall points (azimuths [rad]): the side's
+    heights and their σ from the image and from the pose, the top's heights, σ and rate of
+    change [mm, mm/s] (NaN where the top has no surface then), the clock link's σ [s] and the
+    nearest top frame (whose fit the top's errors share)."""
 
+    azimuth_rad: np.ndarray
     side_mm: np.ndarray
     side_sigma_mm: np.ndarray
     side_pose_sigma_mm: np.ndarray
@@ -158,6 +159,8 @@ class ComparisonSummary:
     predicted_mm: float
     wave_shift_s: float
     wave_shift_sigma_s: float
+    tilt_deg: tuple[float, float]
+    tilt_sigma_deg: tuple[float, float]
     aligned_scatter_mm: float
     aligned_predicted_mm: float
 
@@ -170,22 +173,26 @@ class ComparisonSummary:
                 f"where both σ predict {self.predicted_mm:.3f} mm")
 
     def wave_summary(self, clock_sigma_s: float) -> str:
-        """One line: the wave's clock check, and the scatter once the wave aligns the two."""
+        """One line: the wave's clock check, the tilt between the two, and the scatter once
+        both are taken out."""
         pull = self.wave_shift_s / np.hypot(self.wave_shift_sigma_s, clock_sigma_s)
+        tilt = ", ".join(f"{v:+.3f} ± {e:.3f}°" for v, e in zip(self.tilt_deg,
+                                                                 self.tilt_sigma_deg,
+                                                                 strict=True))
         return (f"the wave's own timing: the side frames {self.wave_shift_s * 1e3:+.2f} ± "
                 f"{self.wave_shift_sigma_s * 1e3:.2f} ms from the LED clock ({pull:+.1f} σ of "
-                f"both); so shifted, side − top scatters {self.aligned_scatter_mm:.3f} mm "
-                f"about its mean where the side's noise and the top fit predict "
-                f"{self.aligned_predicted_mm:.3f} mm")
+                f"both); side − top tilts by γx, γy = {tilt}; with both taken out, side − top "
+                f"scatters {self.aligned_scatter_mm:.3f} mm about its mean where the side's "
+                f"noise and the top fit predict {self.aligned_predicted_mm:.3f} mm")
 
 
-def summarise(frames: list[FrameComparison]) -> ComparisonSummary:
-    """The run's summary over every wall point compared."""
+def summarise(frames: list[FrameComparison], radius_mm: float) -> ComparisonSummary:
+    """The run's summary over every wall point compared (on the wall of `radius_mm`)."""
     nan = float("nan")
     rows = [(f, np.isfinite(f.difference_mm) & np.isfinite(f.predicted_sigma_mm)) for f in frames]
     rows = [(f, used) for f, used in rows if used.any()]
     if not rows:
-        return ComparisonSummary(0, 0, *(nan,) * 9)
+        return ComparisonSummary(0, 0, *(nan,) * 7, (nan, nan), (nan, nan), nan, nan)
 
     def joined(name: str) -> np.ndarray:
         return np.concatenate([getattr(f, name)[used] for f, used in rows])
@@ -193,32 +200,38 @@ def summarise(frames: list[FrameComparison]) -> ComparisonSummary:
     difference, sigma, pose = (joined(n) for n in ("difference_mm", "predicted_sigma_mm",
                                                   "side_pose_sigma_mm"))
     aligned, rate = joined("aligned_sigma_mm"), joined("top_rate_mm_s")
+    azimuth = joined("azimuth_rad")
     cluster = np.concatenate([np.full(np.count_nonzero(used), f.top_frame) for f, used in rows])
     mean = float(np.mean(difference))
-    shift, shift_sigma, residual = _wave_shift(difference, rate, aligned, cluster)
+    # difference = offset + a cos θ + b sin θ + rate · shift, a = −R tan γx, b = −R tan γy
+    design = np.column_stack([np.ones_like(rate), np.cos(azimuth), np.sin(azimuth), rate])
+    solution, sigma_of, residual = _clustered_least_squares(design, difference, aligned,
+                                                            cluster)
+    tilt = tuple(float(np.degrees(-np.arctan(v / radius_mm))) for v in solution[1:3])
+    tilt_sigma = tuple(float(np.degrees(e / radius_mm)) for e in sigma_of[1:3])
     return ComparisonSummary(int(difference.size), len(rows), mean,
                              float(np.sqrt(np.mean(pose**2))),
                              float(np.sqrt(np.mean(difference**2))),
                              float(np.sqrt(np.mean((difference - mean) ** 2))),
-                             float(np.sqrt(np.mean(sigma**2))), shift, shift_sigma,
+                             float(np.sqrt(np.mean(sigma**2))), float(solution[3]),
+                             float(sigma_of[3]), (tilt[0], tilt[1]),
+                             (tilt_sigma[0], tilt_sigma[1]),
                              float(np.sqrt(np.mean(residual**2))),
                              float(np.sqrt(np.mean(aligned**2))))
 
 
-def _wave_shift(difference: np.ndarray, rate: np.ndarray, sigma: np.ndarray,
-                cluster: np.ndarray) -> tuple[float, float, np.ndarray]:
-    """The time shift [s] in difference = mean + rate · shift (weighted by 1/σ²), its σ [s]
-    (cluster-robust by top frame: the points of one top fit share its error), and the
-    residuals [mm]."""
-    design = np.column_stack([np.ones_like(rate), rate])
+def _clustered_least_squares(design: np.ndarray, values: np.ndarray, sigma: np.ndarray,
+                             cluster: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Weighted (1/σ²) least squares: the solution, its σ (cluster-robust: the points of one
+    cluster, one top fit, share its error, so they are not independent) and the residuals."""
     weight = sigma**-2.0
     normal = design.T @ (design * weight[:, None])
-    solution = np.linalg.solve(normal, design.T @ (weight * difference))
-    residual = difference - design @ solution
+    solution = np.linalg.solve(normal, design.T @ (weight * values))
+    residual = values - design @ solution
     scores = design * (weight * residual)[:, None]
     groups = np.unique(cluster, return_inverse=True)[1]
-    per_cluster = np.zeros((groups.max() + 1, 2))
+    per_cluster = np.zeros((groups.max() + 1, design.shape[1]))
     np.add.at(per_cluster, groups, scores)
     inverse = np.linalg.inv(normal)
     covariance = inverse @ (per_cluster.T @ per_cluster) @ inverse
-    return float(solution[1]), float(np.sqrt(covariance[1, 1])), residual
+    return solution, np.sqrt(np.diag(covariance)), residual

@@ -184,10 +184,11 @@ def process_lateral(setup: LateralSetup, rig: Rig, top_video: Path, out: Path,
     for time_s, profile in zip(times, profiles, strict=True):
         top_time_s = float(clock.top_time_s(time_s))
         top_mm, top_sigma, top_rate = top.wall(top_time_s, profile.azimuth_rad)
-        comparisons.append(FrameComparison(profile.wall_mm[:, 2], profile.sigma_z_mm,
+        comparisons.append(FrameComparison(profile.azimuth_rad, profile.wall_mm[:, 2],
+                                           profile.sigma_z_mm,
                                            profile.pose_sigma_z_mm, top_mm, top_sigma, top_rate,
                                            clock.sigma_s, top.nearest_frame(top_time_s)))
-    summary = summarise(comparisons)
+    summary = summarise(comparisons, rig.container.radius_mm)
     run = LateralRun(board, clock, len(times), summary)
     _write_frames(out / "lateral.csv", times, clock, comparisons)
     _write_profiles(out / "lateral_profile.csv", times, clock, profiles, comparisons)
