@@ -20,7 +20,10 @@ Arduino's SD log. Printed per rig and scenario:
 - the side profile's height RMSE against the true surface at the wall (at each point's
   azimuth and the side frame's true time), and the largest frame's RMSE;
 - the top/side comparison: side − top on average, its scatter about that mean, and what the
-  side's image noise and the top fit's σ predict for it.
+  side's image noise, the top fit's σ and the clock's σ predict for it;
+- the wave's own clock against the truth, the tilt between the two surfaces at the wall, and
+  the scatter left once the offset, the tilt and the time shift are taken out, against what
+  the side's noise and the top fit's σ predict.
 
 With `--pose-draws N`, only the side camera's pose is checked, on N random side cameras (as
 above) looking at the flat liquid: the wall heights' mean error against the pose's σ, with
@@ -117,12 +120,25 @@ def one_run(folder: Path, name: str, seed: int, first: FirstUse, rng: np.random.
           f"predicted {summary.predicted_mm:.3f} mm (ratio "
           f"{summary.scatter_mm / summary.predicted_mm:.2f}), {summary.frames} frames",
           flush=True)
+    wave_error_s = clock.offset_s + summary.wave_shift_s - true_offset
+    print(f"{'':<12} the wave's clock {wave_error_s * 1e3:+.2f} ± "
+          f"{summary.wave_shift_sigma_s * 1e3:.2f} ms off the truth "
+          f"({wave_error_s / summary.wave_shift_sigma_s:+.1f} σ); tilt γx, γy "
+          f"{summary.tilt_deg[0]:+.3f} ± {summary.tilt_sigma_deg[0]:.3f}°, "
+          f"{summary.tilt_deg[1]:+.3f} ± {summary.tilt_sigma_deg[1]:.3f}°; aligned scatter "
+          f"{summary.aligned_scatter_mm:.3f} mm, predicted {summary.aligned_predicted_mm:.3f} "
+          f"mm (ratio {summary.aligned_scatter_mm / summary.aligned_predicted_mm:.2f})",
+          flush=True)
     record = {"scenario": name, "seed": seed, "clock_error_s": clock.offset_s - true_offset,
               "clock_sigma_s": clock.sigma_s, "profile_rmse_mm": profile_rmse,
               "profile_mean_mm": profile_mean, "pose_sigma_mm": summary.pose_sigma_mm,
               "worst_frame_rmse_mm": worst_frame, "mean_difference_mm":
               summary.mean_difference_mm, "scatter_mm": summary.scatter_mm,
-              "predicted_mm": summary.predicted_mm}
+              "predicted_mm": summary.predicted_mm, "wave_error_s": wave_error_s,
+              "wave_sigma_s": summary.wave_shift_sigma_s, "tilt_deg": summary.tilt_deg,
+              "tilt_sigma_deg": summary.tilt_sigma_deg,
+              "aligned_scatter_mm": summary.aligned_scatter_mm,
+              "aligned_predicted_mm": summary.aligned_predicted_mm}
     (folder / "bench.json").write_text(json.dumps(record, indent=2) + "\n")
 
 
