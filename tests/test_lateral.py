@@ -278,6 +278,26 @@ def test_a_bad_side_input_fails_before_any_work_in_one_line(side_run, tmp_path: 
     assert not (tmp_path / "b").exists()
 
 
+def test_a_side_camera_that_fails_keeps_the_top_results(side_run, tmp_path: Path) -> None:
+    """The side view's LED region pointed at the dark base: no clock link, so no comparison,
+    said on the summary line; the top camera's results are written whole all the same."""
+    _, simulation, _, _ = side_run
+    view = VIEW_FILE.read_text().replace("../cameras/", str(REPO / "config" / "cameras") + "/")
+    dark_view = tmp_path / "dark_led.yaml"
+    dark_view.write_text(view.replace("led_roi_px: [452, 28, 32, 32]",
+                                      "led_roi_px: [240, 480, 32, 32]"))
+    rig = load_rig(REPO / "config" / "rigs" / "stelium.yaml")
+    rig = replace(rig, camera=rig.camera.scaled(TOP_SCALE))
+    run = process_video(simulation.video, rig, tmp_path / "results", progress=False,
+                        lateral=LateralInput(simulation.lateral_video, dark_view,
+                                             simulation.lateral_boards, None,
+                                             simulation.sd_log))
+    assert run.incomplete and run.lateral is None
+    assert "SIDE CAMERA NOT COMPARED: no LED switch-on seen by the side camera" in run.summary()
+    assert (tmp_path / "results" / "fits.csv").is_file()
+    assert not (tmp_path / "results" / "lateral.csv").exists()
+
+
 def one_line_error(done: subprocess.CompletedProcess, text: str) -> None:
     assert done.returncode == 2, done.stdout + done.stderr
     assert text in done.stderr and len(done.stderr.strip().splitlines()) == 1, done.stderr

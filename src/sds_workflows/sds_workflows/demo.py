@@ -28,6 +28,7 @@ from sds_sloshing.report import REPORT_FILES, summary_lines, truth_from_run
 from sds_sloshing.surface_series import RecordingError
 from sds_viz.from_mcap import mcap_to_rrd
 
+from sds_workflows.errors import input_errors
 from sds_workflows.export import export_recording
 from sds_workflows.lateral import (
     LateralInput,
@@ -237,8 +238,12 @@ def run_live(source: str, rig_file: Path, out: Path, port: str | None,
     for line in summary_lines(result):
         print(f"    {line}")
     if side is not None and is_file and side.inputs.video.is_file():
-        run = process_lateral(side, rig, Path(source), out / "results", progress=False,
-                              report=out / "analysis")
+        try:
+            run = process_lateral(side, rig, Path(source), out / "results", progress=False,
+                                  report=out / "analysis")
+        except input_errors() as error:   # the top camera's results stand
+            print(f"sds run: side camera not compared: {error}", file=sys.stderr)
+            return 2
         print("\n".join(f"  {line}" for line in run.lines()))
     elif side is not None:
         print("  side camera: recorded (/lateral/image); its check of the top surface needs "

@@ -91,6 +91,13 @@ class ProcessedRun:
     analysis: RunAnalysis
     broken: str = ""   # the reader's error when the input broke off after `frames` frames
     lateral: LateralRun | None = None   # the side camera, where one was given
+    lateral_failure: str = ""   # why the side camera gave nothing (the top's results stand)
+
+    @property
+    def incomplete(self) -> bool:
+        """Whether part of the input gave no results (a broken video, a side camera that
+        failed)."""
+        return bool(self.broken or self.lateral_failure)
 
     def summary(self) -> str:
         """The console's lines: the run, then the side camera's."""
@@ -99,6 +106,8 @@ class ProcessedRun:
                 + (f" ({note})" if note else "")
                 + (f"; INPUT INCOMPLETE, results cover the frames read: {self.broken}"
                    if self.broken else "")
+                + (f"; SIDE CAMERA NOT COMPARED: {self.lateral_failure}"
+                   if self.lateral_failure else "")
                 + "".join(f"\nsds process: {line}" for line in
                           (self.lateral.lines() if self.lateral else [])))
 
@@ -130,9 +139,13 @@ def process_video(video: Path, rig: Rig, out: Path, fps: float = 0.0,
             tables.add_camera_imu(imu)
         analysis = finish_analysis(tables, _source_name(video, ending), staging,
                                    AnalysisOptions(gravity_m_s2=gravity_m_s2))
-        side = (process_lateral(side_setup, rig, video, staging, progress)
-                if side_setup is not None else None)
-    return ProcessedRun(video, out, count, analysis, ending.broken, side)
+        side, side_failure = None, ""
+        if side_setup is not None:
+            try:   # a side camera that fails costs the top camera's results nothing
+                side = process_lateral(side_setup, rig, video, staging, progress)
+            except input_errors() as error:
+                side_failure = str(error)
+    return ProcessedRun(video, out, count, analysis, ending.broken, side, side_failure)
 
 
 def _source_name(source: Path, ending: FramesRead) -> str:
@@ -186,7 +199,7 @@ def _process_in_worker(source: Path, is_video: bool, rig_file: Path | None, out:
     try:
         processed = process_input(source, is_video, rig_file, out, fps, gravity_m_s2,
                                   overwrite, False, sequence)
-        return not processed.broken, processed.summary()
+        return not processed.incomplete, processed.summary()
     except Exception as error:
         if not isinstance(error, input_errors()):
             raise

@@ -107,8 +107,8 @@ def run(args: argparse.Namespace) -> int:
         processed = process_input(inputs[0], is_video, rig_file, args.out, args.fps,
                                   args.gravity, args.overwrite, not args.no_progress,
                                   args.sequence, lateral)
-        print(processed.summary(), file=sys.stderr if processed.broken else sys.stdout)
-        return 2 if processed.broken else 0
+        print(processed.summary(), file=sys.stderr if processed.incomplete else sys.stdout)
+        return 2 if processed.incomplete else 0
     failed = process_inputs(inputs, is_video, rig_file, args.out, args.jobs, args.fps,
                             args.gravity, args.overwrite, not args.no_progress, args.sequence)
     return 2 if failed else 0
