@@ -25,9 +25,10 @@ from __future__ import annotations
 
 import csv
 import json
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import cv2
 import numpy as np
@@ -42,6 +43,7 @@ from sds_sim.lateral import LateralRenderer, LateralTruth
 from sds_sim.render import FrameRenderer, FrameTruth
 from sds_sim.scenario import Scenario
 
+T = TypeVar("T")
 FORMAT_VERSION = 1
 CODECS = ("h264", "lossless", "png")
 
@@ -88,6 +90,21 @@ class _FrameSink:
             self._writer.close()
 
 
+def _render_into(sink: _FrameSink, render: Callable[[int], tuple[np.ndarray, T]], count: int,
+                 description: str, progress: bool) -> list[T]:
+    """Render frames 0 … count − 1 into `sink` (closed at the end, also on failure); their
+    truths in order."""
+    truths: list[T] = []
+    try:
+        for index in tqdm(range(count), desc=description, unit="frame", disable=not progress):
+            frame, truth = render(index)
+            sink.write(frame)
+            truths.append(truth)
+    finally:
+        sink.close()
+    return truths
+
+
 def simulate(scenario: Scenario, directory: Path, codec: str = "h264",
              progress: bool = True) -> SimulationOutput:
     """Render every frame, write the streams and the truth; return where they are."""
@@ -98,15 +115,8 @@ def simulate(scenario: Scenario, directory: Path, codec: str = "h264",
     (directory / "arduino").mkdir(parents=True, exist_ok=True)
     renderer = FrameRenderer(scenario)
     sink = _FrameSink(directory, codec, renderer.width, renderer.height, scenario.fps)
-    truths: list[FrameTruth] = []
-    try:
-        for index in tqdm(range(scenario.frame_count), desc="rendering", unit="frame",
-                          disable=not progress):
-            frame, frame_truth = renderer.render(index)
-            sink.write(frame)
-            truths.append(frame_truth)
-    finally:
-        sink.close()
+    truths: list[FrameTruth] = _render_into(sink, renderer.render, scenario.frame_count,
+                                            "rendering", progress)
     arduino, truth = directory / "arduino", directory / "truth"
     output = SimulationOutput(directory, sink.path, arduino / "serial.txt", arduino / "SDS_LOG.TXT",
                               truth / "run.json", truth / "spots.csv", truth / "frames.csv",
@@ -141,15 +151,8 @@ def _simulate_lateral(scenario: Scenario, output: SimulationOutput, codec: str, 
         cv2.imwrite(str(path), image)
     sink = _FrameSink(folder, "h264" if codec == "png" else codec, renderer.width,
                       renderer.height, renderer.fps)
-    truths: list[LateralTruth] = []
-    try:
-        for index in tqdm(range(renderer.frame_count), desc="side view", unit="frame",
-                          disable=not progress):
-            frame, truth = renderer.render(index)
-            sink.write(frame)
-            truths.append(truth)
-    finally:
-        sink.close()
+    truths: list[LateralTruth] = _render_into(sink, renderer.render, renderer.frame_count,
+                                              "side view", progress)
     truth_folder = output.directory / "truth"
     with (truth_folder / "lateral.csv").open("w", newline="") as file:
         writer = csv.writer(file)
