@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -52,3 +53,15 @@ class LedDetector:
             switched = True   # on from the first contrasting frame: the off frames came before
         self.on = on
         return LedSwitch(index, on) if switched else None
+
+
+def switch_times_s(first_frame_s: list[float], period_s: float) -> list[float]:
+    """The LED's switch times [s] from the times of the first frames showing its new state:
+    a switch shows in the first frame after it, late by U(0, T) for a frame period T, so T/2
+    is taken off (σ: `switch_sigma_s`)."""
+    return [t - period_s / 2 for t in first_frame_s]
+
+
+def switch_sigma_s(period_s: float) -> float:
+    """The σ of a switch time from `switch_times_s` [s]: T/√12."""
+    return period_s / math.sqrt(12)

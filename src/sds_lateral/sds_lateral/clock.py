@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 from sds_arduino.clock import camera_offset_s
+from sds_camera.led import switch_sigma_s, switch_times_s
 
 
 @dataclass(frozen=True)
@@ -60,11 +61,6 @@ class ClockError(ValueError):
     """No path links the side camera's clock to the top camera's."""
 
 
-def switch_times_s(first_on_frame_s: list[float], period_s: float) -> list[float]:
-    """The LED's switch-on times [s] from the times of the first frames showing it on."""
-    return [t - period_s / 2 for t in first_on_frame_s]
-
-
 def link_lateral_clock(lateral_on_s: list[float], lateral_period_s: float,
                        top_on_s: list[float] | None = None, top_period_s: float | None = None,
                        device_on_s: list[float] | None = None,
@@ -74,13 +70,13 @@ def link_lateral_clock(lateral_on_s: list[float], lateral_period_s: float,
     the Arduino's LED switch-ons [s, device clock] with the top camera's offset to the device
     (offset, σ [s]) where given; ClockError when no path exists."""
     side = switch_times_s(lateral_on_s, lateral_period_s)
-    side_sigma = lateral_period_s / np.sqrt(12)
+    side_sigma = switch_sigma_s(lateral_period_s)
     paths = []
     if top_on_s and top_period_s and side:
         top = switch_times_s(top_on_s, top_period_s)
         offset = camera_offset_s(side, top)
         paths.append(ClockPath("LED, direct", offset,
-                               float(np.hypot(top_period_s / np.sqrt(12), side_sigma))))
+                               float(np.hypot(switch_sigma_s(top_period_s), side_sigma))))
     if device_on_s and top_minus_device is not None and side:
         side_minus_device = camera_offset_s(device_on_s, side)
         paths.append(ClockPath("LED to the Arduino, its acceleration to the top camera",

@@ -139,6 +139,22 @@ class FrameComparison:
         surface's rate of change) predict for the difference's scatter at each point [mm]."""
         return np.hypot(self.aligned_sigma_mm, self.top_rate_mm_s * self.clock_sigma_s)
 
+    @property
+    def rms_difference_mm(self) -> float:
+        """The RMS of side − top over the points compared [mm] (NaN: none)."""
+        return _rms(self.difference_mm)
+
+    @property
+    def rms_predicted_mm(self) -> float:
+        """What the σ predict for that RMS [mm] (NaN: no point compared)."""
+        return _rms(np.where(np.isfinite(self.difference_mm), self.predicted_sigma_mm, np.nan))
+
+
+def _rms(values: np.ndarray) -> float:
+    """The RMS of the finite values (NaN if none)."""
+    finite = values[np.isfinite(values)]
+    return float(np.sqrt(np.mean(finite**2))) if finite.size else float("nan")
+
 
 @dataclass(frozen=True)
 class ComparisonSummary:

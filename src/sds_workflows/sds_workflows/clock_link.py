@@ -21,7 +21,7 @@ from sds_arduino.clock import ClockLink, align_by_acceleration, camera_offset_s
 from sds_arduino.protocol import read_log, unwrap_time_s
 from sds_camera.camera_imu import read_camera_imu
 from sds_camera.frame_source import VideoFileSource
-from sds_camera.led import LedDetector
+from sds_camera.led import LedDetector, switch_sigma_s, switch_times_s
 from sds_model.rig import Rig
 
 STANDARD_GRAVITY = 9.80665
@@ -86,6 +86,16 @@ def video_led_on_s(video: Path, region: tuple[int, int, int, int]) -> tuple[list
     return times, 1.0 / source.nominal_fps
 
 
+def led_rows_on_s(video: Path, rig: Rig, region: tuple[int, int, int, int]
+                  ) -> tuple[list[float], float]:
+    """`video_led_on_s` of a video taken with `rig`, each time carried to when the LED's rows
+    were exposed (its rolling shutter's delay after the frame's time), and the frame period."""
+    on, period = video_led_on_s(video, region)
+    led_row = region[1] + region[3] / 2
+    row_delay_s = float(rig.camera_shutter.row_time_s(led_row, rig.camera.height_px))
+    return [t + row_delay_s for t in on], period
+
+
 def link_clocks(video: Path, log: ArduinoLog, rig: Rig,
                 led_region: tuple[int, int, int, int] | None) -> ClockLinks:
     """Both links of a video to an Arduino log (None where a link has no data)."""
@@ -97,12 +107,8 @@ def link_clocks(video: Path, log: ArduinoLog, rig: Rig,
                                              imu.accel_time_s, in_rig)
     led_offset = led_sigma = None
     if led_region is not None and log.led_on_s:
-        camera_on, period = video_led_on_s(video, led_region)
-        # The LED's rows are exposed their rolling shutter's delay after the frame's time.
-        led_row = led_region[1] + led_region[3] / 2
-        row_delay_s = float(rig.camera_shutter.row_time_s(led_row, rig.camera.height_px))
-        offset = camera_offset_s(log.led_on_s,
-                                 [t + row_delay_s - period / 2 for t in camera_on])
+        camera_on, period = led_rows_on_s(video, rig, led_region)
+        offset = camera_offset_s(log.led_on_s, switch_times_s(camera_on, period))
         if np.isfinite(offset):
-            led_offset, led_sigma = offset, period / np.sqrt(12)
+            led_offset, led_sigma = offset, switch_sigma_s(period)
     return ClockLinks(acceleration, led_offset, led_sigma)

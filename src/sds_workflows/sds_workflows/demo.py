@@ -206,6 +206,7 @@ def run_live(source: str, rig_file: Path, out: Path, port: str | None,
     if port:
         overrides.append(f"arduino.port={port}")
     graphs: tuple[str, ...] = ()
+    clock = None
     is_file = Path(source).is_file()
     if side is not None:
         graphs = ("lateral.yaml",)
@@ -240,7 +241,7 @@ def run_live(source: str, rig_file: Path, out: Path, port: str | None,
     if side is not None and is_file and side.inputs.video.is_file():
         try:
             run = process_lateral(side, rig, Path(source), out / "results", progress=False,
-                                  report=out / "analysis")
+                                  report=out / "analysis", clock=clock)
         except input_errors() as error:   # the top camera's results stand
             print(f"sds run: side camera not compared: {error}", file=sys.stderr)
             return 2

@@ -47,7 +47,12 @@ from sds_recon.results import load_results
 from sds_sloshing.report import add_report_section
 from tqdm import tqdm
 
-from sds_workflows.clock_link import link_clocks, read_arduino_log, video_led_on_s
+from sds_workflows.clock_link import (
+    led_rows_on_s,
+    link_clocks,
+    read_arduino_log,
+    video_led_on_s,
+)
 
 LATERAL_FILES = ("lateral.csv", "lateral_profile.csv", "lateral.json", "lateral.png")
 """What `process_lateral` writes into a run's folder."""
@@ -130,10 +135,7 @@ def _clock(inputs: LateralInput, rig: Rig, top_video: Path, side_on_s: list[floa
     """The side clock's link to the top camera's by every path the inputs allow."""
     top_on = top_period = None
     if inputs.top_led_roi is not None:
-        on, top_period = video_led_on_s(top_video, inputs.top_led_roi)
-        row = inputs.top_led_roi[1] + inputs.top_led_roi[3] / 2
-        delay = float(rig.camera_shutter.row_time_s(row, rig.camera.height_px))
-        top_on = [t + delay for t in on]
+        top_on, top_period = led_rows_on_s(top_video, rig, inputs.top_led_roi)
     device_on = top_minus_device = None
     if inputs.arduino_log is not None:
         log = read_arduino_log(inputs.arduino_log)
@@ -167,15 +169,19 @@ def place_lateral(inputs: LateralInput, rig: Rig) -> LateralSetup:
 
 
 def process_lateral(setup: LateralSetup, rig: Rig, top_video: Path, out: Path,
-                    progress: bool = True, report: Path | None = None) -> LateralRun:
+                    progress: bool = True, report: Path | None = None,
+                    clock: LateralClock | None = None) -> LateralRun:
     """The placed side camera against a processed top run in `out` (its fits and points):
-    writes LATERAL_FILES there and a section into the report in `report` (default: `out`)."""
+    writes LATERAL_FILES there and a section into the report in `report` (default: `out`).
+    `clock`: the link `link_side_clock` measured already (`sds run`), else it is measured
+    here."""
     inputs, view, board = setup.inputs, setup.view, setup.board
     if not inputs.video.is_file():
         raise ValueError(f"{inputs.video}: no such video (the side camera's, --lateral)")
     times, profiles, side_on, fps = _side_frames(inputs.video, setup.profiler, view.led_roi_px,
                                                  progress)
-    clock = _clock(inputs, rig, top_video, side_on, 1.0 / (fps or view.fps))
+    if clock is None:
+        clock = _clock(inputs, rig, top_video, side_on, 1.0 / (fps or view.fps))
     results = load_results(out)
     if results.fits is None or results.points is None:
         raise ValueError(f"{out}: the top run has no fits or points to compare with")
@@ -206,11 +212,9 @@ def _frame_row(comparison: FrameComparison) -> list[str]:
     used = np.isfinite(difference)
     if not used.any():
         return [str(int(np.isfinite(comparison.side_mm).sum())), "", "", "", "", ""]
-    predicted = comparison.predicted_sigma_mm[used]
     return [str(int(used.sum())), f"{np.mean(comparison.side_mm[used]):.4f}",
             f"{np.mean(comparison.top_mm[used]):.4f}", f"{np.mean(difference[used]):.4f}",
-            f"{np.sqrt(np.mean(difference[used] ** 2)):.4f}",
-            f"{np.sqrt(np.mean(predicted**2)):.4f}"]
+            f"{comparison.rms_difference_mm:.4f}", f"{comparison.rms_predicted_mm:.4f}"]
 
 
 def _write_frames(path: Path, times: list[float], clock: LateralClock,
@@ -274,16 +278,13 @@ def _plot(path: Path, top_time_s: np.ndarray, profiles: list[WallProfile],
     """Side and top heights at the wall point nearest the view's centre, and the per-frame
     RMS of side − top against what both σ predict."""
     figure, (heights, differences) = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
-    side, top, rms, predicted = [], [], [], []
+    side, top = [], []
     for profile, comparison in zip(profiles, comparisons, strict=True):
         middle = len(profile.column_px) // 2
         side.append(comparison.side_mm[middle])
         top.append(comparison.top_mm[middle])
-        used = np.isfinite(comparison.difference_mm)
-        rms.append(np.sqrt(np.mean(comparison.difference_mm[used] ** 2)) if used.any()
-                   else np.nan)
-        sigma = comparison.predicted_sigma_mm[used]
-        predicted.append(np.sqrt(np.mean(sigma**2)) if used.any() else np.nan)
+    rms = [c.rms_difference_mm for c in comparisons]
+    predicted = [c.rms_predicted_mm for c in comparisons]
     heights.plot(top_time_s, side, label="side camera: contact line")
     heights.plot(top_time_s, top, label="top camera: modal fit at the wall")
     heights.set_ylabel("height at the wall [mm]")
