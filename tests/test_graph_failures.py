@@ -105,6 +105,29 @@ def test_a_node_process_that_crashes_leaves_every_threads_stack_in_the_log(repo,
     assert "in _publish_frames" in output and "in _read_frames" in output, output
 
 
+def test_a_process_that_hangs_while_it_stops_is_ended_with_its_stacks_in_the_log(
+        repo, tmp_path, monkeypatch):
+    """A process whose middleware teardown hangs after its nodes closed is ended by its
+    watchdog, a clean stop; one that hangs before (in close()) is killed after the grace
+    period, its threads' stacks in the log first. Neither hangs the graph."""
+    monkeypatch.setenv("PYTHONPATH", str(repo / "tests"))
+    graph_file = tmp_path / "hanging.yaml"
+    graph_file.write_text(yaml.safe_dump({"nodes": [
+        {"name": "teardown", "plugin": "hanging_nodes:HangsInTeardownNode", "required": True},
+        {"name": "close", "plugin": "hanging_nodes:HangsInCloseNode"}]}))
+    started = time.monotonic()
+    graph = SdsGraphRun(str(graph_file))
+    assert graph.wait(timeout=60) == 128 + signal.SIGKILL, graph.output()
+    output = graph.output()
+    assert time.monotonic() - started < 40, output
+    assert "[teardown] its nodes closed, but the middleware's teardown hung: ended after 5 s " \
+           "by the node host's watchdog" in output, output
+    assert "in destroy_node" in output, output   # the watchdog's dump, before the alarm
+    assert "[close] did not stop in 10 s: its threads' stacks follow; killed" in output, output
+    assert "in close" in output, output
+    assert "teardown (teardown) " not in output, output   # no failure report for it
+
+
 def test_a_file_fed_graph_ends_by_itself_once_the_file_is_done(clip):
     graph = SdsGraphRun("camera_monitor.yaml", "--set", f"camera.source={clip}",
                         "--set", "camera.linger_s=0.5")

@@ -23,9 +23,15 @@ from dataclasses import dataclass, field
 from typing import IO
 
 from sds_ros.graph_file import NodeEntry, check_plugins
+from sds_ros.node_process import STACK_DUMP_SIGNAL, TEARDOWN_HUNG, TEARDOWN_LIMIT_S
 
 _PR_SET_PDEATHSIG = 1
 GRACE_PERIOD_S = 10.0
+STACK_DUMP_WAIT_S = 1.0
+"""How long a process that did not stop gets to write its threads' stacks before SIGKILL."""
+CLEAN_STOPS = (0, -signal.SIGTERM, TEARDOWN_HUNG)
+"""Exit statuses of a clean stop: done, stopped while still starting Python (SIGTERM), or
+ended by its teardown watchdog after its nodes had closed."""
 LAST_LINES = 6
 """Log lines of a failed process repeated in its failure report."""
 
@@ -76,6 +82,16 @@ class GraphProcess:
             for e in self.entries
         ]
         return [sys.executable, "-O", "-m", "sds_ros.node_process", json.dumps(specs)]
+
+
+def _stop_status(code: int) -> str:
+    """How a process ended, in words, once the graph has stopped."""
+    if code == -signal.SIGTERM:
+        return "stopped while starting"
+    if code == TEARDOWN_HUNG:
+        return (f"its nodes closed, but the middleware's teardown hung: ended after "
+                f"{TEARDOWN_LIMIT_S:.0f} s by the node host's watchdog")
+    return f"exited with code {code}"
 
 
 def group_processes(entries: list[NodeEntry]) -> list[GraphProcess]:
@@ -140,9 +156,8 @@ class Launcher:
             self._shutdown()
             for sig, handler in previous.items():
                 signal.signal(sig, handler)
-        # A process still starting Python when it got the SIGTERM dies of it: a clean stop.
         codes = [process.popen.returncode for process in self.processes if process.popen]
-        code = next((code for code in codes if code not in (0, None, -signal.SIGTERM)), 0)
+        code = next((code for code in codes if code not in (*CLEAN_STOPS, None)), 0)
         return 128 - code if code < 0 else code   # killed by a signal: the shell's 128 + N
 
     def _start(self) -> None:
@@ -169,7 +184,7 @@ class Launcher:
             running = [p for p in self.processes if p.popen and p.popen.poll() is None]
             for process in self.processes:
                 code = process.popen.returncode if process.popen else None
-                if code not in (0, None) and process.name not in reported:
+                if code not in (*CLEAN_STOPS, None) and process.name not in reported:
                     reported.add(process.name)
                     self._report_failure(process, code)
                     if process.needed:
@@ -197,7 +212,8 @@ class Launcher:
                 print("\n".join(report), file=stream, flush=True)
 
     def _shutdown(self) -> None:
-        """SIGTERM to every live process, then SIGKILL after the grace period. (SIGTERM, not
+        """SIGTERM to every live process; after the grace period, a process still alive writes
+        its threads' stacks to the log (STACK_DUMP_SIGNAL), then gets SIGKILL. (SIGTERM, not
         SIGINT: a process still starting Python dies of it quietly, where SIGINT would raise
         KeyboardInterrupt with a traceback; the node host handles both alike.)"""
         live = [(p.name, p.popen) for p in self.processes if p.popen and p.popen.poll() is None]
@@ -208,16 +224,19 @@ class Launcher:
             try:
                 popen.wait(timeout=max(0.0, deadline - time.monotonic()))
             except subprocess.TimeoutExpired:
-                self._say(name, f"did not stop in {self.grace_period_s:.0f} s: killed")
-                popen.kill()
-                popen.wait()
+                self._say(name, f"did not stop in {self.grace_period_s:.0f} s: its threads' "
+                          "stacks follow; killed")
+                popen.send_signal(STACK_DUMP_SIGNAL)
+                try:
+                    popen.wait(timeout=STACK_DUMP_WAIT_S)
+                except subprocess.TimeoutExpired:
+                    popen.kill()
+                    popen.wait()
         for thread in self._log_threads:
             thread.join(timeout=2.0)
         for process in self.processes:
             if process.popen:
-                code = process.popen.returncode
-                self._say(process.name, "stopped while starting" if code == -signal.SIGTERM
-                          else f"exited with code {code}")
+                self._say(process.name, _stop_status(process.popen.returncode))
 
     def _forward_log(self, process: GraphProcess) -> None:
         assert process.popen is not None and process.popen.stdout is not None

@@ -22,6 +22,7 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
 from sds_ros.hosted_node import HostedNode
+from sds_ros.node_process import arm_teardown_watchdog
 
 NodeFactory = Callable[..., Node]
 EXIT_STARTUP_ERROR = 3
@@ -40,7 +41,10 @@ def run_nodes(
     | Sequence[tuple[NodeFactory, str, bool, list[str]]],
     args: list[str] | None = None,
 ) -> int:
-    """Spin (factory, name, required[, ros_args]) nodes; return the worst node exit code."""
+    """Spin (factory, name, required[, ros_args]) nodes; return the worst node exit code.
+
+    A process's main: once the nodes have closed, the teardown watchdog is armed
+    (sds_ros.node_process.arm_teardown_watchdog)."""
     # SIGINT/SIGTERM end the loop below, not the context: the nodes' last words in close()
     # (files written, final counts) still reach /rosout.
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
@@ -74,6 +78,7 @@ def run_nodes(
             if isinstance(node, HostedNode):
                 node.close()
                 exit_code = max(exit_code, node.exit_code)
+        arm_teardown_watchdog()
         executor.shutdown(timeout_sec=1.0)
         for node in nodes:
             node.destroy_node()
