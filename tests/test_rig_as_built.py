@@ -26,7 +26,7 @@ from sds_recon.calibration.rig_model import RigModel
 from sds_recon.calibration.self_calibration import SelfCalibration, self_calibrate
 from sds_sim.tilt_series import declared, true_surfaces
 from sds_sim.true_rig import RigErrors, random_layout, true_rig
-from sds_workflows.calibration_plan import Accuracy, default_surfaces
+from sds_workflows.calibration_plan import Accuracy, default_surfaces, what_would_meet_the_goals
 from sds_workflows.calibration_trial import SEED_READINGS, as_built_trial, protocol_readings
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -168,12 +168,21 @@ def test_the_planner_predicts_the_fits_sigma_and_asks_first_for_a_second_fill_le
         predicted = planned.sigmas[planned.names.index(name)]
         assert fit.sigma_of(name) == pytest.approx(predicted, rel=0.25), name
 
+    # Where the goals are out of reach, what would reach them: each better knowledge lowers
+    # the predicted tilt σ, a table read to 0.05° (an inclinometer) the most.
+    whatif = dict(what_would_meet_the_goals(rig, Accuracy(), planned))
+    assert {what: p.worst_tilt_deg < planned.worst_tilt_deg for what, p in whatif.items()} == \
+        dict.fromkeys(whatif, True)
+    assert min(whatif, key=lambda what: whatif[what].worst_tilt_deg).startswith(
+        "tilted frames read to 0.05 deg")
+
     rig_file = save_rig(rig, tmp_path / "rig.yaml")
     done = subprocess.run([SDS, "calibrate", "plan", "--rig", str(rig_file), "--out",
                            str(tmp_path / "plan.csv")], capture_output=True, text=True,
                           timeout=300)
     assert done.returncode == 0, done.stderr
     assert "camera Z mm" in done.stdout
+    assert "the planned protocol with better knowledge" in done.stdout, done.stdout
     written = read_surfaces(tmp_path / "plan.csv")
     assert len(written) == len(planned.surfaces)
     assert [s.offset_mm for _, s in sorted(written.items())] == \

@@ -17,7 +17,7 @@ import numpy as np
 from sds_model.rig import Rig
 from sds_recon.calibration.laser_files import read_surfaces
 from sds_recon.calibration.lasers import KnownSurface
-from sds_recon.calibration.plan import Prediction, plan
+from sds_recon.calibration.plan import Prediction, plan, predict, unseen_sensitivity
 
 BASE_TILTS_DEG = (0.0, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0, 35.0)
 """The seed's tilt table series about X (Table 3)."""
@@ -25,6 +25,10 @@ CANDIDATE_TILTS_DEG = (12.5, 22.5, 32.5)
 """Tilts about Y offered to the planner."""
 CANDIDATE_LEVELS_MM = (-5.0, -10.0, -20.0, 10.0)
 """Other fill levels offered to the planner (level surfaces)."""
+INCLINOMETER_DEG = (0.1, 0.05)
+"""Tilted frames read to these σ (a digital inclinometer on the table) in the what-if lines."""
+MEASURED_EMITTER_MM = 0.1
+"""The emitters' σ in the what-if line for a holder measured after printing."""
 
 
 @dataclass(frozen=True)
@@ -62,6 +66,40 @@ def plan_protocol(rig: Rig, accuracy: Accuracy, candidates_csv: Path | None = No
         candidates = [s if s.tilt_sigma_rad or s.offset_sigma_mm else accuracy.declare(s)
                       for _, s in sorted(read_surfaces(candidates_csv).items())]
     return plan(rig, base, candidates)
+
+
+def what_would_meet_the_goals(rig: Rig, accuracy: Accuracy, planned: Prediction
+                              ) -> list[tuple[str, Prediction]]:
+    """The planned surfaces' prediction under better knowledge, one change at a time: the
+    tilted frames read with an inclinometer, the emitters measured, the protocol recorded
+    twice (two readings of every surface, their errors independent)."""
+    sensitivity = unseen_sensitivity(rig)
+    whatif = []
+    for sigma_deg in INCLINOMETER_DEG:
+        better = replace(accuracy, table_deg=sigma_deg)
+        whatif.append((f"tilted frames read to {sigma_deg:g} deg (an inclinometer)",
+                       predict(rig, [better.declare(s) for s in planned.surfaces],
+                               sensitivity)))
+    emitter_mm = rig.tolerances.emitter_mm
+    if emitter_mm is not None and emitter_mm > MEASURED_EMITTER_MM:
+        measured = replace(rig, tolerances=replace(rig.tolerances,
+                                                   emitter_mm=MEASURED_EMITTER_MM))
+        whatif.append((f"emitters known to {MEASURED_EMITTER_MM:g} mm (measured holder)",
+                       predict(measured, planned.surfaces, unseen_sensitivity(measured))))
+    whatif.append(("every surface recorded twice",
+                   predict(rig, [*planned.surfaces, *planned.surfaces], sensitivity)))
+    return whatif
+
+
+def what_if_text(whatif: list[tuple[str, Prediction]]) -> str:
+    """The what-if predictions as a table beside the plan's."""
+    lines = ["the planned protocol with better knowledge (one change at a time):"]
+    for what, prediction in whatif:
+        met = "  goals met" if prediction.meets_goals() else ""
+        lines.append(f"{what:<58} {prediction.worst_tilt_deg:>9.3f} "
+                     f"{prediction.worst_height_mm:>10.3f} "
+                     f"{prediction.sigmas[prediction.names.index('camera Z')]:>12.3f}{met}")
+    return "\n".join(lines)
 
 
 def _describe(surface: KnownSurface) -> str:

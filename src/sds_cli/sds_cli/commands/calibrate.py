@@ -158,17 +158,26 @@ def run_rig(args: argparse.Namespace) -> int:
 def run_plan(args: argparse.Namespace) -> int:
     """The planned protocol: a table of predicted σ, and its surfaces CSV with --out."""
     from sds_model.rig import load_rig
-    from sds_workflows.calibration_plan import Accuracy, plan_protocol, plan_text, write_protocol
+    from sds_workflows.calibration_plan import (
+        Accuracy,
+        plan_protocol,
+        plan_text,
+        what_if_text,
+        what_would_meet_the_goals,
+        write_protocol,
+    )
 
     if args.out is not None:
         refuse_existing(args.out, args.overwrite)
     for name in ("table_sigma_deg", "level_sigma_deg", "fill_sigma_mm"):
         if not getattr(args, name) > 0:
             raise CommandError(f"--{name.replace('_', '-')} must be positive")
-    steps = plan_protocol(load_rig(args.rig), Accuracy(args.table_sigma_deg,
-                                                       args.level_sigma_deg,
-                                                       args.fill_sigma_mm), args.candidates)
+    rig = load_rig(args.rig)
+    accuracy = Accuracy(args.table_sigma_deg, args.level_sigma_deg, args.fill_sigma_mm)
+    steps = plan_protocol(rig, accuracy, args.candidates)
     print(plan_text(steps))
+    if not steps[-1].meets_goals():
+        print(what_if_text(what_would_meet_the_goals(rig, accuracy, steps[-1])))
     if args.out is not None:
         write_protocol(steps[-1], args.out)
         print(f"wrote {args.out} ({len(steps[-1].surfaces)} surfaces)")
