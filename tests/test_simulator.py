@@ -20,6 +20,7 @@ from sds_model.rig import load_rig
 from sds_sim.optics import ray_surface_points
 from sds_sim.render import FrameRenderer
 from sds_sim.scenario import ScenarioError, load_scenario
+from sds_sim.simulate import simulate
 from sds_sim.surface import ModeMotion, Surface
 
 SDS = str(Path(sys.executable).with_name("sds"))
@@ -228,11 +229,24 @@ def test_tilt_table_truth_is_the_tilted_plane(config: Path) -> None:
         assert np.allclose(truth.spot_mm[:, 2], -x * np.tan(np.radians(angle)), atol=1e-9)
 
 
+def test_the_video_is_written_at_the_cameras_bit_rate(config: Path, tmp_path: Path) -> None:
+    """H.264 as the camera records it: the scenario's rate at full resolution, the same bits
+    per pixel at a smaller scale (a rate far below the camera's shrinks sub-pixel motion)."""
+    scale = 0.25
+    for rate_mbit_s in (60.0, 20.0):
+        scenario = load_scenario(config / "scenarios" / "ground_kick.yaml", {
+            "duration_s": 1.0, "scale": scale, "sensor": {"bitrate_mbit_s": rate_mbit_s}})
+        video = simulate(scenario, tmp_path / f"{rate_mbit_s:g}", progress=False).video
+        written_mbit_s = video.stat().st_size * 8 / scenario.duration_s / 1e6
+        assert written_mbit_s == pytest.approx(rate_mbit_s * scale**2, rel=0.3)
+
+
 @pytest.mark.parametrize("change, message", [
     ({"modes": [{"order": 1, "index": 1, "amplitude": 2}]}, "unknown keys"),
     ({"optics": {"spot_size": 2}}, "optics: unknown keys"),
     ({"scale": 2.0}, "scale in"),
     ({"tilt_series_axis": "z"}, "tilt_series_axis"),
+    ({"sensor": {"bitrate_mbit_s": 0}}, "sensor: bitrate_mbit_s 0 must be > 0"),
 ])
 def test_bad_scenarios_are_refused_with_the_field(config: Path, change: dict, message: str) -> None:
     with pytest.raises(ScenarioError, match=message):

@@ -10,8 +10,9 @@ from types import TracebackType
 import imageio_ffmpeg
 import numpy as np
 
-# Codec settings: "h264" as a camera records (lossy, yuv420p), "lossless" keeps every pixel
-# (libx264rgb at qp 0 for BGR, libx264 qp 0 for mono).
+# Codec settings: "h264" as a camera records (lossy, yuv420p: at a constant quality, or at a
+# camera's bit rate), "lossless" keeps every pixel (libx264rgb at qp 0 for BGR, libx264 qp 0
+# for mono).
 CODECS = ("h264", "lossless")
 
 
@@ -27,7 +28,10 @@ class VideoWriter:
         codec: str = "h264",
         mono: bool = False,
         crf: int = 18,
+        bitrate_bit_s: float | None = None,
     ) -> None:
+        """`bitrate_bit_s` (h264 only): encode at this rate, as a camera does, instead of at
+        the constant quality `crf`."""
         if codec not in CODECS:
             raise ValueError(f"codec {codec!r} is not one of {CODECS}")
         rate = Fraction(fps).limit_denominator(100000)
@@ -37,6 +41,11 @@ class VideoWriter:
         if codec == "lossless":
             out = ["-c:v", "libx264", "-qp", "0", "-pix_fmt", "gray"] if mono else [
                 "-c:v", "libx264rgb", "-qp", "0"]
+        elif bitrate_bit_s is not None:
+            # A camera's encoder holds its rate within about a second's buffer.
+            rate_bit_s = str(int(bitrate_bit_s))
+            out = ["-c:v", "libx264", "-b:v", rate_bit_s, "-maxrate", rate_bit_s,
+                   "-bufsize", rate_bit_s, "-pix_fmt", "yuv420p"]
         else:
             out = ["-c:v", "libx264", "-crf", str(crf), "-pix_fmt", "yuv420p"]
         command = [

@@ -50,15 +50,16 @@ class Optics:
 
 @dataclass(frozen=True)
 class Sensor:
-    """Camera sensor effects: read noise (grey levels), shot noise, background level, and the
+    """Camera sensor effects: read noise (grey levels), shot noise, background level, the
     true camera's rolling shutter (`sds_model.camera.rolling_shutter`: each row exposed at its
-    own time)."""
+    own time), and the bit rate its H.264 recording is written at."""
 
     read_noise: float = 2.0
     shot_noise: bool = True
     background: float = 18.0
     readout_s: float = 0.0            # rolling shutter: rows read over this time (0: global)
     readout_direction: str = "top_to_bottom"
+    bitrate_mbit_s: float = 60.0      # H.264 at full resolution (a GoPro HERO5 at 4K, as stated)
 
 
 @dataclass(frozen=True)
@@ -271,6 +272,9 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
         raise ScenarioError(f"{path}: duration_s and fps must be > 0 and scale in (0, 1]")
     if scenario.tilt_series_axis not in ("x", "y"):
         raise ScenarioError(f"{path}: tilt_series_axis must be x or y")
+    if not scenario.sensor.bitrate_mbit_s > 0:
+        raise ScenarioError(f"{path}: sensor: bitrate_mbit_s {scenario.sensor.bitrate_mbit_s:g} "
+                            "must be > 0 (the camera's H.264 rate, e.g. 60)")
     try:
         rolling_shutter({"readout_s": scenario.sensor.readout_s,
                          "readout_direction": scenario.sensor.readout_direction})

@@ -67,7 +67,8 @@ class SimulationOutput:
 class _FrameSink:
     """Video file or PNG sequence."""
 
-    def __init__(self, directory: Path, codec: str, width: int, height: int, fps: float) -> None:
+    def __init__(self, directory: Path, codec: str, width: int, height: int, fps: float,
+                 bitrate_bit_s: float | None = None) -> None:
         self.codec = codec
         if codec == "png":
             self.path = directory / "frames"
@@ -75,7 +76,8 @@ class _FrameSink:
             self._writer = None
         else:
             self.path = directory / "video.mp4"
-            self._writer = VideoWriter(self.path, width, height, fps, codec=codec)
+            self._writer = VideoWriter(self.path, width, height, fps, codec=codec,
+                                       bitrate_bit_s=bitrate_bit_s)
         self._count = 0
 
     def write(self, frame: np.ndarray) -> None:
@@ -114,7 +116,12 @@ def simulate(scenario: Scenario, directory: Path, codec: str = "h264",
     (directory / "truth").mkdir(parents=True, exist_ok=True)
     (directory / "arduino").mkdir(parents=True, exist_ok=True)
     renderer = FrameRenderer(scenario)
-    sink = _FrameSink(directory, codec, renderer.width, renderer.height, scenario.fps)
+    # The camera's rate at full resolution, the same bits per pixel at a smaller scale: a rate
+    # far below the camera's (crf 18 gave 4 Mbit/s at 4K) shrinks sub-pixel spot motion and
+    # biased the damping ratios high (bench/README.md, "Damping ratios and the video's rate").
+    bitrate_bit_s = scenario.sensor.bitrate_mbit_s * 1e6 * scenario.scale**2
+    sink = _FrameSink(directory, codec, renderer.width, renderer.height, scenario.fps,
+                      bitrate_bit_s)
     truths: list[FrameTruth] = _render_into(sink, renderer.render, scenario.frame_count,
                                             "rendering", progress)
     arduino, truth = directory / "arduino", directory / "truth"
