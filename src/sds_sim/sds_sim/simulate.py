@@ -116,9 +116,10 @@ def simulate(scenario: Scenario, directory: Path, codec: str = "h264",
     (directory / "truth").mkdir(parents=True, exist_ok=True)
     (directory / "arduino").mkdir(parents=True, exist_ok=True)
     renderer = FrameRenderer(scenario)
-    # The camera's rate at full resolution, the same bits per pixel at a smaller scale: a rate
-    # far below the camera's (crf 18 gave 4 Mbit/s at 4K) shrinks sub-pixel spot motion and
-    # biased the damping ratios high (bench/README.md, "Damping ratios and the video's rate").
+    # The camera's rate at full resolution, the same bits per pixel at a smaller scale. A
+    # constant quality wrote these dark frames far below a camera's rate, which shrinks
+    # sub-pixel spot motion and biased the damping ratios high (bench/README.md, "Damping
+    # ratios and the video's rate").
     bitrate_bit_s = scenario.sensor.bitrate_mbit_s * 1e6 * scenario.scale**2
     sink = _FrameSink(directory, codec, renderer.width, renderer.height, scenario.fps,
                       bitrate_bit_s)
