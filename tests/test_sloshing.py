@@ -255,12 +255,16 @@ def test_modal_separation_finds_the_sloshing_azimuth(repo: Path) -> None:
     scenario = load_scenario(repo / "config" / "scenarios" / "ground_kick.yaml",
                              {"modes": [{"order": 1, "index": 1, "amplitude_mm": 3.0,
                                          "damping_ratio": 0.01, "azimuth_deg": 30.0}]})
-    analysis = analyze(observe(scenario), scenario.rig)
+    analysis = analyze(observe(scenario), scenario.rig,
+                       AnalysisOptions(damping_caveat="the source's caveat"))
     lateral = next(m for m in analysis.modes if m.name == "lateral_1")
     assert lateral.azimuth_deg % 180 == pytest.approx(30.0, abs=1.0)
     assert lateral.estimates[0].frequency_hz == pytest.approx(
         scenario.mode_motions()[0].frequency_hz, rel=1e-3)
     assert next(m for m in analysis.modes if m.name == "lateral_2").estimates == ()
+    # The source's caveat is on the modes whose damping ratio was estimated, and only there.
+    assert {m.name for m in analysis.modes if "the source's caveat" in m.notes} == \
+        {m.name for m in analysis.modes if m.estimates} == {"lateral_1"}
 
 
 def test_tilt_series_gives_the_table_3_rows(repo: Path) -> None:

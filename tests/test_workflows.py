@@ -12,7 +12,7 @@ import pytest
 from sds_model.rig import load_rig
 from sds_sim.scenario import load_scenario
 from sds_sim.simulate import SimulationOutput, simulate
-from sds_workflows.pipeline import PipelineStep
+from sds_workflows.pipeline import PipelineStep, damping_caveat
 
 from sds_workflows import FramePipeline, process_video, video_frames
 
@@ -40,6 +40,14 @@ def test_process_video_writes_what_sds_process_writes(repo: Path, kick: Simulati
     match, mismatch, errors = filecmp.cmpfiles(tmp_path / "api", tmp_path / "cli",
                                                RESULT_FILES, shallow=False)
     assert sorted(match) == sorted(RESULT_FILES), (mismatch, errors)
+
+
+def test_a_compressed_video_puts_its_caveat_on_the_damping_ratios(kick: SimulationOutput,
+                                                                   tmp_path: Path) -> None:
+    """H.264 shrinks sub-pixel motion (bench/README.md): a video's analysis says so; images
+    do not."""
+    assert damping_caveat(kick.video).startswith("h264 video: compression shrinks sub-pixel")
+    assert damping_caveat(tmp_path) == ""
 
 
 def test_the_pipeline_gives_every_frame_once_in_order(repo: Path, kick: SimulationOutput

@@ -128,6 +128,7 @@ class VideoFileSource:
         self._stream.thread_type = "AUTO"     # frame and slice threads, as many as cores
         self.width = self._stream.codec_context.width
         self.height = self._stream.codec_context.height
+        self.codec: str = self._stream.codec_context.name   # FFmpeg's name: "h264", "hevc", …
         rate = self._stream.average_rate or self._stream.guessed_rate
         self.nominal_fps = float(rate) if rate else 0.0
         self.announced_frames = self._stream.frames or self._frames_from_duration()

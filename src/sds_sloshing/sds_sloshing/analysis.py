@@ -49,6 +49,8 @@ class AnalysisOptions:
     motion of known duration, e.g. a robot's); else at the largest swing (an impulsive kick).
     `gravity_m_s2` overrides the rig's for the theory; `expected_hz` (mode name → Hz) supplies
     frequencies where the theory does not hold (microgravity, a magnetised ferrofluid).
+    `damping_caveat` is noted on every mode of the surface whose damping ratio is estimated:
+    what the source does to it that its σ does not include (a compressed video's).
     """
 
     start_s: float | None = None
@@ -58,6 +60,7 @@ class AnalysisOptions:
     expected_hz: dict[str, float] = field(default_factory=dict)
     max_components: int = 4
     min_snr: float = 8.0
+    damping_caveat: str = ""
 
 
 def with_gravity_regime(options: AnalysisOptions,
@@ -324,8 +327,10 @@ def analyze(recording: SurfaceSeries, rig: Rig, options: AnalysisOptions | None 
     for coordinate in coordinates:
         result = analyze_series(coordinate.name, coordinate.time_s, coordinate.values_mm, "mm",
                                 start, options.end_s, options, expected.get(coordinate.name))
-        modes.append(ModeResult(**{**vars(result),
-                                   "azimuth_deg": float(np.degrees(coordinate.azimuth_rad))}))
+        caveat = (options.damping_caveat,) if options.damping_caveat and result.component \
+            else ()
+        modes.append(replace(result, azimuth_deg=float(np.degrees(coordinate.azimuth_rad)),
+                             notes=result.notes + caveat))
     tof: tuple[ModeResult, ...] = ()
     if len(recording.tof_time_s) >= 16:
         tof = (tof_quick_estimate(recording.tof_time_s, recording.tof_range_mm, options,

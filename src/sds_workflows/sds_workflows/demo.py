@@ -36,6 +36,7 @@ from sds_workflows.lateral import (
     place_lateral,
     process_lateral,
 )
+from sds_workflows.pipeline import damping_caveat
 from sds_workflows.run_tables import RunTables, finish_analysis
 
 DEMO_SCENARIO = CONFIG / "scenarios" / "drop_4p7s.yaml"
@@ -143,8 +144,9 @@ def run_demo(out: Path, seconds: float | None, run_chain: ChainRunner) -> int:
         print(f"demo failed: {outputs.failure or 'no recording'} (see {outputs.log})",
               file=sys.stderr)
         return outputs.exit_code or 1
-    result = analyse_run(outputs.recording, rig, out,
-                         AnalysisOptions(gravity_m_s2=scenario.gravity), simulation.run)
+    result = analyse_run(outputs.recording, rig, out, AnalysisOptions(
+        gravity_m_s2=scenario.gravity, damping_caveat=damping_caveat(simulation.video)),
+        simulation.run)
     return print_summary(out, scenario, simulation, outputs, result)
 
 
@@ -233,7 +235,8 @@ def run_live(source: str, rig_file: Path, out: Path, port: str | None,
         print(f"sds run: {outputs.failure or 'no recording'} (see {outputs.log})",
               file=sys.stderr)
         return outputs.exit_code or 1
-    result = analyse_run(outputs.recording, rig, out, AnalysisOptions(gravity_m_s2=gravity))
+    result = analyse_run(outputs.recording, rig, out, AnalysisOptions(
+        gravity_m_s2=gravity, damping_caveat=damping_caveat(Path(source)) if is_file else ""))
     print(f"\nSDS run: {source}\n  recording {outputs.recording}\n  Rerun {outputs.rerun}\n"
           f"  report {out / 'analysis' / 'report.html'}\n  results {out / 'results'}/")
     for line in summary_lines(result):

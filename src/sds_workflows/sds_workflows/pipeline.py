@@ -20,6 +20,7 @@ from sds_camera.frame_source import (
     FrameSource,
     FrameSourceError,
     Region,
+    VideoFileSource,
     open_source,
     read_ahead,
 )
@@ -57,6 +58,25 @@ class RedFrame:
     time_s: float
     red: np.ndarray
     offset: tuple[int, int]
+
+
+LOSSLESS_CODECS = ("rawvideo", "png", "ffv1")
+"""Video codecs that keep every pixel (H.264 may too, at qp 0, but its stream does not say)."""
+
+
+def damping_caveat(video: Path) -> str:
+    """What a compressed video does to the damping ratios, for the analysis's notes (nothing
+    for an image folder or a lossless codec): bench/README.md, "Damping ratios and the
+    video's rate"."""
+    if video.is_dir():
+        return ""
+    source = VideoFileSource(video)
+    codec = source.codec
+    source.close()
+    if codec in LOSSLESS_CODECS:
+        return ""
+    return (f"{codec} video: compression shrinks sub-pixel spot motion, so the damping ratio "
+            "may read a few % high, beyond its σ (record at the camera's highest bit rate)")
 
 
 def video_frames(path: Path, rig: Rig, fps: float = 0.0) -> Iterator[RedFrame]:

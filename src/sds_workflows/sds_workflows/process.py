@@ -34,7 +34,13 @@ from sds_workflows.lateral import (
     place_lateral,
     process_lateral,
 )
-from sds_workflows.pipeline import FramePipeline, RedFrame, mcap_frames, video_frames
+from sds_workflows.pipeline import (
+    FramePipeline,
+    RedFrame,
+    damping_caveat,
+    mcap_frames,
+    video_frames,
+)
 from sds_workflows.rig_calibration import calibrate_rig
 from sds_workflows.run_tables import RunAnalysis, RunTables, finish_analysis
 
@@ -138,7 +144,8 @@ def process_video(video: Path, rig: Rig, out: Path, fps: float = 0.0,
         if imu is not None:
             tables.add_camera_imu(imu)
         analysis = finish_analysis(tables, _source_name(video, ending), staging,
-                                   AnalysisOptions(gravity_m_s2=gravity_m_s2))
+                                   AnalysisOptions(gravity_m_s2=gravity_m_s2,
+                                                   damping_caveat=damping_caveat(video)))
         side, side_failure = None, ""
         if side_setup is not None:
             try:   # a side camera that fails costs the top camera's results nothing
