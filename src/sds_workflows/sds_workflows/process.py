@@ -136,6 +136,7 @@ def process_video(video: Path, rig: Rig, out: Path, fps: float = 0.0,
         if not lateral.video.is_file():
             raise ValueError(f"{lateral.video}: no such video (the side camera's, --lateral)")
         side_setup = place_lateral(lateral, rig)
+    caveat = damping_caveat(video)
     with staged_folder(out, RUN_FILES) as staging:
         tables = RunTables(ResultsWriter(staging), rig)
         count, ending = process_frames(video_frames(video, rig, fps), rig, tables, progress,
@@ -145,7 +146,7 @@ def process_video(video: Path, rig: Rig, out: Path, fps: float = 0.0,
             tables.add_camera_imu(imu)
         analysis = finish_analysis(tables, _source_name(video, ending), staging,
                                    AnalysisOptions(gravity_m_s2=gravity_m_s2,
-                                                   damping_caveat=damping_caveat(video)))
+                                                   damping_caveat=caveat))
         side, side_failure = None, ""
         if side_setup is not None:
             try:   # a side camera that fails costs the top camera's results nothing
