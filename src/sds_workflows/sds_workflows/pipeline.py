@@ -65,10 +65,10 @@ LOSSLESS_CODECS = ("rawvideo", "png", "ffv1")
 
 
 def damping_caveat(video: Path) -> str:
-    """What a compressed video does to the damping ratios, for the analysis's notes (nothing
-    for an image folder or a lossless codec): bench/README.md, "Damping ratios and the
-    video's rate"."""
-    if video.is_dir():
+    """What a compressed video file does to the damping ratios, for the analysis's notes
+    (nothing for an image folder, a camera or a lossless codec): bench/README.md, "Damping
+    ratios and the video's rate"."""
+    if not video.is_file():
         return ""
     source = VideoFileSource(video)
     codec = source.codec
