@@ -96,10 +96,15 @@ def what_if_text(whatif: list[tuple[str, Prediction]]) -> str:
     lines = ["the planned protocol with better knowledge (one change at a time):"]
     for what, prediction in whatif:
         met = "  goals met" if prediction.meets_goals() else ""
-        lines.append(f"{what:<58} {prediction.worst_tilt_deg:>9.3f} "
-                     f"{prediction.worst_height_mm:>10.3f} "
-                     f"{prediction.sigmas[prediction.names.index('camera Z')]:>12.3f}{met}")
+        lines.append(_row(what, prediction) + met)
     return "\n".join(lines)
+
+
+def _row(what: str, prediction: Prediction) -> str:
+    """One line of the planner's tables: what was planned, and its predicted tilt σ [deg],
+    height σ [mm] and camera height σ [mm]."""
+    return (f"{what:<58} {prediction.worst_tilt_deg:>9.3f} {prediction.worst_height_mm:>10.3f} "
+            f"{prediction.sigmas[prediction.names.index('camera Z')]:>12.3f}")
 
 
 def _describe(surface: KnownSurface) -> str:
@@ -117,8 +122,7 @@ def plan_text(steps: list[Prediction]) -> str:
     for index, step in enumerate(steps):
         what = f"the base series ({base} tilts about X)" if index == 0 else \
             "+ " + _describe(step.surfaces[-1])
-        lines.append(f"{what:<58} {step.worst_tilt_deg:>9.3f} {step.worst_height_mm:>10.3f} "
-                     f"{step.sigmas[step.names.index('camera Z')]:>12.3f}")
+        lines.append(_row(what, step))
     last = steps[-1]
     lines.append("goals met" if last.meets_goals() else
                  "goals (0.033 deg, 0.033 mm) not met: no candidate gains 10 % more; the "
