@@ -30,7 +30,7 @@ from sds_model.rig import load_rig
 from sds_sim.scenario import load_scenario
 from sds_sim.simulate import simulate
 from sds_sloshing.report import truth_from_run
-from sds_tracker.tracker import FrameTracker, tracker_config
+from sds_workflows.pipeline import FramePipeline, video_frames
 
 REPO = Path(__file__).resolve().parents[1]
 EARLY_S = 1.5
@@ -57,16 +57,12 @@ def spot_gains(video: Path, scenario_rig: Path, truth_spots: Path, kick_s: float
                ) -> list[tuple[int, float, float, float]]:
     """Per spot: RMS true motion [px] late, and the gain of its raw motion on the true one,
     early and late."""
-    tracker = FrameTracker(load_rig(scenario_rig), tracker_config({}))
-    source = VideoFileSource(video)
+    rig = load_rig(scenario_rig)
     tracked: dict[tuple[int, int], tuple[float, float]] = {}
-    for frame in source.frames(channel="red"):
-        ready, _ = tracker.process(frame.index, frame.image, (0, 0))
-        for index, spots in ready:
-            tracked.update({(index, s.laser_id): (s.x_raw_px, s.y_raw_px) for s in spots})
-    for index, spots in tracker.flush():
-        tracked.update({(index, s.laser_id): (s.x_raw_px, s.y_raw_px) for s in spots})
-    source.close()
+    for step in FramePipeline(rig).run(video_frames(video, rig)):
+        for frame in step.spot_frames:
+            tracked.update({(frame.index, s.laser_id): (s.x_raw_px, s.y_raw_px)
+                            for s in frame.spots})
     rows: dict[int, list[tuple[float, float, float, float, float]]] = {}
     with truth_spots.open() as file:
         for row in csv.DictReader(file):
