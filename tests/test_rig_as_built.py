@@ -8,6 +8,7 @@ and, for the rendered rig, a camera file off by one Table 2 σ."""
 
 from __future__ import annotations
 
+import itertools
 import subprocess
 import sys
 from dataclasses import replace
@@ -20,13 +21,18 @@ from sds_model.rig import RigError, Tolerances, load_rig, save_rig
 from sds_recon.calibration.laser_files import read_surfaces
 from sds_recon.calibration.lasers import KnownSurface
 from sds_recon.calibration.model_check import check_model
-from sds_recon.calibration.plan import plan
+from sds_recon.calibration.plan import HEIGHT_GOAL_MM, plan
 from sds_recon.calibration.rig_calibration import calibrate_rig
 from sds_recon.calibration.rig_model import RigModel
 from sds_recon.calibration.self_calibration import SelfCalibration, self_calibrate
 from sds_sim.tilt_series import declared, true_surfaces
 from sds_sim.true_rig import RigErrors, random_layout, true_rig
-from sds_workflows.calibration_plan import Accuracy, default_surfaces, what_would_meet_the_goals
+from sds_workflows.calibration_plan import (
+    Accuracy,
+    default_surfaces,
+    plan_protocol,
+    what_would_meet_the_goals,
+)
 from sds_workflows.calibration_trial import SEED_READINGS, as_built_trial, protocol_readings
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -157,7 +163,7 @@ def test_the_planner_predicts_the_fits_sigma_and_asks_first_for_a_second_fill_le
     and `sds calibrate plan` writes the plan as a surfaces CSV."""
     rng = np.random.default_rng(31)
     rig = replace(random_layout(load_rig(STELIUM), rng), tolerances=Tolerances(emitter_mm=0.3))
-    base, candidates = default_surfaces(Accuracy())
+    base, candidates = default_surfaces(rig, Accuracy())
     steps = plan(rig, base, candidates)
     assert steps[1].surfaces[-1].offset_mm != 0.0
     assert steps[-1].worst_tilt_deg < 0.5 * steps[0].worst_tilt_deg
@@ -187,6 +193,29 @@ def test_the_planner_predicts_the_fits_sigma_and_asks_first_for_a_second_fill_le
     assert len(written) == len(planned.surfaces)
     assert [s.offset_mm for _, s in sorted(written.items())] == \
         [s.offset_mm for s in planned.surfaces]
+
+
+def test_the_readmes_protocol_is_the_plan_for_the_stelium_rig_and_meets_the_height_goal(
+        ) -> None:
+    """For the StELIUM rig with its emitters to 0.3 mm the planner chooses the README's
+    protocol (but for the two tilts about Y that hold the line laser's plane, which it does not
+    model): fill levels over the heights a tilted surface reaches, until heights meet their
+    goal even where the tilts' goal is out of reach (the table's readings set their floor)."""
+    rig = replace(load_rig(STELIUM), tolerances=Tolerances(emitter_mm=0.3))
+    steps = plan_protocol(rig, Accuracy())
+    planned = steps[-1]
+
+    def described(surfaces: list[KnownSurface]) -> set[tuple[float, float, float]]:
+        return {(round(float(np.degrees(s.tilt_x_rad)), 3),
+                 round(float(np.degrees(s.tilt_y_rad)), 3), s.offset_mm) for s in surfaces}
+
+    line_plane_only = {(0.0, 12.5, 0.0), (0.0, 22.5, 0.0)}
+    assert described(planned.surfaces) == described(protocol_readings()) - line_plane_only
+    assert planned.worst_height_mm <= HEIGHT_GOAL_MM < steps[0].worst_height_mm
+    # a step taken for the heights alone: the tilt σ moved by less than the least gain
+    assert any(after.worst_tilt_deg > 0.9 * before.worst_tilt_deg
+               and after.worst_height_mm <= 0.9 * before.worst_height_mm
+               for before, after in itertools.pairwise(steps))
 
 
 def test_a_wrong_model_keeps_every_diode_and_is_flagged_not_emptied() -> None:

@@ -1,7 +1,8 @@
 """`sds calibrate plan`: which known surfaces to record, planned from the joint fit's model.
 
 The base is the seed's tilt table series (0–35° about X in 5° steps); the candidates are
-tilts about Y and level surfaces at other fill levels (or a CSV of the user's own). Each
+tilts about Y and level surfaces at other fill levels, every 10 mm over the heights the
+steepest unseen surface reaches inside the container (or a CSV of the user's own). Each
 surface is declared with the accuracy the user can read it to: the table's angle, a spirit
 level's on level frames, the fill level's. `sds_recon.calibration.plan` adds the candidates
 that pay, and the planned protocol is written as the surfaces CSV `sds calibrate rig` reads.
@@ -17,14 +18,22 @@ import numpy as np
 from sds_model.rig import Rig
 from sds_recon.calibration.laser_files import read_surfaces
 from sds_recon.calibration.lasers import KnownSurface
-from sds_recon.calibration.plan import Prediction, plan, predict, unseen_sensitivity
+from sds_recon.calibration.plan import (
+    Prediction,
+    plan,
+    predict,
+    unseen_reach_mm,
+    unseen_sensitivity,
+)
 
 BASE_TILTS_DEG = (0.0, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0, 35.0)
 """The seed's tilt table series about X (Table 3)."""
 CANDIDATE_TILTS_DEG = (12.5, 22.5, 32.5)
 """Tilts about Y offered to the planner."""
-CANDIDATE_LEVELS_MM = (-5.0, -10.0, -20.0, 10.0)
-"""Other fill levels offered to the planner (level surfaces)."""
+LEVEL_STEP_MM = 10.0
+"""Spacing of the other fill levels offered to the planner (level surfaces)."""
+LEAST_DEPTH_MM = 10.0
+"""Liquid left in the container at the lowest level offered (the spots must fall on liquid)."""
 INCLINOMETER_DEG = (0.1, 0.05)
 """Tilted frames read to these σ (a digital inclinometer on the table) in the what-if lines."""
 MEASURED_EMITTER_MM = 0.1
@@ -48,11 +57,25 @@ class Accuracy:
             offset_sigma_mm=self.fill_mm if surface.offset_mm != 0.0 else 0.0)
 
 
-def default_surfaces(accuracy: Accuracy) -> tuple[list[KnownSurface], list[KnownSurface]]:
-    """The base series and the candidates, declared with `accuracy`."""
+def candidate_levels_mm(rig: Rig) -> list[float]:
+    """Fill levels [mm from the first] to offer: every LEVEL_STEP_MM up to the height the
+    steepest unseen surface reaches at the wall (rounded up to a step), either way, leaving
+    LEAST_DEPTH_MM of liquid and not above the container's rim. Beams calibrated over the
+    heights they will measure need no extrapolation."""
+    container = rig.container
+    steps = int(np.ceil(unseen_reach_mm(rig) / LEVEL_STEP_MM))
+    levels = [k * LEVEL_STEP_MM for k in range(-steps, steps + 1) if k != 0]
+    return [level for level in levels
+            if container.fill_height_mm + level >= LEAST_DEPTH_MM
+            and container.fill_height_mm + level <= container.height_mm]
+
+
+def default_surfaces(rig: Rig, accuracy: Accuracy
+                     ) -> tuple[list[KnownSurface], list[KnownSurface]]:
+    """The base series and the candidates for `rig`, declared with `accuracy`."""
     base = [KnownSurface(0.0, float(np.radians(a)), 0.0) for a in BASE_TILTS_DEG]
     candidates = ([KnownSurface(0.0, 0.0, float(np.radians(a))) for a in CANDIDATE_TILTS_DEG]
-                  + [KnownSurface(level, 0.0, 0.0) for level in CANDIDATE_LEVELS_MM])
+                  + [KnownSurface(level, 0.0, 0.0) for level in candidate_levels_mm(rig)])
     return [accuracy.declare(s) for s in base], [accuracy.declare(s) for s in candidates]
 
 
@@ -61,7 +84,7 @@ def plan_protocol(rig: Rig, accuracy: Accuracy, candidates_csv: Path | None = No
     """The planner's steps for `rig` (its tolerances as priors): the base series, then each
     surface added; the last step is the plan. `candidates_csv` (a surfaces CSV; σ columns
     absent: `accuracy`'s) replaces the default candidates."""
-    base, candidates = default_surfaces(accuracy)
+    base, candidates = default_surfaces(rig, accuracy)
     if candidates_csv is not None:
         candidates = [s if s.tilt_sigma_rad or s.offset_sigma_mm else accuracy.declare(s)
                       for _, s in sorted(read_surfaces(candidates_csv).items())]

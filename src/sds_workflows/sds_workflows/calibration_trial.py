@@ -252,10 +252,11 @@ SEED_READINGS = ReadingErrors(about_axis_deg=0.5, across_deg=0.15, level_deg=0.0
                               offset_mm=0.05)
 """The seed's tilt table ("0.5 deg accuracy" about its axis, the other "kept close to 0"), a
 spirit level on the level frames and a fill level changed by a measured volume."""
-FILL_LEVELS_MM = (-20.0,)
+FILL_LEVELS_MM = (-40.0, -30.0, 40.0)
 """The protocol's other fill levels: level surfaces this far from the first (a measured volume
-taken out; `sds calibrate plan` chooses it first for a rig with uncertain emitters: a level
-5 mm lower leaves the camera's height at σ 0.7 mm, 20 mm lower at 0.25 mm)."""
+taken out or poured in), what `sds calibrate plan` chooses for the StELIUM rig with its
+emitters to 0.3 mm: the camera's height and the beams over the heights that tilted surfaces
+reach at the wall."""
 
 
 @dataclass(frozen=True)

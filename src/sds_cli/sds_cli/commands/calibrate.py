@@ -84,12 +84,13 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
         description="From the rig file (its tolerances as priors) and how well each surface "
                     "is read, predict every parameter's σ and the tilt and height σ of unseen "
                     "surfaces for the seed's tilt series, then add the candidate surfaces "
-                    "(tilts about Y, other fill levels) that lower them most.")
+                    "(tilts about Y, other fill levels) that bring an unmet goal closest.")
     planned.add_argument("--rig", type=Path, required=True,
                          help="the rig file as designed, with its tolerances")
     planned.add_argument("--candidates", type=Path,
                          help="surfaces CSV of candidate surfaces (default: tilts about Y of "
-                              "12.5, 22.5, 32.5 deg and fill levels -5, -10, -20, +10 mm)")
+                              "12.5, 22.5, 32.5 deg and fill levels every 10 mm up to where "
+                              "a 35 deg tilt reaches the wall, inside the container)")
     planned.add_argument("--table-sigma-deg", type=float, default=0.5 / 3**0.5,
                          help="σ of a tilt table reading [deg] (default: ±0.5 deg, uniform)")
     planned.add_argument("--level-sigma-deg", type=float, default=0.05,

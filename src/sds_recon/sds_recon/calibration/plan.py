@@ -7,7 +7,8 @@ same parameter table, priors and residuals) and takes the posterior covariance. 
 that to the reconstruction of unseen surfaces (a tilt series about the diagonal, an axis no
 protocol uses): how far each tilt and height moves when the calibrated rig is off by one
 posterior σ in any direction. Starting from a base protocol it adds, one at a time, the
-candidate surface that lowers the worst predicted tilt σ most, until the goals are met.
+candidate surface that brings an unmet goal (tilt or height) closest to it, until the goals are
+met or no candidate pays.
 """
 
 from __future__ import annotations
@@ -32,9 +33,9 @@ HEIGHT_GOAL_MM = 0.033
 UNSEEN_TILTS_DEG = (10.0, 20.0, 35.0)
 """Tilts about the diagonal X = Y of the unseen surfaces the prediction is made for."""
 LEAST_GAIN = 0.1
-"""A surface is added only if it lowers the worst predicted tilt σ by this share or more:
-past that, more images cost the user time and buy nothing (the emitters' and the readings'
-tolerances set the floor)."""
+"""A surface is added only if it lowers the predicted σ of an unmet goal (tilt or height) by
+this share or more: past that, more images cost the user time and buy nothing (the emitters'
+and the readings' tolerances set the floor)."""
 
 
 @dataclass(frozen=True)
@@ -61,6 +62,22 @@ class Prediction:
     def meets_goals(self) -> bool:
         """Whether tilts and heights of unseen surfaces are predicted within their goals."""
         return self.worst_tilt_deg <= TILT_GOAL_DEG and self.worst_height_mm <= HEIGHT_GOAL_MM
+
+    def gain_over(self, before: Prediction) -> float:
+        """The largest share by which this prediction lowers the σ of a goal that `before`
+        does not meet (tilt or height; 0 if it lowers none)."""
+        gains = [0.0]
+        if before.worst_tilt_deg > TILT_GOAL_DEG:
+            gains.append(1.0 - self.worst_tilt_deg / before.worst_tilt_deg)
+        if before.worst_height_mm > HEIGHT_GOAL_MM:
+            gains.append(1.0 - self.worst_height_mm / before.worst_height_mm)
+        return max(gains)
+
+
+def unseen_reach_mm(rig: Rig) -> float:
+    """How far above and below the fill level the steepest unseen surface reaches at the
+    container's wall [mm]: the heights the calibrated rig must measure."""
+    return float(rig.container.radius_mm * np.tan(np.radians(max(UNSEEN_TILTS_DEG))))
 
 
 def diagonal(tilt_deg: float) -> KnownSurface:
@@ -169,17 +186,18 @@ def predict(rig: Rig, surfaces: list[KnownSurface],
 def plan(rig: Rig, base: list[KnownSurface], candidates: list[KnownSurface]
          ) -> list[Prediction]:
     """Greedy plan: the prediction for `base`, then for base plus each next candidate that
-    lowers the worst predicted tilt σ most, until the goals are met, the candidates run out,
-    or the best gains less than LEAST_GAIN. Returns every step's prediction, the last the
-    plan."""
+    lowers the σ of an unmet goal by the largest share (`Prediction.gain_over`), until the
+    goals are met, the candidates run out, or the best gains less than LEAST_GAIN. Returns
+    every step's prediction, the last the plan."""
     chosen = list(base)
     sensitivity = unseen_sensitivity(rig)
     steps = [predict(rig, chosen, sensitivity)]
     left = list(candidates)
     while left and not steps[-1].meets_goals():
         trials = [predict(rig, [*chosen, candidate], sensitivity) for candidate in left]
-        best = int(np.argmin([t.worst_tilt_deg for t in trials]))
-        if trials[best].worst_tilt_deg > (1 - LEAST_GAIN) * steps[-1].worst_tilt_deg:
+        gains = [trial.gain_over(steps[-1]) for trial in trials]
+        best = int(np.argmax(gains))
+        if gains[best] < LEAST_GAIN:
             break
         chosen.append(left.pop(best))
         steps.append(trials[best])
