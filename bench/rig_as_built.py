@@ -7,8 +7,9 @@ Each trial (`sds_workflows.calibration_trial.as_built_trial`): a random diode la
 beams leaning (σ 0.6°, up to 3°), emitters off their drawn places (σ 0.3 mm per axis), the
 camera turned up to ±2° and moved up to ±5 mm in height, the camera file off by one of its σ
 (Table 2's: a0, centre, stretch), wall reflections; the README's protocol rendered in 4K
-(eight tilts about X, three about Y, a level 20 mm lower) with the table read to ±0.5° about
-its axis and σ 0.15° across it, level frames to 0.05°, the lower fill level to 0.05 mm. The rig
+(eight tilts about X, three about Y, levels 40 and 30 mm lower and 40 mm higher) with the
+table read to ±0.5° about its axis and σ 0.15° across it, level frames to 0.05°, the other fill
+levels to 0.05 mm. The rig
 file declares `tolerances: {emitter_mm: 0.3}`, the camera file Table 2's σ, and the surfaces
 CSV the readings' σ. The same images are also calibrated with the table's accuracy declared
 ten times too tight, and with today's model (emitters, table and camera file exact). Each

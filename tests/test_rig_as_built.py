@@ -31,6 +31,7 @@ from sds_workflows.calibration_plan import (
     Accuracy,
     default_surfaces,
     plan_protocol,
+    plan_text,
     what_would_meet_the_goals,
 )
 from sds_workflows.calibration_trial import SEED_READINGS, as_built_trial, protocol_readings
@@ -216,6 +217,7 @@ def test_the_readmes_protocol_is_the_plan_for_the_stelium_rig_and_meets_the_heig
     assert any(after.worst_tilt_deg > 0.9 * before.worst_tilt_deg
                and after.worst_height_mm <= 0.9 * before.worst_height_mm
                for before, after in itertools.pairwise(steps))
+    assert "goal tilt 0.033 deg not met (height 0.033 mm met)" in plan_text(steps)
 
 
 def test_a_wrong_model_keeps_every_diode_and_is_flagged_not_emptied() -> None:

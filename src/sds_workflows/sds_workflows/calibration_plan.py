@@ -19,6 +19,9 @@ from sds_model.rig import Rig
 from sds_recon.calibration.laser_files import read_surfaces
 from sds_recon.calibration.lasers import KnownSurface
 from sds_recon.calibration.plan import (
+    HEIGHT_GOAL_MM,
+    LEAST_GAIN,
+    TILT_GOAL_DEG,
     Prediction,
     plan,
     predict,
@@ -147,10 +150,21 @@ def plan_text(steps: list[Prediction]) -> str:
             "+ " + _describe(step.surfaces[-1])
         lines.append(_row(what, step))
     last = steps[-1]
-    lines.append("goals met" if last.meets_goals() else
-                 "goals (0.033 deg, 0.033 mm) not met: no candidate gains 10 % more; the "
-                 "emitters' and the readings' tolerances set the floor")
+    lines.append(_goals_line(last))
     return "\n".join(lines)
+
+
+def _goals_line(plan: Prediction) -> str:
+    """Which goals the plan meets and, if not all, why the planner stopped."""
+    if plan.meets_goals():
+        return "goals met"
+    goals = [(f"tilt {TILT_GOAL_DEG:g} deg", plan.worst_tilt_deg <= TILT_GOAL_DEG),
+             (f"height {HEIGHT_GOAL_MM:g} mm", plan.worst_height_mm <= HEIGHT_GOAL_MM)]
+    unmet = [goal for goal, met in goals if not met]
+    met = "".join(f" ({goal} met)" for goal, is_met in goals if is_met)
+    noun, pronoun = ("goals", "them") if len(unmet) > 1 else ("goal", "it")
+    return (f"{noun} {' and '.join(unmet)} not met{met}: no candidate lowers {pronoun} by "
+            f"{LEAST_GAIN:.0%} more; the emitters' and the readings' tolerances set the floor")
 
 
 def write_protocol(prediction: Prediction, path: Path) -> None:
