@@ -225,9 +225,12 @@ def run_live(source: str, rig_file: Path, out: Path, port: str | None,
             overrides.append(f"lateral.stamp_offset_s={clock.offset_s}")
     frames = None
     if is_file:
+        from contextlib import closing
+
         from sds_camera.frame_source import VideoFileSource
 
-        frames = VideoFileSource(Path(source)).announced_frames
+        with closing(VideoFileSource(Path(source))) as video:
+            frames = video.announced_frames
     outputs = run_chain(overrides, out, frames, graphs=graphs)
     if outputs.interrupted and is_file:   # a live camera's run ends with Ctrl-C
         return interrupted("sds run", outputs)

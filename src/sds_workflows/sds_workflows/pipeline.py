@@ -11,6 +11,7 @@ folder) or `mcap_frames` (a recording's images).
 from __future__ import annotations
 
 from collections.abc import Iterable, Iterator, Mapping
+from contextlib import closing
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -70,9 +71,8 @@ def damping_caveat(video: Path) -> str:
     ratios and the video's rate"."""
     if not video.is_file():
         return ""
-    source = VideoFileSource(video)
-    codec = source.codec
-    source.close()
+    with closing(VideoFileSource(video)) as source:
+        codec = source.codec
     if codec in LOSSLESS_CODECS:
         return ""
     return (f"{codec} video: compression shrinks sub-pixel spot motion, so the damping ratio "
