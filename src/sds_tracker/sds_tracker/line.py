@@ -14,6 +14,10 @@ INTERPOLATED, SATURATED_LINE, LOW_SIGNAL = 1, 2, 4
 """Flag bits, the same as sds_msgs/LaserLineProfile's."""
 SEED_MEDIAN_ROWS = 31
 """Rows in the running median that turns per-row brightest columns into the search centre."""
+SEEK_MEDIAN_ROWS = 61
+"""Rows in `seek_line`'s running median of per-row brightest columns: its reach holds spots
+beside the line, and a saturated spot is the brightest on about 17 rows of a 4K image (its
+ties with the saturated line fall to the leftmost column); the line outvotes it on 61."""
 
 
 @dataclass(frozen=True)
@@ -96,6 +100,60 @@ def redness(bgr: np.ndarray) -> np.ndarray:
     """
     blue, green, red = cv2.split(bgr.astype(np.float32))
     return np.maximum(red - 0.5 * (green + blue), 0.0)
+
+
+def seek_line(image: np.ndarray, offset: tuple[int, int], rows: np.ndarray,
+              low_x: np.ndarray, high_x: np.ndarray, settings: LineSettings | None = None,
+              read_noise: float = 2.0) -> LineProfile:
+    """The line anywhere between full-frame columns `low_x` and `high_x` on each of the
+    full-frame `rows`, with no prior inside that reach (a still, or a video's first frame).
+
+    Each row's brightest column in its reach, on the rows whose brightest rises `threshold`
+    above the row's mean, smoothed by a running median over SEEK_MEDIAN_ROWS rows (so that
+    a spot beside the line cannot move the search), is the centre that `track_line` refines.
+    """
+    s = settings or LineSettings()
+    x0, y0 = offset
+    local_rows = np.asarray(rows, dtype=np.int64) - y0
+    keep = (local_rows >= 0) & (local_rows < image.shape[0]) & np.isfinite(low_x) & \
+        np.isfinite(high_x)
+    local_rows = local_rows[keep]
+    low = np.clip(np.floor(np.asarray(low_x)[keep]) - x0, 0, image.shape[1]).astype(np.int64)
+    high = np.clip(np.ceil(np.asarray(high_x)[keep]) - x0 + 1, 0, image.shape[1]
+                   ).astype(np.int64)
+    width = int(np.max(high - low)) if len(local_rows) else 0
+    if width <= 0:
+        empty = np.zeros(0)
+        return LineProfile(empty, empty, empty, empty, np.zeros(0, np.uint8))
+    starts = np.clip(low, 0, image.shape[1] - width)
+    columns = starts[:, None] + np.arange(width)
+    inside = (columns >= low[:, None]) & (columns < high[:, None])
+    reach = np.where(inside, image[local_rows[:, None], columns], 0)
+    brightest = np.argmax(reach, axis=1)
+    # The row's mean stands for its background: the line and a spot or two are a few % of it.
+    background = reach.sum(axis=1, dtype=np.float64) / np.maximum(inside.sum(axis=1), 1)
+    lit = reach[np.arange(len(local_rows)), brightest] - background > s.threshold
+    if lit.sum() < 2:
+        empty = np.zeros(0)
+        return LineProfile(empty, empty, empty, empty, np.zeros(0, np.uint8))
+    index = np.arange(len(local_rows))
+    centre = np.interp(index, index[lit], (starts + brightest)[lit].astype(float))
+    centre = median_filter(centre, size=SEEK_MEDIAN_ROWS, mode="nearest")
+    return _longest_stretch(track_line(image, offset, centre + x0, local_rows + y0, s,
+                                       read_noise), s.band_px)
+
+
+def _longest_stretch(line: LineProfile, jump_px: float) -> LineProfile:
+    """The line's longest stretch of rows without a jump of more than `jump_px` between
+    neighbouring samples: beyond the line's ends the median seeks a spot's rows instead."""
+    if len(line.x_px) < 2:
+        return line
+    breaks = np.flatnonzero(np.abs(np.diff(line.x_px)) > jump_px) + 1
+    bounds = np.concatenate([[0], breaks, [len(line.x_px)]])
+    longest = int(np.argmax(np.diff(bounds)))
+    kept = slice(bounds[longest], bounds[longest + 1])
+    return LineProfile(line.x_px[kept], line.y_px[kept], line.sigma_px[kept],
+                       line.peak[kept], line.flags[kept])
 
 
 def find_line(image: np.ndarray, mask: np.ndarray, settings: LineSettings | None = None

@@ -14,7 +14,7 @@ from sds_recon.triangulation import beam_image_path, line_image_path
 
 from sds_tracker.hampel import BankOutput, HampelBank
 from sds_tracker.kernels import warm_up
-from sds_tracker.line import LineProfile, LineSettings, track_line
+from sds_tracker.line import LineProfile, LineSettings, seek_line, track_line
 from sds_tracker.spots import (
     HAMPEL_REPLACED,
     LOST,
@@ -99,6 +99,24 @@ def flat_line_px(rig: Rig) -> tuple[np.ndarray, np.ndarray]:
     return rows, np.interp(rows, pixels[order, 1], pixels[order, 0])
 
 
+def line_reach_px(rig: Rig, rows: np.ndarray, band_px: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per row of `rows`, the columns between which the line can lie on any surface whose
+    heights stay within the container's radius of the fill level (a surface tilted by up to
+    45°): its image on level surfaces at −R, 0 and +R (each held at its end column beyond its
+    ends), `band_px` wider on either side."""
+    columns = []
+    radius_mm = rig.container.radius_mm
+    for height_mm in (-radius_mm, 0.0, radius_mm):
+        pixels = line_image_path(rig, height_mm)
+        pixels = pixels[np.isfinite(pixels).all(axis=1)]
+        order = np.argsort(pixels[:, 1])
+        columns.append(np.interp(rows, pixels[order, 1], pixels[order, 0]))
+    return np.min(columns, axis=0) - band_px, np.max(columns, axis=0) + band_px
+
+
+SEEK_PERIOD_FRAMES = 30
+"""In a video whose line is lost, frames between searches over the line's whole reach (one
+costs about 6 ms on a 4K image; a still and a video's first frame always get one)."""
 PATH_SIGMAS = 3.0
 """A beam's image path is trusted to this many of its σ beyond `path_tolerance_px`."""
 
@@ -148,6 +166,10 @@ class FrameTracker:
             self.config.hampel_window, self.config.hampel_k, self.config.hampel_floor_px)
         self._pending: dict[int, dict[int, SpotEstimate]] = {}
         self._line_rows, self._line_x = flat_line_px(rig)
+        self._line_reach = line_reach_px(rig, self._line_rows, self.config.line.band_px) \
+            if len(self._line_rows) else (np.zeros(0), np.zeros(0))
+        self._line_followed = False
+        self._frames_since_seek = SEEK_PERIOD_FRAMES
         warm_up()
 
     def process(self, frame: int, red: np.ndarray, offset: tuple[int, int]
@@ -157,11 +179,12 @@ class FrameTracker:
         Returns the spots of every frame whose Hampel window is now complete (frame, spots),
         and this frame's line profile.
         """
-        line = track_line(red, offset, self._line_x, self._line_rows, self.config.line,
-                          self.config.spots.read_noise)
-        if len(line.x_px) > len(self._line_rows) // 4:
+        line = self._find_line(red, offset)
+        self._line_followed = len(line.x_px) > len(self._line_rows) // 4
+        if self._line_followed:
             # Follow the line: next frame looks around where it is now.
             self._line_x = np.interp(self._line_rows, line.y_px, line.x_px)
+        self._line_followed &= self.hampel is not None   # a still's line says nothing of the next
         if self.hampel is None:   # a still: where the spots were says nothing of this image
             self.spots.previous = dict.fromkeys(self.paths)
         # The line's light is kept out of the spots it passes (seen this frame, or expected).
@@ -174,6 +197,22 @@ class FrameTracker:
         out = self.hampel.push(frame, positions, np.array([e.sigma_px for e in estimates]))
         ready = [] if out is None else [(out.frame, self._tracked(out))]
         return ready, line
+
+    def _find_line(self, red: np.ndarray, offset: tuple[int, int]) -> LineProfile:
+        """This frame's line: around the last frame's where it was followed, else (the first
+        frame, a still, a lost line every SEEK_PERIOD_FRAMES) also sought over its whole
+        reach, the one found on more rows kept: on a tilted surface the line moves off the
+        level surface's line with the height, beyond the band searched around it."""
+        settings, noise = self.config.line, self.config.spots.read_noise
+        line = track_line(red, offset, self._line_x, self._line_rows, settings, noise)
+        self._frames_since_seek += 1
+        if self._line_followed or (self.hampel is not None
+                                   and self._frames_since_seek < SEEK_PERIOD_FRAMES):
+            return line
+        self._frames_since_seek = 0
+        low_x, high_x = self._line_reach
+        sought = seek_line(red, offset, self._line_rows, low_x, high_x, settings, noise)
+        return sought if len(sought.x_px) > len(line.x_px) else line
 
     def unfiltered(self, frame: int) -> list[TrackedSpot]:
         """A frame's spots as measured, before its Hampel window closes (for a live view):
