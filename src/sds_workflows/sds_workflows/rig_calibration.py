@@ -28,14 +28,12 @@ from sds_recon.calibration.rig_model import LineObservations
 from sds_recon.calibration.rig_report import calibrated_rig, report_text, rig_report
 from sds_recon.triangulation import beam_image_path
 from sds_tracker.discovery import SpotCandidates, find_spots
-from sds_tracker.line import LineSettings, track_line
+from sds_tracker.line import LineSettings, seek_line
 from sds_tracker.plateaus import changed_pixels, find_plateaus
-from sds_tracker.tracker import flat_line_px
+from sds_tracker.tracker import flat_line_px, line_reach_px
 
 REGION_MARGIN_MM = 8.0
 """The search region reaches this far beyond the rim (a turned camera moves the image)."""
-LINE_BAND_4K_PX = 80
-"""Columns searched on each side of the rig file's line at 3840 px width (scaled with it)."""
 LINE_SAMPLES_PER_FRAME = 60
 """Line rows per image that enter the joint fit (evenly spaced; more add time, not accuracy)."""
 OVERLAY_WIDTH_PX = 1200
@@ -134,16 +132,16 @@ def read_video_plateaus(path: Path, rig: Rig, count: int, min_still_s: float = S
 
 def observe(rig: Rig, images: list[np.ndarray]) -> CalibrationImages:
     """Blobs and line centres in each image (BGR, full frame), inside the container region."""
-    scale_px = rig.camera.width_px / 3840
     margin = int(np.ceil(REGION_MARGIN_MM * rig.surface_px_per_mm()))
     region = Region(*rig.container_region_px(rig.camera, margin))
-    rows, expected = flat_line_px(rig)
-    settings = LineSettings(band_px=max(10, round(LINE_BAND_4K_PX * scale_px)))
+    rows, _ = flat_line_px(rig)
+    settings = LineSettings()
+    low_x, high_x = line_reach_px(rig, rows, settings.band_px) if len(rows) else (rows, rows)
     spots, line_frame, line_pixels, line_sigma = [], [], [], []
     for index, image in enumerate(images):
         region.check_inside(image.shape[1], image.shape[0])
         red = select(image, region, "red")
-        profile = track_line(red, (region.x, region.y), expected, rows, settings) \
+        profile = seek_line(red, (region.x, region.y), rows, low_x, high_x, settings) \
             if len(rows) else None
         line_px = (profile.y_px, profile.x_px) if profile is not None and \
             len(profile.y_px) > len(rows) // 4 else None
