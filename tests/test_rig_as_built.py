@@ -125,6 +125,8 @@ def test_a_rendered_rig_as_built_meets_the_goals_by_the_readmes_protocol() -> No
     assert result["unseen"].heights.rmse_mm <= 0.1
     normalised = result["normalised"]
     assert max(normalised.camera, normalised.beams, normalised.surfaces) <= 1.5, normalised
+    # all the errors together, against the fit's full covariance
+    assert normalised.joint_p > 0.01, normalised
     # today's model on the same data is worse on the unseen series
     assert result["today_unseen"].tilt_error_deg > result["unseen"].tilt_error_deg
 

@@ -14,11 +14,12 @@ from typing import Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation
+from scipy.stats import chi2 as chi2_distribution
 from sds_camera.frame_source import Region, select
 from sds_model.paths import CONFIG
 from sds_model.rig import Rig, Tolerances, load_rig
 from sds_recon.calibration.lasers import KnownSurface, calibrate_beams
-from sds_recon.calibration.parameters import LINE_PLANE
+from sds_recon.calibration.parameters import CAMERA_ROTATION, CAMERA_SHIFT, LINE_PLANE
 from sds_recon.calibration.plan import diagonal
 from sds_recon.calibration.rig_calibration import RigCalibration
 from sds_recon.calibration.rig_model import across_axes
@@ -285,46 +286,62 @@ def diagonal_surfaces() -> list[KnownSurface]:
 @dataclass(frozen=True)
 class NormalisedErrors:
     """RMS of error/σ of a calibration's parameters against the truth (about 1 when the
-    fit's σ are honest), by group."""
+    fit's σ are honest), by group; and all those errors together against the fit's full
+    covariance (χ² with one degree of freedom per parameter when the covariance is honest:
+    parameters that move together, such as the camera's pose and every beam's lean, count
+    once for what they share)."""
 
     camera: float
     beams: float
     surfaces: float
+    joint_chi2: float
+    joint_count: int
+
+    @property
+    def joint_p(self) -> float:
+        """Probability of a χ² this large or larger from an honest covariance."""
+        return float(chi2_distribution.sf(self.joint_chi2, self.joint_count))
 
 
 def _normalised_errors(result: RigCalibration, nominal: Rig, true: Rig,
                        truths: list[KnownSurface]) -> NormalisedErrors:
-    """Each fitted parameter's error against the true rig and surfaces, in its σ."""
+    """Each fitted parameter's error (fitted − true, in the fit's parameter basis) against the
+    true rig and surfaces, in its σ and against the fit's covariance."""
     fit = result.fit
     rig = fit.rig
     turn = Rotation.from_matrix(rig.world_to_camera.rotation.T
                                 @ true.world_to_camera.rotation).as_rotvec()
-    camera = np.concatenate([turn / fit.sigmas[:3],
-                             (rig.camera_position_mm - true.camera_position_mm)
-                             / fit.sigmas[3:6]])
-    beams = []
+    errors = dict(zip([*CAMERA_ROTATION, *CAMERA_SHIFT],
+                      [*turn, *(rig.camera_position_mm - true.camera_position_mm)],
+                      strict=True))
     for laser_id in result.laser_ids:
         u, v = across_axes(nominal.diode(laser_id).direction)
-        error = true.diode(laser_id).direction - rig.diode(laser_id).direction
-        beams += [error @ u / fit.sigma_of(f"beam {laser_id} tilt a"),
-                  error @ v / fit.sigma_of(f"beam {laser_id} tilt b")]
-    surfaces = []
+        error = rig.diode(laser_id).direction - true.diode(laser_id).direction
+        errors[f"beam {laser_id} tilt a"], errors[f"beam {laser_id} tilt b"] = error @ u, \
+            error @ v
     for index, (fitted, truth) in enumerate(zip(fit.surfaces, truths, strict=True)):
-        for axis, error in (("x", fitted.tilt_x_rad - truth.tilt_x_rad),
-                            ("y", fitted.tilt_y_rad - truth.tilt_y_rad)):
-            name = f"surface {index} tilt {axis}"
-            if name in fit.names:
-                surfaces.append(error / fit.sigma_of(name))
-        if f"surface {index} offset" in fit.names:
-            surfaces.append((fitted.offset_mm - truth.offset_mm)
-                            / fit.sigma_of(f"surface {index} offset"))
+        errors[f"surface {index} tilt x"] = fitted.tilt_x_rad - truth.tilt_x_rad
+        errors[f"surface {index} tilt y"] = fitted.tilt_y_rad - truth.tilt_y_rad
+        errors[f"surface {index} offset"] = fitted.offset_mm - truth.offset_mm
+    fitted_names = [name for name in errors
+                    if name in fit.names and np.isfinite(fit.sigma_of(name))]
+    normalised = {name: errors[name] / fit.sigma_of(name) for name in fitted_names}
+    camera = [normalised[name] for name in (*CAMERA_ROTATION, *CAMERA_SHIFT)
+              if name in normalised]
+    beams = [value for name, value in normalised.items() if name.startswith("beam")]
+    surfaces = [value for name, value in normalised.items() if name.startswith("surface")]
+    rows = [fit.names.index(name) for name in fitted_names]
+    error_vector = np.array([errors[name] for name in fitted_names])
+    joint_chi2 = float(error_vector @ np.linalg.solve(fit.covariance[np.ix_(rows, rows)],
+                                                      error_vector))
 
     def rms(values: list[float] | np.ndarray) -> float:
         finite = np.asarray(values, float)
         finite = finite[np.isfinite(finite)]
         return float(np.sqrt(np.mean(finite**2))) if len(finite) else float("nan")
 
-    return NormalisedErrors(rms(camera), rms(beams), rms(surfaces))
+    return NormalisedErrors(rms(camera), rms(beams), rms(surfaces), joint_chi2,
+                            len(fitted_names))
 
 
 @dataclass(frozen=True)

@@ -44,6 +44,7 @@ class SelfCalibration:
     table: ParameterTable
     values: np.ndarray              # natural units (rad, mm), change from the rig file
     sigmas: np.ndarray              # one sigma, same units; NaN for fixed parameters
+    covariance: np.ndarray          # the parameters' covariance, same units; NaN where fixed
     fixed: dict[str, str]           # undetermined parameter → the data that would fix it
     weak: dict[str, str]            # fitted, but σ above its goal → the data that would help
     condition_number: float
@@ -125,16 +126,17 @@ def jacobian(model: RigModel, observations: Observations, x: np.ndarray, free: n
 
 
 def uncertainty(jacobian_free: np.ndarray, scales: np.ndarray, chi2_per_dof: float
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """One-sigma uncertainties of the free parameters (scaled by χ²/dof when above 1) and the
-    Jacobian's singular values in the parameters' scales."""
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One-sigma uncertainties of the free parameters and their covariance (natural units,
+    scaled by χ²/dof when above 1), and the Jacobian's singular values in the parameters'
+    scales."""
     scaled = jacobian_free * scales
     _, singular, rows = np.linalg.svd(scaled, full_matrices=False)
     # A direction the data do not constrain at all has an unbounded variance (a pseudo-
     # inverse would call it zero).
     inverse = np.where(singular > NULL_SINGULAR * singular[0], singular, 1e-30) ** -2.0
-    variance = np.sum(rows**2 * inverse[:, None], axis=0) * max(chi2_per_dof, 1.0)
-    return np.sqrt(variance) * scales, singular
+    covariance = (rows.T * inverse) @ rows * max(chi2_per_dof, 1.0) * np.outer(scales, scales)
+    return np.sqrt(np.diag(covariance)), covariance, singular
 
 
 def least_determined(table: ParameterTable, free: np.ndarray, sigmas: np.ndarray) -> int | None:
@@ -185,7 +187,7 @@ def self_calibrate(rig: Rig, laser_ids: list[int], surfaces: list[KnownSurface],
         x = _with(x, free, solution.x)
         dof = max(len(solution.fun) - int(free.sum()), 1)
         chi2 = float(np.sum(solution.fun**2))
-        sigmas, singular = uncertainty(solution.jac, scales[free], chi2 / dof)
+        sigmas, covariance, singular = uncertainty(solution.jac, scales[free], chi2 / dof)
         worst = least_determined(table, free, sigmas)
         if worst is None:
             break
@@ -194,12 +196,15 @@ def self_calibrate(rig: Rig, laser_ids: list[int], surfaces: list[KnownSurface],
         x = np.zeros(model.size)
     all_sigmas = np.full(model.size, np.nan)
     all_sigmas[free] = sigmas
+    all_covariance = np.full((model.size, model.size), np.nan)
+    all_covariance[np.ix_(free, free)] = covariance
     spot_residuals = pixels - model.predict(x, diode, frame)
     # A surface with a declared reading σ is not a goal of the calibration, only its means.
     weak = {p.name: p.advice for p, sigma in zip(table.parameters, all_sigmas, strict=True)
             if p.kind not in (SURFACE_TILT_KIND, SURFACE_OFFSET_KIND) and sigma > p.kind.goal}
     return SelfCalibration(
-        rig=model.to_rig(x), table=table, values=x, sigmas=all_sigmas, fixed=fixed, weak=weak,
+        rig=model.to_rig(x), table=table, values=x, sigmas=all_sigmas,
+        covariance=all_covariance, fixed=fixed, weak=weak,
         condition_number=float(singular[0] / max(singular[-1], 1e-300)),
         rms_px=float(np.sqrt(np.nanmean(np.sum(spot_residuals**2, axis=1)))),
         chi2=chi2, dof=dof, spot_residuals_px=spot_residuals,
