@@ -154,12 +154,12 @@ def plan_text(steps: list[Prediction]) -> str:
     return "\n".join(lines)
 
 
-def _goals_line(plan: Prediction) -> str:
+def _goals_line(planned: Prediction) -> str:
     """Which goals the plan meets and, if not all, why the planner stopped."""
-    if plan.meets_goals():
+    if planned.meets_goals():
         return "goals met"
-    goals = [(f"tilt {TILT_GOAL_DEG:g} deg", plan.worst_tilt_deg <= TILT_GOAL_DEG),
-             (f"height {HEIGHT_GOAL_MM:g} mm", plan.worst_height_mm <= HEIGHT_GOAL_MM)]
+    goals = [(f"tilt {TILT_GOAL_DEG:g} deg", planned.tilt_met),
+             (f"height {HEIGHT_GOAL_MM:g} mm", planned.height_met)]
     unmet = [goal for goal, met in goals if not met]
     met = "".join(f" ({goal} met)" for goal, is_met in goals if is_met)
     noun, pronoun = ("goals", "them") if len(unmet) > 1 else ("goal", "it")

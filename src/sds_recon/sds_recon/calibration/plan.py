@@ -59,17 +59,27 @@ class Prediction:
         """The largest predicted height σ over the unseen surfaces [mm]."""
         return float(np.max(self.height_sigma_mm))
 
+    @property
+    def tilt_met(self) -> bool:
+        """Whether tilts of unseen surfaces are predicted within TILT_GOAL_DEG."""
+        return self.worst_tilt_deg <= TILT_GOAL_DEG
+
+    @property
+    def height_met(self) -> bool:
+        """Whether heights of unseen surfaces are predicted within HEIGHT_GOAL_MM."""
+        return self.worst_height_mm <= HEIGHT_GOAL_MM
+
     def meets_goals(self) -> bool:
         """Whether tilts and heights of unseen surfaces are predicted within their goals."""
-        return self.worst_tilt_deg <= TILT_GOAL_DEG and self.worst_height_mm <= HEIGHT_GOAL_MM
+        return self.tilt_met and self.height_met
 
     def gain_over(self, before: Prediction) -> float:
         """The largest share by which this prediction lowers the σ of a goal that `before`
         does not meet (tilt or height; 0 if it lowers none)."""
         gains = [0.0]
-        if before.worst_tilt_deg > TILT_GOAL_DEG:
+        if not before.tilt_met:
             gains.append(1.0 - self.worst_tilt_deg / before.worst_tilt_deg)
-        if before.worst_height_mm > HEIGHT_GOAL_MM:
+        if not before.height_met:
             gains.append(1.0 - self.worst_height_mm / before.worst_height_mm)
         return max(gains)
 
