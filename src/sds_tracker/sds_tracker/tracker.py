@@ -103,7 +103,9 @@ def line_reach_px(rig: Rig, rows: np.ndarray, band_px: int) -> tuple[np.ndarray,
     """Per row of `rows`, the columns between which the line can lie on any surface whose
     heights stay within the container's radius of the fill level (a surface tilted by up to
     45°): its image on level surfaces at −R, 0 and +R (each held at its end column beyond its
-    ends), `band_px` wider on either side."""
+    ends), `band_px` wider on either side; empty for a rig without a line laser."""
+    if rig.line_laser is None:
+        return np.zeros(0), np.zeros(0)
     columns = []
     radius_mm = rig.container.radius_mm
     for height_mm in (-radius_mm, 0.0, radius_mm):
@@ -166,8 +168,7 @@ class FrameTracker:
             self.config.hampel_window, self.config.hampel_k, self.config.hampel_floor_px)
         self._pending: dict[int, dict[int, SpotEstimate]] = {}
         self._line_rows, self._line_x = flat_line_px(rig)
-        self._line_reach = line_reach_px(rig, self._line_rows, self.config.line.band_px) \
-            if len(self._line_rows) else (np.zeros(0), np.zeros(0))
+        self._line_reach = line_reach_px(rig, self._line_rows, self.config.line.band_px)
         self._line_followed = False
         self._frames_since_seek = SEEK_PERIOD_FRAMES
         warm_up()
@@ -180,11 +181,12 @@ class FrameTracker:
         and this frame's line profile.
         """
         line = self._find_line(red, offset)
-        self._line_followed = len(line.x_px) > len(self._line_rows) // 4
-        if self._line_followed:
+        found = len(line.x_px) > len(self._line_rows) // 4
+        if found:
             # Follow the line: next frame looks around where it is now.
             self._line_x = np.interp(self._line_rows, line.y_px, line.x_px)
-        self._line_followed &= self.hampel is not None   # a still's line says nothing of the next
+        # A still's line says nothing of the next image's.
+        self._line_followed = found and self.hampel is not None
         if self.hampel is None:   # a still: where the spots were says nothing of this image
             self.spots.previous = dict.fromkeys(self.paths)
         # The line's light is kept out of the spots it passes (seen this frame, or expected).

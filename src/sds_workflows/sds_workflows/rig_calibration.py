@@ -136,7 +136,7 @@ def observe(rig: Rig, images: list[np.ndarray]) -> CalibrationImages:
     region = Region(*rig.container_region_px(rig.camera, margin))
     rows, _ = flat_line_px(rig)
     settings = LineSettings()
-    low_x, high_x = line_reach_px(rig, rows, settings.band_px) if len(rows) else (rows, rows)
+    low_x, high_x = line_reach_px(rig, rows, settings.band_px)
     spots, line_frame, line_pixels, line_sigma = [], [], [], []
     for index, image in enumerate(images):
         region.check_inside(image.shape[1], image.shape[0])
