@@ -238,6 +238,47 @@ def test_the_line_is_subtracted_from_a_spot_beside_it() -> None:
     assert found is not None and np.hypot(*(found.centre - spot)) < 0.1
 
 
+def spot_on_background(spot: np.ndarray, background: np.ndarray, seed: int) -> np.ndarray:
+    """A saturated 4K-sized spot (x, y) on a background image, with shot and read noise."""
+    rows, columns = np.indices(background.shape)
+    light = background + 600.0 * np.exp(-0.5 * ((columns - spot[0]) ** 2 +
+                                               (rows - spot[1]) ** 2) / 5.0**2)
+    noise = np.random.default_rng(seed).normal(0.0, 1.0, light.shape) * np.sqrt(light + 4.0)
+    return np.clip(np.round(light + noise), 0, 255).astype(np.uint8)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_spot_on_the_rims_edge_reports_the_error_the_edge_gives_it(seed: int) -> None:
+    """A spot at the container's rim in the image (the liquid dark, beyond the rim 12 grey
+    levels brighter): a scalar background leaves the edge in its light, which pulls it by
+    tenths of a pixel, far beyond its photons' σ. Its σ says so, in the tracker's steady state
+    and its full search alike; on one level, or with the laser line along its window's side,
+    the σ is the photons' alone."""
+    settings = SpotSettings()
+    size = 120
+    rows, columns = np.indices((size, size))
+    spot = np.array([60.3, 59.6])
+    flat = np.full((size, size), 8.0)
+    edge = np.where(columns + 0.4 * rows > spot[0] + 0.4 * spot[1] + 1.0, 20.0, 8.0)
+    line = flat + 60.0 * np.exp(-0.5 * ((columns - (spot[0] - settings.window_px)) / 1.5) ** 2)
+    along = np.array([0.0, 40.0])
+    path = np.array([spot - along, spot + along])
+    sigmas = {}
+    for name, background in (("flat", flat), ("edge", edge), ("line", line)):
+        image = spot_on_background(spot, background, seed)
+        for mode in ("steady", "search"):
+            tracker = SpotTracker({0: path}, settings)
+            tracker.previous[0] = spot + np.array([0.4, -0.3]) if mode == "steady" else None
+            (estimate,) = tracker.update(image)
+            error = np.hypot(estimate.x_px - spot[0], estimate.y_px - spot[1])
+            sigmas[name, mode] = estimate.sigma_px
+            assert error < 3 * estimate.sigma_px, (name, mode, error, estimate.sigma_px)
+    assert sigmas["flat", "steady"] < 0.1
+    for mode in ("steady", "search"):
+        assert sigmas["edge", mode] > 3 * sigmas["flat", mode]
+        assert sigmas["line", mode] < 1.1 * sigmas["flat", mode]
+
+
 def saturated_spot_and_line(spot: np.ndarray, line_x: np.ndarray, size: int) -> np.ndarray:
     """A window where a bright spot (x, y) and a bright slanted line both clip at 255."""
     rows, columns = np.mgrid[0:size, 0:size].astype(float)

@@ -11,6 +11,36 @@ import numpy as np
 from numba import njit
 
 
+@njit(cache=True)
+def background_step(window: np.ndarray, read_noise: float) -> float:
+    """How far a window's background departs from one level [grey levels]: the third
+    brightest less the third darkest median of its border's eight half-sides, less the read
+    noise (a difference within it is noise, not an edge). An edge across the window (the
+    container's rim behind a spot near the wall) darkens at least three of them and brightens
+    three; the laser line along one side lights only two."""
+    height, width = window.shape
+    medians = np.empty(8)
+    for side in range(4):
+        if side < 2:
+            values = window[0 if side == 0 else height - 1].astype(np.float64)
+        else:
+            values = window[:, 0 if side == 2 else width - 1].astype(np.float64)
+        middle = len(values) // 2
+        medians[2 * side] = np.median(values[:middle])
+        medians[2 * side + 1] = np.median(values[middle:])
+    medians.sort()
+    return max(float(medians[5] - medians[2]) - read_noise, 0.0)
+
+
+@njit(cache=True)
+def step_sigma_px(step: float, lever_px: float, total: float) -> float:
+    """The centroid's σ [px] from a background `step` [grey levels] across a spot: half the
+    step added on one side and taken off the other, over the weighted pixels' distances from
+    the centre (their sum `lever_px`, averaged over the edge's direction: 2/π), in the spot's
+    weight `total`. A scalar background leaves such an edge in the spot's light."""
+    return step / 2 * (2 / np.pi) * lever_px / total
+
+
 @njit(cache=True, fastmath=True)
 def spot_windows(image: np.ndarray, corners: np.ndarray, half: int, prior: np.ndarray,
                  threshold: float, min_competitor: float, aperture_factor: float,
@@ -22,7 +52,8 @@ def spot_windows(image: np.ndarray, corners: np.ndarray, half: int, prior: np.nd
     Background: median of the window's border. Blob: the prior-weighted brightest pixel, its
     area and mass above `threshold` within half/2 px; another blob with `min_competitor` of that
     mass leaves the spot to the full search. Centroid: `clip_fraction` of the peak taken off,
-    within 1.6 × the blob's radius (`aperture_factor`), re-centred once.
+    within 1.6 × the blob's radius (`aperture_factor`), re-centred once. σ: the photons' and the
+    read noise's (`read_noise`), and a background that is not one level (`step_sigma_px`).
     """
     count = corners.shape[0]
     size = 2 * half + 1
@@ -80,7 +111,7 @@ def spot_windows(image: np.ndarray, corners: np.ndarray, half: int, prior: np.nd
             cx, cy = sx / total, sy / total
         if total <= 0 or abs(cx - half) + radius > half or abs(cy - half) + radius > half:
             continue
-        variance, top = 0.0, 0.0
+        variance, top, lever = 0.0, 0.0, 0.0
         for y in range(max(0, int(cy) - reach), min(size, int(cy) + reach + 1)):
             for x in range(max(0, int(cx) - reach), min(size, int(cx) + reach + 1)):
                 distance2 = (x - cx) ** 2 + (y - cy) ** 2
@@ -88,8 +119,12 @@ def spot_windows(image: np.ndarray, corners: np.ndarray, half: int, prior: np.nd
                     raw = float(image[y0 + y, x0 + x])
                     variance += (raw + read_noise * read_noise) * distance2
                     top = max(top, raw)
+                    if raw - background - clip_fraction * peak > 0:
+                        lever += np.sqrt(distance2)
         centres[k, 0], centres[k, 1] = cx, cy
-        sigmas[k] = np.sqrt(variance / 2) / total
+        step = step_sigma_px(background_step(image[y0:y0 + size, x0:x0 + size], read_noise),
+                             lever, total)
+        sigmas[k] = np.sqrt(variance / 2 / total**2 + step**2)
         peaks[k] = top
         settled[k] = True
     return centres, sigmas, peaks, settled

@@ -7,7 +7,13 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from sds_tracker.kernels import remove_line, spot_windows, symmetric_centre
+from sds_tracker.kernels import (
+    background_step,
+    remove_line,
+    spot_windows,
+    step_sigma_px,
+    symmetric_centre,
+)
 
 LOST, SATURATED, REFLECTION_SUSPECTED, OFF_PATH, HAMPEL_REPLACED, NOT_FILTERED = 1, 2, 4, 8, 16, 32
 """Flag bits, the same as sds_msgs/LaserSpot's."""
@@ -279,8 +285,12 @@ class SpotTracker:
             centre = np.array([np.sum(weights * xs), np.sum(weights * ys)]) / total
         peak = float(raw.max())
         variance = np.clip(raw, 0, None) + s.read_noise**2
-        sigma = float(np.sqrt(np.sum(variance * ((xs - centre[0]) ** 2 +
-                                                 (ys - centre[1]) ** 2)) / 2) / total)
+        distances = np.hypot(xs - centre[0], ys - centre[1])
+        bounds = spot_window(image.shape, origin, centre, s.window_px)
+        around = window if bounds is None else image[bounds[1]:bounds[3], bounds[0]:bounds[2]]
+        step = step_sigma_px(background_step(np.ascontiguousarray(around), s.read_noise),
+                             float(distances[weights > 0].sum()), total)
+        sigma = float(np.sqrt(np.sum(variance * distances**2) / 2 / total**2 + step**2))
         # The laser line's light pulls a spot it passes towards itself, even off its path:
         # such a spot is measured again with the line's light subtracted.
         if previous is None and line is not None:
