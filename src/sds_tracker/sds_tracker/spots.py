@@ -48,7 +48,8 @@ class SpotSettings:
     clip_fraction: float = 0.15    # share of the peak removed before the centroid (see below)
     path_tolerance_px: float = 4.0  # farthest a spot may lie from its beam's image path
     saturation_level: float = 250.0
-    read_noise: float = 2.0        # grey levels, for the position uncertainty
+    read_noise: float = 2.0        # grey levels, for the position uncertainty; a background
+                                   # step within it is noise (kernels.background_step)
     min_competitor: float = 0.3    # a second blob this bright (relative) flags a reflection
 
 
