@@ -119,6 +119,8 @@ def test_a_rendered_rig_as_built_meets_the_goals_by_the_readmes_protocol() -> No
     assert result["wrong"] == 0
     assert set(result["visible"]) <= set(result["calibrated"]) | set(result["unidentified"])
     assert result["check"].explained, result["check"].summary()
+    # the tracker's σ of the spots it found, against the renderer's truth
+    assert 0.85 < result["spot_sigma_rms"] < 1.15, result["spot_sigma_rms"]
     assert not result["tight_check"].explained
     assert not result["today_check"].explained
     assert result["unseen"].tilt_error_deg <= 0.1

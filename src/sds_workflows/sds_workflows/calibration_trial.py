@@ -24,6 +24,7 @@ from sds_recon.calibration.plan import diagonal
 from sds_recon.calibration.rig_calibration import RigCalibration
 from sds_recon.calibration.rig_model import across_axes
 from sds_recon.calibration.rig_report import beam_sigma_deg, calibrated_rig
+from sds_recon.calibration.self_calibration import spot_whitening
 from sds_recon.reconstruction import fit_surface, reconstruct_spots
 from sds_sim.render import FrameRenderer
 from sds_sim.scenario import load_scenario
@@ -206,6 +207,22 @@ def wrong_identities(result: RigCalibration, found: CalibrationImages, series: T
                 np.nanmin(to_spots) > np.nanmin(np.append(to_reflections, np.inf)):
             wrong += 1
     return wrong
+
+
+def spot_errors_in_sigma(result: RigCalibration, found: CalibrationImages, series: TiltSeries
+                         ) -> float:
+    """RMS over the spots the calibration used, and over x and y, of each spot's error against
+    the renderer's truth in the σ the fit believes of it (its whitened covariance): about 1
+    when the tracker's σ are honest."""
+    pixels = np.array([found.spots[f].pixels[b] for f, b in zip(result.frame, result.blob,
+                                                                 strict=True)]).reshape(-1, 2)
+    covariance = np.array([found.spots[f].covariance_px2[b]
+                           for f, b in zip(result.frame, result.blob, strict=True)])
+    truth = np.array([series.truths[f].spot_exposure_px[result.laser_ids[d]]
+                      for d, f in zip(result.diode, result.frame, strict=True)]).reshape(-1, 2)
+    whitened = np.einsum("nij,nj->ni", spot_whitening(covariance.reshape(-1, 2, 2)),
+                         pixels - truth)
+    return float(np.sqrt(np.mean(whitened**2)))
 
 
 def trial(seed: int, rig_file: Path, scale: float = 1.0, errors: RigErrors | None = None,
@@ -407,6 +424,7 @@ def as_built_trial(seed: int, rig_file: Path, scale: float = 1.0,
     rigs = {"declared": first.calibrated, "today": calibrated_rig(
         replace(nominal, tolerances=Tolerances(), camera_sigma={}), today)}
     return {"seed": seed, "wrong": wrong, "spots": len(result.diode),
+            "spot_sigma_rms": spot_errors_in_sigma(result, found, series),
             "calibrated": list(result.laser_ids), "unidentified": dict(result.unidentified),
             "visible": visible, "check": result.check, "tight_check": tight.check,
             "today_check": today.check,
