@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
 from scipy import stats
+from sds_camera.frame_source import Region, select
+from sds_model.rig import load_rig
 from sds_sim.render import FrameRenderer
 from sds_sim.scenario import load_scenario
 from sds_tracker.hampel import HampelBank
@@ -26,6 +29,7 @@ from sds_tracker.tracker import (
     flat_line_px,
     is_lost,
 )
+from sds_workflows.calibration_trial import AsBuilt, rig_as_built
 
 
 def run_tracker(repo: Path, frames: int, overrides: dict) -> dict:
@@ -152,7 +156,6 @@ def test_hampel_keeps_a_deviation_within_the_spots_own_sigma() -> None:
 def test_stills_of_different_surfaces_are_tracked_each_on_its_own(repo: Path) -> None:
     """Tilt-table images are no video: with `stills` every image's spots come out with it,
     none replaced by a temporal filter, each where its image shows it."""
-    from sds_model.rig import load_rig
     from sds_sim.tilt_series import render_tilt_series
 
     rig = load_rig(repo / "config" / "rigs" / "stelium.yaml")
@@ -179,7 +182,6 @@ def test_the_line_on_a_tilted_still_is_found_along_its_whole_length(repo: Path) 
     the band searched around it: it is sought over its whole reach, found on nearly all its
     rows, and no spot it passes is measured against a wrong line (one such spot read 3 px off
     with σ 0.08 px, and a tilt 0.3° off)."""
-    from sds_model.rig import load_rig
     from sds_recon.calibration.plan import diagonal
     from sds_sim.tilt_series import render_surfaces
 
@@ -373,6 +375,34 @@ def test_a_spot_on_the_line_is_acquired_where_its_path_runs_beside_the_line(
     assert estimate.sigma_px >= ON_LINE_SIGMA_PX[1]
 
 
+def test_a_spot_whose_light_merges_with_the_lines_is_acquired_in_the_first_frame(
+        repo: Path) -> None:
+    """Held-out rig 9111's drop: in the first frame, diode 18's spot lies 12.7 px beside the
+    laser line and their light is one blob above the threshold, centred 15 px from the spot.
+    Measured without the line's light from there, nothing was left; the search along its path
+    then found the spot clear of the line, where it took only spots that overlap the line, so
+    the spot was lost. Every visible spot is found in the first frame, where it is."""
+    _, true = rig_as_built(load_rig(repo / "config" / "rigs" / "stelium.yaml"), AsBuilt(),
+                           np.random.default_rng(9111))
+    scenario = load_scenario(repo / "config" / "scenarios" / "ground_kick.yaml",
+                             {"seed": 9111})
+    scenario = replace(scenario, rig=true, disturbances=replace(scenario.disturbances,
+                                                                occlusion_rate_per_s=0.0))
+    image, truth = FrameRenderer(scenario).render(round(scenario.kick_s * scenario.fps))
+    region = Region(*true.container_region_px(true.camera, 60))
+    tracker = FrameTracker(true)
+    tracker.process(0, select(image, region, "red"), (region.x, region.y))
+    ((_, spots),) = tracker.flush()
+    ids = [d.laser_id for d in true.diodes]
+    visible = {ids[i] for i in np.flatnonzero(truth.visible)}
+    assert 18 in visible
+    for spot in spots:
+        if spot.laser_id in visible:
+            assert not is_lost(spot), spot
+            expected = truth.spot_exposure_px[ids.index(spot.laser_id)]
+            assert np.hypot(spot.x_raw_px - expected[0], spot.y_raw_px - expected[1]) < 0.3
+
+
 def speckled_line_frame(seed: int, spot: np.ndarray | None, size: int = 200
                         ) -> tuple[np.ndarray, np.ndarray]:
     """A frame with an unsaturated laser line whose light varies 20 % from pixel to pixel
@@ -430,10 +460,8 @@ def test_a_weakly_calibrated_beam_widens_its_own_path_gate_only(repo: Path) -> N
     """A beam whose direction the calibration left at σ 0.3° (tilts about one axis only) is
     0.5° off; at 35° about the other axis its spot lies beyond the 4 px gate: with the σ in
     the rig file the tracker widens that beam's gate and finds it, and no other gate moves."""
-    from dataclasses import replace
 
     from scipy.spatial.transform import Rotation
-    from sds_model.rig import load_rig
     from sds_sim.tilt_series import render_tilt_series
     from sds_tracker.spots import OFF_PATH
 

@@ -181,12 +181,15 @@ class SpotTracker:
         return settled
 
     def _track_on_line(self, image: np.ndarray, origin: np.ndarray, laser_id: int,
-                       path: np.ndarray, refined: LineFreeSpot) -> SpotEstimate | None:
-        """A tracked spot that overlaps the laser line, from its measurement without the
-        line's light (`refined`), σ ON_LINE_SIGMA_PX across the line; None for a spot clear
-        of the line, off its path or not there (the full search decides)."""
+                       path: np.ndarray, refined: LineFreeSpot, beside_too: bool = False
+                       ) -> SpotEstimate | None:
+        """A tracked spot that overlaps the laser line (`beside_too`: or lies beside it),
+        from its measurement without the line's light (`refined`), σ ON_LINE_SIGMA_PX across
+        the line; None for a spot clear of the line (unless `beside_too`), off its path or
+        not there (the full search decides)."""
         s = self.settings
-        if not np.isfinite(refined.centre).all() or refined.clearance_px >= 0 or \
+        clear = refined.clearance_px >= 0 and not beside_too
+        if not np.isfinite(refined.centre).all() or clear or \
                 distance_to_path(refined.centre, path) > self.tolerance_px[laser_id]:
             return None
         x, y = np.round(refined.centre - origin).astype(int)
@@ -198,12 +201,13 @@ class SpotTracker:
     def _acquire_on_line(self, image: np.ndarray, origin: np.ndarray, laser_id: int,
                          path: np.ndarray, line: tuple[np.ndarray, np.ndarray]
                          ) -> SpotEstimate | None:
-        """A spot not yet acquired that overlaps the laser line: its light and the line's are
-        one blob, whose centre lies on the line, not on the path (a path can run beside the
-        line for 200 px). Measured without the line's light (`settled_line_free_centre`,
-        `_track_on_line`) from starts every half window along the stretch of its path within
-        a window of the line; None unless exactly one spot (finds within a quarter window of
-        each other) is there."""
+        """A spot not yet acquired that overlaps the laser line, or lies so near it that
+        their light merges above the threshold: the two are one blob, whose centre lies near
+        the line, not on the path (a path can run beside the line for 200 px), and from there
+        the spot can be beyond the reach of its measurement without the line's light.
+        Measured so (`settled_line_free_centre`, `_track_on_line`) from starts every half
+        window along the stretch of its path within a window of the line; None unless
+        exactly one spot (finds within a quarter window of each other) is there."""
         s = self.settings
         step = s.window_px / 2
         lengths = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0),
@@ -216,7 +220,7 @@ class SpotTracker:
         for start in starts[np.abs(starts[:, 0] - line_x) <= s.window_px]:
             refined = settled_line_free_centre(image, origin, start, line, s)
             estimate = None if refined is None else \
-                self._track_on_line(image, origin, laser_id, path, refined)
+                self._track_on_line(image, origin, laser_id, path, refined, beside_too=True)
             if estimate is not None and all(np.hypot(estimate.x_px - f.x_px,
                                                      estimate.y_px - f.y_px) > step / 2
                                             for f in found):

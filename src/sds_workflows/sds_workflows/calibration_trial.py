@@ -380,6 +380,16 @@ class FirstUse:
         return calibrated_rig(self.nominal, self.result)
 
 
+def rig_as_built(base: Rig, as_built: AsBuilt, rng: np.random.Generator) -> tuple[Rig, Rig]:
+    """A random diode layout of `base` (the rig file its user writes) and that rig as built:
+    beams leaning, the camera turned and moved, emitters displaced, the true camera off its
+    file by `as_built.camera_file_sigmas` of its σ."""
+    designed = random_layout(base, rng)
+    true = true_rig(designed, as_built.rig, rng)
+    return designed, replace(true, camera=camera_as_calibrated(
+        base.camera, base.camera_sigma, as_built.camera_file_sigmas, rng))
+
+
 def first_use(seed: int, rig_file: Path, scale: float = 1.0, as_built: AsBuilt | None = None
               ) -> FirstUse:
     """A random rig as built (seeded: layout, leans, camera pose, emitters, camera file off by
@@ -387,10 +397,7 @@ def first_use(seed: int, rig_file: Path, scale: float = 1.0, as_built: AsBuilt |
     as_built = as_built or AsBuilt()
     rng = np.random.default_rng(seed)
     base = load_rig(rig_file)
-    designed = random_layout(base, rng)
-    true = true_rig(designed, as_built.rig, rng)
-    true = replace(true, camera=camera_as_calibrated(base.camera, base.camera_sigma,
-                                                     as_built.camera_file_sigmas, rng))
+    designed, true = rig_as_built(base, as_built, rng)
     readings = protocol_readings()
     truths = true_surfaces(readings, as_built.readings, rng)
     series = render_surfaces(true, truths, scale, seed)
