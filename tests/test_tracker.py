@@ -460,7 +460,6 @@ def test_a_weakly_calibrated_beam_widens_its_own_path_gate_only(repo: Path) -> N
     """A beam whose direction the calibration left at σ 0.3° (tilts about one axis only) is
     0.5° off; at 35° about the other axis its spot lies beyond the 4 px gate: with the σ in
     the rig file the tracker widens that beam's gate and finds it, and no other gate moves."""
-
     from scipy.spatial.transform import Rotation
     from sds_sim.tilt_series import render_tilt_series
     from sds_tracker.spots import OFF_PATH
