@@ -44,6 +44,10 @@ def test_shedding_counts_late_frames_against_the_fastest_and_says_so():
     assert shedding.report(22.0) is None
 
 
+BURST = 60
+"""Frames published at once to the reconstruction node."""
+
+
 @pytest.mark.ros
 def test_recon_behind_its_input_sheds_live_points_and_keeps_every_recorded_frame(repo):
     rig_file = repo / "config" / "rigs" / "stelium.yaml"
@@ -51,9 +55,11 @@ def test_recon_behind_its_input_sheds_live_points_and_keeps_every_recorded_frame
     pixels = rig.project(np.array([[d.emitter_mm[0], d.emitter_mm[1], 0.0]
                                    for d in rig.diodes]))
     probe = Probe("overload_probe")
-    # A 1 ms limit: a burst of frames makes the node behind its input at once.
+    # A 10 ms limit: a burst of frames puts the node behind its input within a few frames; the
+    # live cloud is checked on frames one at a time, not on the burst's first, whose delivery
+    # alone can take milliseconds on a busy machine.
     graph = SdsGraphRun("recon.yaml", "--set", f"recon.rig={rig_file}",
-                        "--set", "recon.live_max_lag_s=0.001")
+                        "--set", "recon.live_max_lag_s=0.01")
     try:
         live = probe.collect(PointCloud2, "/recon/points_live", live_qos())
         clouds = probe.collect(PointCloud2, "/recon/points", stream_qos())
@@ -69,26 +75,33 @@ def test_recon_behind_its_input_sheds_live_points_and_keeps_every_recorded_frame
                                                    sigma_px=0.05)
                                          for d, (x, y) in zip(rig.diodes, pixels, strict=True)])
 
-        # One at a time until the best-effort live cloud has matched this probe: on time.
-        warm_up = 100
-        while not live and warm_up < 200:
-            live_pub.publish(frame(warm_up))
-            warm_up += 1
-            time.sleep(0.05)
-        assert live, graph.output()
+        def on_time(first: int) -> bool:
+            """Frames one at a time, until the best-effort live cloud has matched the probe."""
+            live.clear()
+            for index in range(first, first + 100):
+                live_pub.publish(frame(index))
+                if wait_until(lambda: bool(live), 0.05):
+                    return True
+            return False
+
+        assert on_time(1000), graph.output()
         live.clear()
         # A burst: each waits for the triangulation and fits of those before it.
-        for index in range(30):
+        for index in range(BURST):
             live_pub.publish(frame(index))
             spots_pub.publish(frame(index))
-        assert wait_until(lambda: len(clouds) == 30), graph.output()
-        graph.wait_for_line("points_live: shedding the frames more than 1 ms late", 10.0)
+        assert wait_until(lambda: len(clouds) == BURST), graph.output()
+        graph.wait_for_line("points_live: shedding the frames more than 10 ms late", 10.0)
+        shed_burst = BURST - len(live)
+        # On time again, the live cloud is made again.
+        back = on_time(2000)
     finally:
         probe.close()
         graph.stop()
-    # Every frame's recorded cloud came; live ones for the first of the burst at most.
-    assert sorted(m.header.stamp.sec for m in clouds) == list(range(30))
-    assert 1 <= len(live) < 10
+    # Every frame's recorded cloud came; most of the burst's live ones were shed.
+    assert sorted(m.header.stamp.sec for m in clouds) == list(range(BURST))
+    assert shed_burst >= BURST // 2
+    assert back
 
 
 def test_frame_gaps_count_the_frames_between_two_stamps():
