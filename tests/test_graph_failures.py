@@ -7,8 +7,6 @@ from __future__ import annotations
 import os
 import re
 import signal
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -58,19 +56,6 @@ def test_a_source_that_cannot_be_opened_ends_the_drop_graph_with_its_cause(repo,
     if (tmp_path / "drop.mcap").exists():   # the recorder had started: it closed its file
         assert "wrote 0 messages" in output, output
     assert "Traceback" not in output and "rosout" not in output, output
-
-
-def test_sds_run_on_a_missing_video_fails_in_seconds_with_one_line(repo, tmp_path):
-    rig = repo / "config" / "rigs" / "stelium.yaml"
-    done = subprocess.run([str(Path(sys.executable).with_name("sds")), "run", "--video",
-                           str(tmp_path / "nope.mp4"), "--rig", str(rig), "--out",
-                           str(tmp_path / "run")], capture_output=True, text=True, timeout=120,
-                          env=dict(os.environ), check=False)
-    assert done.returncode == 2, done.stdout + done.stderr
-    last = done.stderr.strip().splitlines()[-1]
-    assert re.match(r"sds run: \w+ \([\w, ]*\bcamera\b[\w, ]*\) exited with code 2: video "
-                    r"file .*nope\.mp4 does not exist", last), done.stderr
-    assert "Traceback" not in done.stdout + done.stderr
 
 
 def test_a_killed_consumer_stops_the_graph_and_is_named(repo, tmp_path, clip):

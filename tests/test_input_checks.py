@@ -46,6 +46,13 @@ def test_process_refuses_a_video_of_another_frame_size(tmp_path: Path) -> None:
     assert not (tmp_path / "out").exists()
 
 
+def test_run_refuses_a_missing_video_before_any_process_starts(tmp_path: Path) -> None:
+    done = sds("run", "--video", str(tmp_path / "nope.mp4"), "--rig", str(RIG), "--out",
+               str(tmp_path / "run"))
+    one_line_error(done, f"video file {tmp_path / 'nope.mp4'} does not exist")
+    assert not (tmp_path / "run").exists()     # no graph started, no folder made
+
+
 def test_an_override_of_the_wrong_type_is_refused_not_replaced() -> None:
     entries = load_graph(REPO / "config" / "graphs" / "drop.yaml")
     with pytest.raises(GraphFileError, match=r"is an integer .* not 'abc'"):

@@ -5,7 +5,13 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from sds_cli.commands import add_lateral_options, add_overwrite, lateral_input, refuse_existing
+from sds_cli.commands import (
+    CommandError,
+    add_lateral_options,
+    add_overwrite,
+    lateral_input,
+    refuse_existing,
+)
 
 
 def add_parser(commands: argparse._SubParsersAction) -> None:
@@ -34,6 +40,9 @@ def run(args: argparse.Namespace) -> int:
     from sds_bringup.chain import run_chain
     from sds_workflows.demo import run_live
 
+    if args.video is not None and not Path(args.video).is_file():
+        # Before the graph: its processes take seconds to start and then fail on the same.
+        raise CommandError(f"video file {args.video} does not exist")
     refuse_existing(args.out / "recording.mcap", args.overwrite)
     lateral = lateral_input(args)
     return run_live(args.video or args.camera, args.rig, args.out, args.port, args.gravity,
