@@ -8,6 +8,14 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike
 
+_IDENTITY = np.eye(3)
+
+
+def _determinant(matrix: np.ndarray) -> float:
+    """The determinant of a 3×3 matrix (the triple product of its rows)."""
+    (a, b, c), (d, e, f), (g, h, i) = matrix.tolist()
+    return a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
+
 
 @dataclass(frozen=True)
 class RigidTransform:
@@ -19,8 +27,10 @@ class RigidTransform:
     def __post_init__(self) -> None:
         rotation = np.asarray(self.rotation, dtype=float).reshape(3, 3)
         translation = np.asarray(self.translation_mm, dtype=float).reshape(3)
-        orthonormal = np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-9)
-        if not orthonormal or np.linalg.det(rotation) < 0:
+        # Cheap checks (not np.allclose, np.linalg.det): fits build a transform per pose per
+        # evaluation.
+        orthonormal = np.abs(rotation @ rotation.T - _IDENTITY).max() <= 1e-9
+        if not orthonormal or _determinant(rotation) < 0:
             raise ValueError("rotation must be a proper orthonormal 3×3 matrix")
         object.__setattr__(self, "rotation", rotation)
         object.__setattr__(self, "translation_mm", translation)
