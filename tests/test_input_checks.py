@@ -46,6 +46,24 @@ def test_process_refuses_a_video_of_another_frame_size(tmp_path: Path) -> None:
     assert not (tmp_path / "out").exists()
 
 
+def test_a_refusal_loads_no_numerical_library() -> None:
+    """A command's one-line refusal comes at once: the CLI and the workflows' input errors load
+    neither SciPy, Numba nor Matplotlib (they took 3-4 s before every `sds` refusal), while
+    every entry point the workflows package names is there when asked for."""
+    heavy = ("scipy", "numba", "matplotlib")
+    probe = ("import sys, sds_cli.cli, sds_workflows.errors\n"
+             "sds_workflows.errors.input_errors()\n"
+             f"print([m for m in {heavy!r} if m in sys.modules])")
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                          timeout=60, check=True)
+    assert done.stdout.strip() == "[]", done.stdout
+    import sds_workflows
+
+    assert all(callable(getattr(sds_workflows, name)) for name in sds_workflows.__all__)
+    with pytest.raises(AttributeError, match="no attribute 'process_videos'"):
+        sds_workflows.process_videos  # noqa: B018
+
+
 def test_run_refuses_a_missing_video_before_any_process_starts(tmp_path: Path) -> None:
     done = sds("run", "--video", str(tmp_path / "nope.mp4"), "--rig", str(RIG), "--out",
                str(tmp_path / "run"))

@@ -24,15 +24,37 @@ The main entry points:
   launcher's `sds_bringup.chain.run_chain` (the workflows start no graph themselves).
 """
 
-from sds_workflows.analyze import analyse_recording
-from sds_workflows.clock_link import link_clocks
-from sds_workflows.export import export_results
-from sds_workflows.lateral import LateralInput
-from sds_workflows.line_plane_calibration import calibrate_line_plane
-from sds_workflows.pipeline import FramePipeline, mcap_frames, video_frames
-from sds_workflows.process import process_inputs, process_recording, process_video
-from sds_workflows.rig_calibration import calibrate_rig
+from __future__ import annotations
 
+from importlib import import_module
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from sds_workflows.analyze import analyse_recording
+    from sds_workflows.clock_link import link_clocks
+    from sds_workflows.export import export_results
+    from sds_workflows.lateral import LateralInput
+    from sds_workflows.line_plane_calibration import calibrate_line_plane
+    from sds_workflows.pipeline import FramePipeline, mcap_frames, video_frames
+    from sds_workflows.process import process_inputs, process_recording, process_video
+    from sds_workflows.rig_calibration import calibrate_rig
+
+_MODULE_OF = {
+    "FramePipeline": "pipeline", "LateralInput": "lateral", "analyse_recording": "analyze",
+    "calibrate_line_plane": "line_plane_calibration", "calibrate_rig": "rig_calibration",
+    "export_results": "export", "link_clocks": "clock_link", "mcap_frames": "pipeline",
+    "process_inputs": "process", "process_recording": "process", "process_video": "process",
+    "video_frames": "pipeline",
+}
 __all__ = ["FramePipeline", "LateralInput", "analyse_recording", "calibrate_line_plane",
            "calibrate_rig", "export_results", "link_clocks", "mcap_frames", "process_inputs",
            "process_recording", "process_video", "video_frames"]
+
+
+def __getattr__(name: str) -> object:
+    """An entry point, imported when first asked for (PEP 562): importing one light module of
+    the package, such as `errors`, then loads none of the others (seconds of SciPy, Numba and
+    Matplotlib for every `sds` command)."""
+    if name not in _MODULE_OF:
+        raise AttributeError(f"module 'sds_workflows' has no attribute {name!r}")
+    return getattr(import_module(f"sds_workflows.{_MODULE_OF[name]}"), name)

@@ -52,12 +52,12 @@ def expected_frequencies(items: list[str]) -> dict[str, float]:
 
 def run(args: argparse.Namespace) -> int:
     """Analyse, write the report, print the summary."""
+    refuse_existing(args.out / "analysis.json", args.overwrite,
+                    "exists: the folder holds an analysis already")
     from sds_sloshing.analysis import AnalysisOptions
     from sds_sloshing.report import summary_lines, truth_from_run, write_report
     from sds_workflows.analyze import analyse_recording
 
-    refuse_existing(args.out / "analysis.json", args.overwrite,
-                    "exists: the folder holds an analysis already")
     options = AnalysisOptions(args.start_s, args.end_s, args.forcing_s, args.gravity,
                               expected_frequencies(args.expected))
     analysis = analyse_recording(args.recording, args.rig, options)
