@@ -77,10 +77,7 @@ def expand_inputs(paths: list[Path], suffixes: tuple[str, ...]) -> list[Path]:
 
 def run(args: argparse.Namespace) -> int:
     """Result files and the analysis report of each video or recording."""
-    from sds_model.rig import load_rig
     from sds_recon.results import refuse_results
-    from sds_record.recorded_series import recording_rig
-    from sds_workflows.process import calibrate_from_images, process_input, process_inputs
 
     is_video = args.video is not None
     lateral = lateral_input(args)
@@ -91,6 +88,11 @@ def run(args: argparse.Namespace) -> int:
     if not args.overwrite:   # before any work: a refused folder is named at once
         for out in outs:
             refuse_results(out)
+    # Only now the numerical libraries (seconds): a missing input is told at once.
+    from sds_model.rig import load_rig
+    from sds_record.recorded_series import recording_rig
+    from sds_workflows.process import calibrate_from_images, process_input, process_inputs
+
     rig_file = args.rig
     if args.calibrate_lasers:
         if args.surfaces is None:

@@ -30,14 +30,14 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Convert and say how many messages the scene shows."""
-    from sds_model.rig import load_rig
-    from sds_record.recorded_series import recorded_rig
-    from sds_viz.from_mcap import mcap_to_rrd
-
     output = args.out or args.recording.with_suffix(".rrd")
     if not args.recording.is_file():
         raise CommandError(f"{args.recording}: no such recording")
     refuse_existing(output, args.overwrite)
+    from sds_model.rig import load_rig
+    from sds_record.recorded_series import recorded_rig
+    from sds_viz.from_mcap import mcap_to_rrd
+
     rig = load_rig(args.rig) if args.rig else recorded_rig(args.recording)
     if rig is None:
         print(f"sds view: {args.recording} carries no rig and no --rig was given: the "
