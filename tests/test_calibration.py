@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -18,9 +19,10 @@ from sds_model.camera.importers import (
 )
 from sds_model.geometry import RigidTransform
 from sds_recon.calibration.board import BoardView, Checkerboard, detect_corners
-from sds_recon.calibration.camera_calibration import calibrate_camera
+from sds_recon.calibration.camera_calibration import CalibrationRun, calibrate_camera
 from sds_recon.calibration.intrinsics import calibrate_scaramuzza, reprojection_errors
 from sds_recon.calibration.lasers import calibrate_line_plane_on_boards
+from sds_recon.calibration.report import report_content, report_text
 from sds_tracker.line import find_line
 
 BOARD = Checkerboard(8, 6, 15.0)
@@ -134,6 +136,19 @@ def test_scaramuzza_fit_is_exact_on_exact_corners() -> None:
     assert np.max(np.abs(calibration.camera.project(symmetric.pixel_to_ray(grid)) - grid)) < 1e-4
 
 
+def test_a_fit_that_stops_at_its_limit_says_so_first() -> None:
+    truth = ocamcalib_camera(*IMGBACK, pixel_origin=0)
+    views = [BoardView(f"view{i}", truth.project(pose.apply(BOARD.object_points())),
+                       BOARD.object_points())
+             for i, pose in enumerate(board_poses(truth, BOARD, 8, seed=4))]
+    calibration = calibrate_scaramuzza(views, truth.width_px, truth.height_px)
+    assert calibration.converged
+    run = CalibrationRun("scaramuzza", BOARD, replace(calibration, converged=False), [])
+    first = report_text(report_content(run)).splitlines()[0]
+    assert first.startswith("THE FIT DID NOT CONVERGE"), first
+    assert "NOT CONVERGE" not in report_text(report_content(replace(run, calibration=calibration)))
+
+
 def test_scaramuzza_calibration_recovers_a_known_fisheye(tmp_path: Path) -> None:
     truth = ocamcalib_camera(*IMGBACK, pixel_origin=0)
     run = calibrate_camera(write_views(truth, tmp_path, 10, seed=3), BOARD, "scaramuzza")
@@ -240,6 +255,7 @@ def test_own_scaramuzza_fit_is_no_worse_than_ocamcalib(shared_data: Path, name: 
     run = calibrate_camera(images, checkerboard, "scaramuzza")
     assert not run.rejected_images
     ours = run.calibration
+    assert ours.converged, name     # by its tolerance, not at its limit of evaluations
     theirs = reference["recomputed_reprojection"]["overall_rms_px"]
     assert ours.rms_px <= theirs, f"{name}: ours {ours.rms_px:.3f} px, OCamCalib {theirs:.3f} px"
     # Same answer as OCamCalib's within what two corner detectors allow (SOURCE.txt: ~1 px).

@@ -216,8 +216,9 @@ def run_camera(args: argparse.Namespace) -> int:
     refuse_existing(args.out, args.overwrite)
     board = Checkerboard.parse(args.board, args.square)
     run = calibrate_camera(sorted(args.images), board, args.model)
+    unconverged = "" if run.calibration.converged else "THE FIT DID NOT CONVERGE. "
     camera_path = save_camera(run.calibration.camera, args.out, comment=(
-        f"Calibrated by `sds calibrate camera --model {args.model}` from "
+        f"{unconverged}Calibrated by `sds calibrate camera --model {args.model}` from "
         f"{len(run.calibration.views)} images of a {args.board} board, {args.square:g} mm squares: "
         f"RMS reprojection error {run.calibration.rms_px:.3f} px."))
     paths = write_report(run, camera_path.parent, camera_path.stem)

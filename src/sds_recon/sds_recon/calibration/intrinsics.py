@@ -46,6 +46,7 @@ class Calibration:
     poses: list[RigidTransform]
     views: list[BoardView]
     errors: list[ViewError]
+    converged: bool = True     # False: the fit stopped at its evaluation limit
 
     @property
     def mean_px(self) -> float:
@@ -175,6 +176,9 @@ def _initial_scaramuzza(views: list[BoardView], centre: np.ndarray,
     return polynomial, poses
 
 
+FIT_MAX_EVALUATIONS = 200
+"""The Scaramuzza fit's limit of evaluations (each a finite-difference Jacobian); stopping
+there, it reports itself not converged."""
 INTRINSIC_COUNT = 4 + SCARAMUZZA_DEGREE
 """x0, y0, c, e (= m), a0, a2 … a_degree."""
 
@@ -225,8 +229,12 @@ def calibrate_scaramuzza(views: list[BoardView], width_px: int, height_px: int) 
         first = INTRINSIC_COUNT + 6 * index
         sparsity[2 * start: 2 * (start + size), first: first + 6] = 1
         start += size
+    # LSMR solves each step's linear problem to 1e-12, not its default 1e-6: the polynomial's
+    # terms are nearly collinear, and steps solved to 1e-6 crawl along them until the limit.
     solution = least_squares(residuals, np.concatenate([intrinsics, extrinsics]),
                              jac_sparsity=sparsity, x_scale="jac", method="trf",
-                             xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=200)
+                             tr_options={"atol": 1e-12, "btol": 1e-12},
+                             xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=FIT_MAX_EVALUATIONS)
     camera, poses = unpack(solution.x)
-    return Calibration(camera, poses, views, reprojection_errors(camera, poses, views))
+    return Calibration(camera, poses, views, reprojection_errors(camera, poses, views),
+                       converged=solution.status > 0)

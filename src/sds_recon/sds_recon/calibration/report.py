@@ -22,6 +22,7 @@ def report_content(run: CalibrationRun) -> dict[str, Any]:
         "board": {"columns": run.board.columns, "rows": run.board.rows,
                   "square_mm": run.board.square_mm},
         "images_used": len(calibration.views),
+        "converged": calibration.converged,
         "images_without_board": run.rejected_images,
         "overall": {"points": int(everything.size), "mean_px": calibration.mean_px,
                     "rms_px": calibration.rms_px, "max_px": float(everything.max())},
@@ -44,6 +45,9 @@ def report_text(content: dict[str, Any]) -> str:
              f"{'image':<28} {'points':>6} {'mean px':>8} {'rms px':>8} {'max px':>8}"]
     lines += [f"{row['image']:<28} {row['points']:>6} {row['mean_px']:>8.3f} {row['rms_px']:>8.3f} "
               f"{row['max_px']:>8.3f}" for row in content["per_image"]]
+    if not content["converged"]:
+        lines.insert(0, "THE FIT DID NOT CONVERGE: it stopped at its limit of evaluations; the "
+                        "camera below is not the best the corners give (check the images)")
     if content["images_without_board"]:
         lines.append("no complete board found in: " + ", ".join(content["images_without_board"]))
     for correction in content["corner_corrections"]:
