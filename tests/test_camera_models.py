@@ -271,6 +271,26 @@ def test_rigid_transform_matches_rodrigues_and_inverts() -> None:
         RigidTransform(np.diag([1.0, 1.0, -1.0]))
 
 
+def test_a_rotation_is_accepted_where_np_allclose_accepted_it() -> None:
+    """The cheap orthonormality check keeps np.allclose's tolerance (atol 1e-9, rtol 1e-5)."""
+    outcomes = []
+    for row, column, change in [(0, 0, 4e-6), (1, 1, -4e-6), (0, 1, 1e-7), (2, 0, 5e-10),
+                                (0, 0, 2e-5)]:
+        rotation = np.eye(3)
+        rotation[row, column] += change
+        expected = np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-9)
+        try:
+            RigidTransform(rotation)
+            accepted = True
+        except ValueError:
+            accepted = False
+        assert accepted == expected, (row, column, change)
+        outcomes.append(accepted)
+    assert any(outcomes) and not all(outcomes)
+    with pytest.raises(ValueError, match="proper orthonormal"):
+        RigidTransform(np.diag([1.0, 1.0, -1.0]))
+
+
 def test_symmetric_stretch_forms_the_same_image_with_a_roll() -> None:
     camera = gopro()
     symmetric, roll = camera.with_symmetric_stretch()

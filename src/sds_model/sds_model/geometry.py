@@ -9,6 +9,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 _IDENTITY = np.eye(3)
+_ORTHONORMAL_TOLERANCE = 1e-9 + 1e-5 * _IDENTITY
+"""How far R Rᵀ may be from the identity, entry by entry: np.allclose's atol 1e-9 and
+rtol 1e-5, the check this replaces."""
 
 
 def _determinant(matrix: np.ndarray) -> float:
@@ -29,7 +32,8 @@ class RigidTransform:
         translation = np.asarray(self.translation_mm, dtype=float).reshape(3)
         # Cheap checks (not np.allclose, np.linalg.det): fits build a transform per pose per
         # evaluation.
-        orthonormal = np.abs(rotation @ rotation.T - _IDENTITY).max() <= 1e-9
+        error = np.abs(rotation @ rotation.T - _IDENTITY)
+        orthonormal = bool(np.all(error <= _ORTHONORMAL_TOLERANCE))
         if not orthonormal or _determinant(rotation) < 0:
             raise ValueError("rotation must be a proper orthonormal 3×3 matrix")
         object.__setattr__(self, "rotation", rotation)
