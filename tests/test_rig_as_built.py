@@ -21,7 +21,7 @@ from sds_model.rig import RigError, Tolerances, load_rig, save_rig
 from sds_recon.calibration.laser_files import read_surfaces
 from sds_recon.calibration.lasers import KnownSurface
 from sds_recon.calibration.model_check import check_model
-from sds_recon.calibration.plan import HEIGHT_GOAL_MM, plan
+from sds_recon.calibration.plan import HEIGHT_GOAL_MM, plan, predict, tilt_shares
 from sds_recon.calibration.rig_calibration import calibrate_rig
 from sds_recon.calibration.rig_model import RigModel
 from sds_recon.calibration.self_calibration import SelfCalibration, self_calibrate
@@ -187,6 +187,17 @@ def test_the_planner_predicts_the_fits_sigma_and_asks_first_for_a_second_fill_le
     assert min(whatif, key=lambda what: whatif[what].worst_tilt_deg).startswith(
         "tilted frames read to 0.05 deg")
 
+    # What sets the tilt: a group's share (the posterior conditioned on it) is what a plan
+    # with that group known exactly loses, computed by the planner from a new information
+    # matrix instead.
+    shares = dict(tilt_shares(planned))
+    assert all(0.0 <= share <= 1.0 for share in shares.values())
+    exact = predict(replace(rig, tolerances=Tolerances(emitter_mm=1e-4)), planned.surfaces)
+    gradient = planned.worst_tilt_gradient
+    assert shares["emitters' places"] == pytest.approx(
+        1.0 - (gradient @ exact.covariance @ gradient)
+        / (gradient @ planned.covariance @ gradient), abs=0.02)
+
     rig_file = save_rig(rig, tmp_path / "rig.yaml")
     done = subprocess.run([SDS, "calibrate", "plan", "--rig", str(rig_file), "--out",
                            str(tmp_path / "plan.csv")], capture_output=True, text=True,
@@ -194,6 +205,7 @@ def test_the_planner_predicts_the_fits_sigma_and_asks_first_for_a_second_fill_le
     assert done.returncode == 0, done.stderr
     assert "camera Z mm" in done.stdout
     assert "the planned protocol with better knowledge" in done.stdout, done.stdout
+    assert "what sets the unseen tilt's sigma" in done.stdout, done.stdout
     written = read_surfaces(tmp_path / "plan.csv")
     assert len(written) == len(planned.surfaces)
     assert [s.offset_mm for _, s in sorted(written.items())] == \

@@ -25,10 +25,14 @@ from sds_recon.calibration.plan import (
     Prediction,
     plan,
     predict,
+    tilt_shares,
     unseen_reach_mm,
     unseen_sensitivity,
 )
 
+SHOWN_SHARE = 0.1
+"""A parameter group is named among what sets the unseen tilt when knowing it exactly would
+take this share of the tilt's variance or more."""
 BASE_TILTS_DEG = (0.0, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0, 35.0)
 """The seed's tilt table series about X (Table 3)."""
 CANDIDATE_TILTS_DEG = (12.5, 22.5, 32.5)
@@ -164,7 +168,16 @@ def _goals_line(planned: Prediction) -> str:
     met = "".join(f" ({goal} met)" for goal, is_met in goals if is_met)
     noun, pronoun = ("goals", "them") if len(unmet) > 1 else ("goal", "it")
     return (f"{noun} {' and '.join(unmet)} not met{met}: no candidate lowers {pronoun} by "
-            f"{LEAST_GAIN:.0%} more; the emitters' and the readings' tolerances set the floor")
+            f"{LEAST_GAIN:.0%} more")
+
+
+def shares_text(planned: Prediction) -> str:
+    """What sets the planned protocol's unseen tilt σ: the parameter groups whose exact
+    knowledge would take SHOWN_SHARE or more of its variance (`tilt_shares`)."""
+    shares = [f"{group} {share:.0%}" for group, share in tilt_shares(planned)
+              if share >= SHOWN_SHARE]
+    return ("what sets the unseen tilt's sigma (the share of its variance that would go, each "
+            "known exactly; they overlap): " + ", ".join(shares))
 
 
 def write_protocol(prediction: Prediction, path: Path) -> None:

@@ -163,6 +163,7 @@ def run_plan(args: argparse.Namespace) -> int:
         Accuracy,
         plan_protocol,
         plan_text,
+        shares_text,
         what_if_text,
         what_would_meet_the_goals,
         write_protocol,
@@ -178,6 +179,7 @@ def run_plan(args: argparse.Namespace) -> int:
     steps = plan_protocol(rig, accuracy, args.candidates)
     print(plan_text(steps))
     if not steps[-1].meets_goals():
+        print(shares_text(steps[-1]))
         print(what_if_text(what_would_meet_the_goals(rig, accuracy, steps[-1])))
     if args.out is not None:
         write_protocol(steps[-1], args.out)

@@ -48,6 +48,8 @@ class Prediction:
     sigmas: np.ndarray
     tilt_sigma_deg: np.ndarray
     height_sigma_mm: np.ndarray
+    covariance: np.ndarray            # posterior of every parameter (natural units)
+    worst_tilt_gradient: np.ndarray   # the worst unseen tilt's change per parameter [rad]
 
     @property
     def worst_tilt_deg(self) -> float:
@@ -182,15 +184,49 @@ def predict(rig: Rig, surfaces: list[KnownSurface],
     information = (design * scales).T @ (design * scales)
     posterior = np.linalg.pinv(information, rcond=1e-12) * np.outer(scales, scales)
     sigmas = np.sqrt(np.clip(np.diag(posterior), 0.0, None))
-    tilt_sigma, height_sigma = [], []
+    tilt_sigma, height_sigma, tilt_gradients = [], [], []
     for unseen in range(len(UNSEEN_TILTS_DEG)):
         tilt_gradient, height_gradient = sensitivity.rows(model.table.names, unseen)
         tilt_variance = np.einsum("ki,kl,li->i", tilt_gradient, posterior, tilt_gradient)
         height_variance = np.einsum("ki,kl,li->i", height_gradient, posterior, height_gradient)
         tilt_sigma.append(float(np.degrees(np.sqrt(np.max(tilt_variance)))))
+        tilt_gradients.append(tilt_gradient[:, int(np.argmax(tilt_variance))])
         height_sigma.append(float(np.sqrt(np.mean(height_variance))))
     return Prediction(list(surfaces), model.table.names, sigmas, np.array(tilt_sigma),
-                      np.array(height_sigma))
+                      np.array(height_sigma), posterior,
+                      tilt_gradients[int(np.argmax(tilt_sigma))])
+
+
+def parameter_group(name: str) -> str:
+    """The group a parameter counts in when the planner says what sets the unseen tilt: each
+    of the camera's six pose parameters alone, else its kind (every beam, every emitter, every
+    surface's tilt reading, every fill level, the line plane, the camera file)."""
+    if name.startswith("camera ") and name.removeprefix("camera ") in (
+            "rotation about X", "rotation about Y", "rotation about Z", "X", "Y", "Z"):
+        return name
+    for prefix, group in (("beam ", "beams' leans"), ("emitter ", "emitters' places"),
+                          ("line plane", "line plane"), ("camera ", "camera file")):
+        if name.startswith(prefix):
+            return group
+    return "surfaces' tilt readings" if "tilt" in name else "fill levels"
+
+
+def tilt_shares(prediction: Prediction) -> list[tuple[str, float]]:
+    """What sets the worst unseen tilt's σ: for each parameter group (`parameter_group`), the
+    share of its variance that would go were the group known exactly (the posterior
+    conditioned on it), largest first. Shares overlap: groups that move together (the
+    camera's turn about the vertical and the emitters' layout) each claim what they share."""
+    covariance, gradient = prediction.covariance, prediction.worst_tilt_gradient
+    total = float(gradient @ covariance @ gradient)
+    groups = np.array([parameter_group(name) for name in prediction.names])
+    shares = []
+    for group in dict.fromkeys(groups):
+        known, rest = groups == group, groups != group
+        conditioned = covariance[np.ix_(rest, rest)] - covariance[np.ix_(rest, known)] @ \
+            np.linalg.pinv(covariance[np.ix_(known, known)]) @ covariance[np.ix_(known, rest)]
+        left = float(gradient[rest] @ conditioned @ gradient[rest])
+        shares.append((str(group), 1.0 - left / total))
+    return sorted(shares, key=lambda share: -share[1])
 
 
 def plan(rig: Rig, base: list[KnownSurface], candidates: list[KnownSurface]
