@@ -53,6 +53,9 @@ def test_a_source_that_cannot_be_opened_ends_the_drop_graph_with_its_cause(repo,
     # The camera's process (in drop.yaml the chain: camera, tracker, recon) is named with it.
     assert re.search(r"\w+ \([\w, ]*\bcamera\b[\w, ]*\) exited with code 2: video file "
                      r"/nonexistent/drop\.mp4 does not exist; stopping the graph", output), output
+    # The chain's nodes after the camera are not started (they would publish, the rig for
+    # one, into a recording of a run that never was).
+    assert "[tracker]" not in output and "[recon]" not in output, output
     if (tmp_path / "drop.mcap").exists():   # the recorder had started: it closed its file
         assert "wrote 0 messages" in output, output
     assert "Traceback" not in output and "rosout" not in output, output

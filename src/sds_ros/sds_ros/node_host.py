@@ -62,6 +62,8 @@ def run_nodes(
             executor.add_node(node)
             if is_required:
                 required.append(node)
+            if _failed(node):   # it cannot work (a missing source): start no more of them
+                break
         # Until a required node is done, or any node has failed (a node that cannot work,
         # e.g. a recorder refusing to replace a file, ends its process with its code).
         while rclpy.ok() and not stop.is_set() and \
