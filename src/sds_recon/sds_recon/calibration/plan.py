@@ -19,6 +19,18 @@ import numpy as np
 from sds_model.rig import Rig
 
 from sds_recon.calibration.lasers import KnownSurface
+from sds_recon.calibration.parameters import (
+    BEAM_KIND,
+    CAMERA_POSITION_KIND,
+    CAMERA_ROTATION_KIND,
+    EMITTER_KIND,
+    LINE_OFFSET_KIND,
+    LINE_PLANE_KIND,
+    SURFACE_OFFSET_KIND,
+    SURFACE_TILT_KIND,
+    Parameter,
+    ParameterTable,
+)
 from sds_recon.calibration.rig_model import RigModel
 from sds_recon.calibration.self_calibration import Observations, jacobian, spot_whitening
 from sds_recon.reconstruction import reconstruct_spots
@@ -40,16 +52,21 @@ and the readings' tolerances set the floor)."""
 
 @dataclass(frozen=True)
 class Prediction:
-    """A protocol's predicted outcome: every parameter's posterior σ (natural units) and the
-    one-σ tilt [deg] and height RMS [mm] errors on each unseen surface."""
+    """A protocol's predicted outcome: every parameter's posterior σ and covariance (natural
+    units) and the one-σ tilt [deg] and height RMS [mm] errors on each unseen surface."""
 
     surfaces: list[KnownSurface]
-    names: list[str]
+    table: ParameterTable
     sigmas: np.ndarray
     tilt_sigma_deg: np.ndarray
     height_sigma_mm: np.ndarray
     covariance: np.ndarray            # posterior of every parameter (natural units)
     worst_tilt_gradient: np.ndarray   # the worst unseen tilt's change per parameter [rad]
+
+    @property
+    def names(self) -> list[str]:
+        """Every parameter's name, in the order of `sigmas`."""
+        return self.table.names
 
     @property
     def worst_tilt_deg(self) -> float:
@@ -192,23 +209,24 @@ def predict(rig: Rig, surfaces: list[KnownSurface],
         tilt_sigma.append(float(np.degrees(np.sqrt(np.max(tilt_variance)))))
         tilt_gradients.append(tilt_gradient[:, int(np.argmax(tilt_variance))])
         height_sigma.append(float(np.sqrt(np.mean(height_variance))))
-    return Prediction(list(surfaces), model.table.names, sigmas, np.array(tilt_sigma),
+    return Prediction(list(surfaces), model.table, sigmas, np.array(tilt_sigma),
                       np.array(height_sigma), posterior,
                       tilt_gradients[int(np.argmax(tilt_sigma))])
 
 
-def parameter_group(name: str) -> str:
-    """The group a parameter counts in when the planner says what sets the unseen tilt: each
-    of the camera's six pose parameters alone, else its kind (every beam, every emitter, every
-    surface's tilt reading, every fill level, the line plane, the camera file)."""
-    if name.startswith("camera ") and name.removeprefix("camera ") in (
-            "rotation about X", "rotation about Y", "rotation about Z", "X", "Y", "Z"):
-        return name
-    for prefix, group in (("beam ", "beams' leans"), ("emitter ", "emitters' places"),
-                          ("line plane", "line plane"), ("camera ", "camera file")):
-        if name.startswith(prefix):
-            return group
-    return "surfaces' tilt readings" if "tilt" in name else "fill levels"
+GROUP_OF_KIND = {BEAM_KIND: "beams' leans", EMITTER_KIND: "emitters' places",
+                 SURFACE_TILT_KIND: "surfaces' tilt readings", SURFACE_OFFSET_KIND: "fill levels",
+                 LINE_PLANE_KIND: "line plane", LINE_OFFSET_KIND: "line plane"}
+"""The group each kind of parameter counts in when the planner says what sets the unseen
+tilt (the camera's pose parameters count alone; the camera file's intrinsics, each of a kind
+of its own, together)."""
+
+
+def parameter_group(parameter: Parameter) -> str:
+    """The group `parameter` counts in when the planner says what sets the unseen tilt."""
+    if parameter.kind in (CAMERA_ROTATION_KIND, CAMERA_POSITION_KIND):
+        return parameter.name
+    return GROUP_OF_KIND.get(parameter.kind, "camera file")
 
 
 def tilt_shares(prediction: Prediction) -> list[tuple[str, float]]:
@@ -218,7 +236,7 @@ def tilt_shares(prediction: Prediction) -> list[tuple[str, float]]:
     camera's turn about the vertical and the emitters' layout) each claim what they share."""
     covariance, gradient = prediction.covariance, prediction.worst_tilt_gradient
     total = float(gradient @ covariance @ gradient)
-    groups = np.array([parameter_group(name) for name in prediction.names])
+    groups = np.array([parameter_group(p) for p in prediction.table.parameters])
     shares = []
     for group in dict.fromkeys(groups):
         known, rest = groups == group, groups != group
