@@ -29,15 +29,19 @@ from __future__ import annotations
 from importlib import import_module
 from typing import TYPE_CHECKING
 
-if TYPE_CHECKING:
-    from sds_workflows.analyze import analyse_recording
-    from sds_workflows.clock_link import link_clocks
-    from sds_workflows.export import export_results
-    from sds_workflows.lateral import LateralInput
-    from sds_workflows.line_plane_calibration import calibrate_line_plane
-    from sds_workflows.pipeline import FramePipeline, mcap_frames, video_frames
-    from sds_workflows.process import process_inputs, process_recording, process_video
-    from sds_workflows.rig_calibration import calibrate_rig
+if TYPE_CHECKING:   # what a type checker sees: every entry point, re-exported
+    from sds_workflows.analyze import analyse_recording as analyse_recording
+    from sds_workflows.clock_link import link_clocks as link_clocks
+    from sds_workflows.export import export_results as export_results
+    from sds_workflows.lateral import LateralInput as LateralInput
+    from sds_workflows.line_plane_calibration import calibrate_line_plane as calibrate_line_plane
+    from sds_workflows.pipeline import FramePipeline as FramePipeline
+    from sds_workflows.pipeline import mcap_frames as mcap_frames
+    from sds_workflows.pipeline import video_frames as video_frames
+    from sds_workflows.process import process_inputs as process_inputs
+    from sds_workflows.process import process_recording as process_recording
+    from sds_workflows.process import process_video as process_video
+    from sds_workflows.rig_calibration import calibrate_rig as calibrate_rig
 
 _MODULE_OF = {
     "FramePipeline": "pipeline", "LateralInput": "lateral", "analyse_recording": "analyze",
@@ -46,9 +50,8 @@ _MODULE_OF = {
     "process_inputs": "process", "process_recording": "process", "process_video": "process",
     "video_frames": "pipeline",
 }
-__all__ = ["FramePipeline", "LateralInput", "analyse_recording", "calibrate_line_plane",
-           "calibrate_rig", "export_results", "link_clocks", "mcap_frames", "process_inputs",
-           "process_recording", "process_video", "video_frames"]
+"""Where each entry point lives (the package's one list of them)."""
+__all__ = sorted(_MODULE_OF)
 
 
 def __getattr__(name: str) -> object:
