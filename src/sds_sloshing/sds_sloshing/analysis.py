@@ -145,9 +145,7 @@ class SloshingAnalysis:
 
 def _significant(fit: DampedSinusoidFit, component: DampedSinusoid, min_snr: float) -> bool:
     """Matched-filter SNR of a component, √(Σ c(τ)²) / residual RMS, at least `min_snr`."""
-    tau = np.linspace(0.0, fit.end_s - fit.start_s, fit.sample_count)
-    energy = float(np.sum(component.evaluate(tau) ** 2))
-    return np.sqrt(energy) >= min_snr * max(fit.residual_rms, np.finfo(float).tiny)
+    return fit.window_norm(component) >= min_snr * max(fit.residual_rms, np.finfo(float).tiny)
 
 
 def _pick(fit: DampedSinusoidFit, expected_hz: float | None, min_snr: float

@@ -96,10 +96,15 @@ class DampedSinusoid:
         return np.exp(-self.decay_rate_s * tau) * (self.cos_amplitude * np.cos(phase)
                                                    + self.sin_amplitude * np.sin(phase))
 
+    def norm(self, tau_s: ArrayLike) -> float:
+        """√(Σ c(τ)²) over the samples at τ [s]: how much of the record the component is."""
+        return float(np.sqrt(np.sum(self.evaluate(tau_s) ** 2)))
+
 
 @dataclass(frozen=True)
 class DampedSinusoidFit:
-    """Offset plus damped sinusoids fitted to a record from `start_s` (matrix pencil + NLS)."""
+    """Offset plus damped sinusoids fitted to a record from `start_s` (matrix pencil + NLS),
+    the components largest in the window first (`window_norm`)."""
 
     start_s: float
     end_s: float
@@ -113,6 +118,10 @@ class DampedSinusoidFit:
         """The fitted model at times [s]."""
         tau = np.asarray(time_s, dtype=float) - self.start_s
         return self.offset + sum((c.evaluate(tau) for c in self.components), np.zeros_like(tau))
+
+    def window_norm(self, component: DampedSinusoid) -> float:
+        """√(Σ c(τ)²) of a component over the window's samples (taken as evenly spaced)."""
+        return component.norm(np.linspace(0.0, self.end_s - self.start_s, self.sample_count))
 
     def estimate(self, component: DampedSinusoid, method: str = "matrix_pencil") -> ModeEstimate:
         """A component as a `ModeEstimate`."""
@@ -492,8 +501,11 @@ def fit_damped_sinusoids(time_s: ArrayLike, values: ArrayLike, max_components: i
             for k in range(found))
         bic = len(y) * np.log(rss / len(y)) + len(parameters) * np.log(len(y))
         if best is None or bic < best.bic:
+            # Largest over the window, not at its start: a fast, heavily damped component
+            # that fits one sample can start thousands of times larger than the mode (its
+            # cos and sin terms cancelling) and be gone two samples later.
             best = DampedSinusoidFit(float(t[0]), float(t[-1]), float(linear[0]),
-                                     tuple(sorted(components, key=lambda c: -c.amplitude)),
+                                     tuple(sorted(components, key=lambda c: -c.norm(tau))),
                                      float(np.sqrt(rss / len(y))), len(y), float(bic))
     if best is None:
         raise DecayError("no decaying oscillation found in the record")
