@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import hashlib
 import itertools
 import json
 import subprocess
@@ -266,3 +267,13 @@ def test_rig_file_errors_name_the_field(config: Path, tmp_path: Path) -> None:
     broken.write_text(text.replace("direction: [0.0, 0.0, -1.0]}", "direction: [0, 0, 0]}", 1))
     with pytest.raises(ValueError, match=r"diodes\[0\].direction must not be zero"):
         load_rig(broken)
+
+
+def test_a_scenario_gives_the_same_video_every_time(config: Path, tmp_path: Path) -> None:
+    """Three runs of one scenario write byte-identical videos, so a run that went wrong can be
+    made again (x264's frame threads under a bit-rate limit differed nearly every run)."""
+    scenario = load_scenario(config / "scenarios" / "drop_4p7s.yaml",
+                             {"duration_s": 1.0, "scale": 0.5})
+    videos = {hashlib.sha256(simulate(scenario, tmp_path / str(run), progress=False)
+                             .video.read_bytes()).hexdigest() for run in range(3)}
+    assert len(videos) == 1, videos

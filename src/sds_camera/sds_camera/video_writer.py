@@ -14,6 +14,10 @@ import numpy as np
 # camera's bit rate), "lossless" keeps every pixel (libx264rgb at qp 0 for BGR, libx264 qp 0
 # for mono).
 CODECS = ("h264", "lossless")
+ENCODER_THREADS = "1"
+"""One encoder thread: the same frames give the same file on every run. x264's
+threads (frame or slice) under a bit-rate limit (VBV) gave a different file nearly every run,
+so a simulated run that went wrong could not be made again."""
 
 
 class VideoWriter:
@@ -52,7 +56,7 @@ class VideoWriter:
             imageio_ffmpeg.get_ffmpeg_exe(), "-y", "-loglevel", "error",
             "-f", "rawvideo", "-pix_fmt", pix_in, "-s", f"{width}x{height}",
             "-r", f"{rate.numerator}/{rate.denominator}", "-i", "-",
-            *out, "-preset", "veryfast", str(self.path),
+            *out, "-preset", "veryfast", "-threads", ENCODER_THREADS, str(self.path),
         ]
         self._process = subprocess.Popen(command, stdin=subprocess.PIPE, stderr=subprocess.PIPE)
 
