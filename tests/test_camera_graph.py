@@ -206,9 +206,13 @@ def test_demo_measures_a_simulated_drop_with_the_whole_graph(tmp_path, repo):
     results = load_results(tmp_path / "results")
     for table in (results.imu, results.tof):   # one clock from the first record: none back
         assert table is not None and np.all(np.diff(table["t_s"]) > 0)
+    # Wall-clock stamps, yet every frame's time to the nanosecond (not float seconds since 1970)
+    assert results.spots is not None
+    np.testing.assert_allclose(results.spots["t_s"], results.spots["frame"] / 30, rtol=0,
+                               atol=2e-9)
     analysis = json.loads((tmp_path / "analysis" / "analysis.json").read_text())
     lateral_1 = next(m for m in analysis["modes"] if m["mode"] == "lateral_1")
-    assert abs(lateral_1["estimates"][0]["frequency_error_pct"]) < 0.5
+    assert abs(lateral_1["estimates"][0]["frequency_error_pct"]) < 0.5, result.stdout
     heights = re.search(r"heights +RMSE ([0-9.]+) mm against the truth \((\d+) points\)",
                         result.stdout)
     assert heights and float(heights.group(1)) < 0.2, result.stdout

@@ -353,9 +353,10 @@ def points_rows(recording: SurfaceSeries) -> tuple[np.ndarray, np.ndarray, np.nd
             np.tile(recording.laser_ids, frames), recording.points_mm.reshape(-1, 3))
 
 
-def write_points_mcap(recording: SurfaceSeries, path: Path) -> None:
+def write_points_mcap(recording: SurfaceSeries, path: Path, epoch_ns: int = 0) -> None:
     """The recording as PointCloud2 messages on /points, in metres as the reconstruction node
-    sends them (written with rosbags' message definition and the mcap writer, not ours)."""
+    sends them, stamped `epoch_ns` + its times (written with rosbags' message definition and
+    the mcap writer, not ours)."""
     typestore = get_typestore(Stores.ROS2_KILTED)
     msgdef, _ = typestore.generate_msgdef("sensor_msgs/msg/PointCloud2", ros_version=2)
     fields = [{"name": n, "offset": o, "datatype": d, "count": 1}
@@ -371,7 +372,7 @@ def write_points_mcap(recording: SurfaceSeries, path: Path) -> None:
             for axis, name in enumerate("xyz"):
                 cloud[name] = points[keep, axis] / 1000
             cloud["laser_id"] = recording.laser_ids[keep]
-            stamp_ns = round(time_s * 1e9)
+            stamp_ns = epoch_ns + round(time_s * 1e9)
             writer.write_message("/points", schema, {
                 "header": {"stamp": {"sec": stamp_ns // 10**9, "nanosec": stamp_ns % 10**9},
                            "frame_id": "world"},
@@ -504,15 +505,14 @@ def test_meniscus_profile_from_the_line_laser_before_the_kick(repo: Path) -> Non
 def test_mcap_times_are_seconds_from_the_first_frame_and_a_window_must_be_one(
         repo: Path, tmp_path: Path) -> None:
     """A recording stamped with the wall clock reads as seconds from its first frame, as the
-    CSVs do; a window that ends before it starts is a one-line error."""
+    CSVs do, to the nanosecond (float seconds since 1970 resolve only 0.24 µs); a window that
+    ends before it starts is a one-line error."""
     scenario = load_scenario(repo / "config" / "scenarios" / "drop_4p7s.yaml")
     recording = observe(scenario)
-    epoch = 1.8e9
-    shifted = SurfaceSeries(recording.time_s + epoch, recording.laser_ids,
-                               recording.points_mm)
-    write_points_mcap(shifted, tmp_path / "drop.mcap")
+    write_points_mcap(recording, tmp_path / "drop.mcap", epoch_ns=1_796_000_000_123_456_789)
     back = read_surface_series(tmp_path / "drop.mcap")
-    np.testing.assert_allclose(back.time_s, recording.time_s - recording.time_s[0], atol=1e-6)
+    np.testing.assert_allclose(back.time_s, recording.time_s - recording.time_s[0], rtol=0,
+                               atol=2e-9)
     rig = str(scenario.rig_file)   # written by hand: the file carries no rig
     done = run_sds("analyze", str(tmp_path / "drop.mcap"), "--start-s", "1.5", "--end-s", "1.0",
                    "--rig", rig, "--out", str(tmp_path / "analysis"))

@@ -15,7 +15,7 @@ import numpy as np
 from mcap.exceptions import McapError
 from sds_model.rig import Rig, load_rig, rig_from_document
 from sds_recon.reconstruction import LINE_LASER_ID
-from sds_ros.point_cloud import read_cloud, stamp_s
+from sds_ros.point_cloud import read_cloud, stamp_ns, stamp_s
 from sds_sloshing.surface_series import RecordingError, SurfaceSeries, surface_series_from_rows
 
 from sds_record.mcap_files import decoded_messages
@@ -37,22 +37,23 @@ def read_surface_series(path: str | Path) -> SurfaceSeries:
             cloud = read_cloud(msg) if recorded.type_name == CLOUD_TYPE else None
             if cloud is not None and (~cloud.rejected).any():
                 kept = ~cloud.rejected
-                rows["time"].append(np.full(int(kept.sum()), stamp_s(msg)))
+                rows["time"].append(np.full(int(kept.sum()), stamp_ns(msg)))
                 rows["id"].append(cloud.points.laser_ids[kept])
                 rows["xyz"].append(cloud.points.points_mm[kept])
             elif recorded.type_name == RANGE_TYPE and np.isfinite(msg.range):
-                tof_time.append(stamp_s(msg))
+                tof_time.append(stamp_ns(msg))
                 tof_range.append(msg.range * 1e3)
     except (McapError, OSError, ValueError) as error:
         raise RecordingError(f"{path}: {error}") from None
     if not rows:
         raise RecordingError(f"{path}: no PointCloud2 with a laser_id field (a recording of the "
                              "reconstruction node's points topic is needed)")
-    times, ids = np.concatenate(rows["time"]), np.concatenate(rows["id"])
+    times_ns, ids = np.concatenate(rows["time"]), np.concatenate(rows["id"])
     spots = ids != LINE_LASER_ID
-    origin = float(times[spots].min()) if spots.any() else float(times.min())
-    return surface_series_from_rows(times - origin, ids, np.concatenate(rows["xyz"]), str(path),
-                               (np.array(tof_time) - origin, np.array(tof_range)))
+    origin_ns = times_ns[spots].min() if spots.any() else times_ns.min()
+    return surface_series_from_rows(
+        (times_ns - origin_ns) * 1e-9, ids, np.concatenate(rows["xyz"]), str(path),
+        ((np.array(tof_time, dtype=np.int64) - origin_ns) * 1e-9, np.array(tof_range)))
 
 
 def read_accelerations(path: str | Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:

@@ -119,3 +119,9 @@ def read_cloud(msg) -> CloudPoints | None:
 def stamp_s(msg) -> float:
     """A message's header stamp [s] (rclpy's messages or decoded from MCAP: the same fields)."""
     return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+
+
+def stamp_ns(msg) -> int:
+    """A message's header stamp [ns], exact: for differences between wall-clock stamps, which
+    `stamp_s` resolves only to 0.24 µs (a float's 53 bits over 1.8e9 s)."""
+    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec

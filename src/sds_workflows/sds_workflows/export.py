@@ -13,7 +13,7 @@ from sds_recon.reconstruction import LINE_LASER_ID, SurfacePoints
 from sds_recon.results import TABLE_FILES, ResultsWriter, refuse_results
 from sds_record.mcap_files import decoded_messages
 from sds_record.recorded_series import recording_rig
-from sds_ros.point_cloud import CloudPoints, read_cloud, stamp_s
+from sds_ros.point_cloud import CloudPoints, read_cloud, stamp_ns
 from sds_ros.static_tf import LATERAL_FRAME
 from sds_sloshing.analysis import AnalysisOptions
 from sds_sloshing.report import REPORT_FILES
@@ -43,21 +43,21 @@ def export_results(recording: Path, out: Path, rig_file: Path | None = None,
 
 def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:
     """The tables from a recording of the graph (spots, line, points, fits, IMU, ToF)."""
-    first: float | None = None
+    first: int | None = None   # the first frame's stamp [ns]
     frames = 0
-    frame_of: dict[float, int] = {}   # header stamp [s] -> frame index (clouds carry none)
-    clouds: list[tuple[float, float, CloudPoints]] = []
-    camera_imu: list[tuple[float, object]] = []
-    sensors: list[tuple[float, str, Any]] = []   # the Arduino's IMU and ToF: stamp, topic
+    frame_of: dict[int, int] = {}   # header stamp [ns] -> frame index (clouds carry none)
+    clouds: list[tuple[int, float, CloudPoints]] = []
+    camera_imu: list[tuple[int, object]] = []
+    sensors: list[tuple[int, str, Any]] = []   # the Arduino's IMU and ToF: stamp [ns], topic
     for recorded, msg in decoded_messages(path):
         name = recorded.type_name
         if not hasattr(msg, "header") or msg.header.frame_id == LATERAL_FRAME:
             continue    # the side camera's frames are not the top camera's
-        stamp = stamp_s(msg)
+        stamp = stamp_ns(msg)   # in ns: differences of float wall-clock seconds lose 0.24 µs
         if first is None and name in ("sensor_msgs/msg/Image", "sds_msgs/msg/LaserSpotArray",
                                       "sds_msgs/msg/LaserLineProfile"):
             first = stamp
-        time_s = stamp - (first if first is not None else stamp)
+        time_s = (stamp - (first if first is not None else stamp)) * 1e-9
         if name in ("sds_msgs/msg/LaserSpotArray", "sds_msgs/msg/LaserLineProfile"):
             frame_of[stamp] = msg.frame_index
         if name == "sds_msgs/msg/LaserSpotArray":
@@ -84,19 +84,19 @@ def export_recording(path: Path, rig: Rig, tables: RunTables) -> int:
     for position, (stamp, time_s, cloud) in enumerate(clouds):
         tables.add_points(frame_of.get(stamp, -1), time_s, cloud.points, cloud.rejected,
                           cloud.sample_offsets_s, analysed.get(position))
-    origin = first if first is not None else 0.0
+    origin = first if first is not None else 0
     for stamp, msg in sorted(camera_imu, key=lambda item: item[0]):
-        tables.add_camera_imu_message(msg, stamp - origin)
+        tables.add_camera_imu_message(msg, (stamp - origin) * 1e-9)
     for stamp, topic, msg in sorted(sensors, key=lambda item: item[0]):
         if hasattr(msg, "range"):
-            tables.add_tof(stamp - origin, msg.range * 1e3)
+            tables.add_tof((stamp - origin) * 1e-9, msg.range * 1e3)
         else:
             a = msg.linear_acceleration
-            tables.add_imu(topic, stamp - origin, (a.x, a.y, a.z))
+            tables.add_imu(topic, (stamp - origin) * 1e-9, (a.x, a.y, a.z))
     return frames
 
 
-def _at_frame_times(rig: Rig, clouds: list[tuple[float, float, CloudPoints]]
+def _at_frame_times(rig: Rig, clouds: list[tuple[int, float, CloudPoints]]
                     ) -> dict[int, SurfacePoints]:
     """The spot clouds' points carried to their frames' times (`sds_recon.instant`: what the
     reconstruction fitted), by position in `clouds`; a global shutter's as recorded."""

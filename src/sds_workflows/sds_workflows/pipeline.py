@@ -37,7 +37,7 @@ from sds_recon.reconstruction import (
 from sds_record.mcap_files import decoded_messages, recorded_topics
 from sds_ros.graph_file import node_parameters
 from sds_ros.image_msg import msg_to_image
-from sds_ros.point_cloud import stamp_s
+from sds_ros.point_cloud import stamp_ns
 from sds_ros.static_tf import LATERAL_FRAME
 from sds_sloshing.surface_series import RecordingError
 from sds_tracker.line import LineProfile
@@ -122,8 +122,8 @@ def _recorded_frames(path: Path) -> Iterator[RedFrame]:
     frames before the first model wait for it (a recorder may log the latched model after
     the first frames), at most FRAMES_BEFORE_MODEL of them."""
     offset: tuple[int, int] | None = None
-    waiting: list[tuple[float, np.ndarray]] = []   # (stamp [s], red image) before any model
-    first: float | None = None
+    waiting: list[tuple[int, np.ndarray]] = []   # (stamp [ns], red image) before any model
+    first: int | None = None
     index = 0
     for recorded, msg in decoded_messages(path):
         name = recorded.type_name
@@ -133,14 +133,14 @@ def _recorded_frames(path: Path) -> Iterator[RedFrame]:
             offset = (int(msg.roi.x_offset), int(msg.roi.y_offset))
         elif name == "sensor_msgs/msg/Image":
             image = msg_to_image(msg)
-            waiting.append((stamp_s(msg), image[..., 2] if image.ndim == 3 else image))
+            waiting.append((stamp_ns(msg), image[..., 2] if image.ndim == 3 else image))
             if offset is None and len(waiting) > FRAMES_BEFORE_MODEL:
                 raise RecordingError(f"{path}: {len(waiting)} camera frames before any camera "
                                      "model (the region offset is unknown)")
         if offset is not None:
             for stamp, red in waiting:
                 first = stamp if first is None else first
-                yield RedFrame(index, stamp - first, red, offset)
+                yield RedFrame(index, (stamp - first) * 1e-9, red, offset)
                 index += 1
             waiting.clear()
     if waiting:
