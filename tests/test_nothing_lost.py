@@ -139,6 +139,23 @@ def test_process_interrupted_at_any_moment_keeps_the_earlier_results(
     assert outcomes[:4] == [130] * 4, outcomes
 
 
+def test_a_ctrl_c_once_the_command_is_done_changes_nothing(tmp_path: Path) -> None:
+    """Ctrl-C while `sds` exits (here in an exit handler, as it may come while threads and
+    compiled code close): the command's own exit code and one line, no KeyboardInterrupt (the
+    last moment of `sds process`'s run once died of the signal, exit -2)."""
+    script = (
+        "import atexit, os, signal, sys, time\n"
+        "from sds_cli.cli import main\n"
+        "atexit.register(lambda: (os.kill(os.getpid(), signal.SIGINT), time.sleep(0.3)))\n"
+        "main(sys.argv[1:])\n")
+    run = interruptible([sys.executable, "-c", script, "process", "--video",
+                         str(tmp_path / "missing.mp4"), "--rig", RIG,
+                         "--out", str(tmp_path / "out")])
+    _, stderr = run.communicate(timeout=60)
+    assert run.returncode == 2, stderr
+    assert len(stderr.strip().splitlines()) == 1 and "KeyboardInterrupt" not in stderr, stderr
+
+
 def test_a_failed_run_leaves_nothing_that_blocks_the_retry(kick: SimulationOutput,
                                                             tmp_path: Path) -> None:
     broken = tmp_path / "broken.mp4"

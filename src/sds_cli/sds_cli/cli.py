@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import signal
 import sys
 
 from sds_cli.commands import COMMANDS, CommandError
@@ -66,7 +67,8 @@ def interrupted() -> int:
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Entry point of the `sds` command: bad input is one line and exit code 2."""
+    """Entry point of the `sds` command: bad input is one line and exit code 2; once the
+    command is done, its process ignores Ctrl-C."""
     try:
         args = build_parser().parse_args(argv)
         # The libraries' warnings (e.g. an unfinished recording read up to its last chunk);
@@ -84,4 +86,9 @@ def main(argv: list[str] | None = None) -> None:
             code = 2
         else:
             raise
+    finally:
+        # Done, or refused: a Ctrl-C from now on has nothing to stop. Python exits with
+        # threads, pools and compiled code still closing, part of it with SIGINT's default
+        # action, so a late Ctrl-C killed the process (signal 2) instead of this exit code.
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
     raise SystemExit(code)
