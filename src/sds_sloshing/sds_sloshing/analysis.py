@@ -151,8 +151,8 @@ def _significant(fit: DampedSinusoidFit, component: DampedSinusoid, min_snr: flo
 def _pick(fit: DampedSinusoidFit, expected_hz: float | None, min_snr: float
           ) -> tuple[DampedSinusoid | None, str]:
     """The significant component nearest the expected frequency (within 15 %), else the
-    largest: the dominant oscillation is always reported, with a note when the theory
-    expected another frequency."""
+    largest over the window: the dominant oscillation is always reported, with a note when the
+    theory expected another frequency."""
     candidates = [c for c in fit.components if _significant(fit, c, min_snr)]  # largest first
     if not candidates:
         return None, ""
