@@ -251,7 +251,6 @@ def test_the_dominant_oscillation_is_reported_when_the_theory_expects_another(
     assert any(f"the theory expects {expected:.3f} Hz" in note for note in lateral.notes)
 
 
-
 def test_a_bad_first_sample_does_not_outrank_the_mode() -> None:
     """One second of a 1.9 Hz decay (the demo's window) with its first sample 0.1 mm off, over
     20 noise draws: the fit often spends a fast, heavily damped component on that sample,
