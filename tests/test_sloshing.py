@@ -270,6 +270,18 @@ def test_a_bad_first_sample_does_not_outrank_the_mode() -> None:
     assert spikes >= 3   # the case the test is for did occur
 
 
+def test_a_component_s_size_is_taken_at_the_samples_recorded() -> None:
+    """Frames dropped from the record: a component's size over the window (the SNR test's,
+    and the ranking's) is over the samples there are, not over an even grid of as many."""
+    t = np.delete(np.arange(60) / 30, np.s_[5:25])
+    y = damped(t, 1.9, 0.05, 2.9, 0.3) + np.random.default_rng(3).normal(0, 0.006, len(t))
+    fit = fit_damped_sinusoids(t, y)
+    mode = fit.components[0]
+    assert fit.window_norm(mode) == pytest.approx(mode.norm(t - t[0]), rel=1e-12)
+    assert fit.window_norm(mode) != pytest.approx(
+        mode.norm(np.linspace(0, t[-1] - t[0], len(t))), rel=1e-3)
+
+
 def test_modal_separation_finds_the_sloshing_azimuth(repo: Path) -> None:
     scenario = load_scenario(repo / "config" / "scenarios" / "ground_kick.yaml",
                              {"modes": [{"order": 1, "index": 1, "amplitude_mm": 3.0,

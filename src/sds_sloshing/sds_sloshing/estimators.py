@@ -111,7 +111,7 @@ class DampedSinusoidFit:
     offset: float
     components: tuple[DampedSinusoid, ...]
     residual_rms: float
-    sample_count: int
+    sample_tau_s: np.ndarray      # the samples' times after `start_s` [s]
     bic: float
 
     def evaluate(self, time_s: ArrayLike) -> np.ndarray:
@@ -120,8 +120,8 @@ class DampedSinusoidFit:
         return self.offset + sum((c.evaluate(tau) for c in self.components), np.zeros_like(tau))
 
     def window_norm(self, component: DampedSinusoid) -> float:
-        """√(Σ c(τ)²) of a component over the window's samples (taken as evenly spaced)."""
-        return component.norm(np.linspace(0.0, self.end_s - self.start_s, self.sample_count))
+        """√(Σ c(τ)²) of a component over the window's samples."""
+        return component.norm(self.sample_tau_s)
 
     def estimate(self, component: DampedSinusoid, method: str = "matrix_pencil") -> ModeEstimate:
         """A component as a `ModeEstimate`."""
@@ -506,7 +506,7 @@ def fit_damped_sinusoids(time_s: ArrayLike, values: ArrayLike, max_components: i
             # cos and sin terms cancelling) and be gone two samples later.
             best = DampedSinusoidFit(float(t[0]), float(t[-1]), float(linear[0]),
                                      tuple(sorted(components, key=lambda c: -c.norm(tau))),
-                                     float(np.sqrt(rss / len(y))), len(y), float(bic))
+                                     float(np.sqrt(rss / len(y))), tau, float(bic))
     if best is None:
         raise DecayError("no decaying oscillation found in the record")
     return best
