@@ -267,7 +267,7 @@ class FrameSourceNode(HostedNode):
 
     def _on_leader_origin(self, msg: Header) -> None:
         if self._leader_origin_ns is None:
-            self._leader_origin_ns = msg.stamp.sec * 10**9 + msg.stamp.nanosec
+            self._leader_origin_ns = Time.from_msg(msg.stamp).nanoseconds
             self._leader_seen.set()
 
     def _origin(self) -> tuple[int, float] | None:
