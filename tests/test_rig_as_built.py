@@ -23,8 +23,16 @@ from sds_recon.calibration.lasers import KnownSurface
 from sds_recon.calibration.model_check import check_model
 from sds_recon.calibration.plan import HEIGHT_GOAL_MM, plan, predict, tilt_shares
 from sds_recon.calibration.rig_calibration import calibrate_rig
-from sds_recon.calibration.rig_model import RigModel
-from sds_recon.calibration.self_calibration import SelfCalibration, self_calibrate
+from sds_recon.calibration.rig_model import LineObservations, RigModel
+from sds_recon.calibration.self_calibration import (
+    FreeProblem,
+    Observations,
+    SelfCalibration,
+    jacobian,
+    residuals,
+    self_calibrate,
+    spot_whitening,
+)
 from sds_sim.tilt_series import declared, true_surfaces
 from sds_sim.true_rig import RigErrors, random_layout, true_rig
 from sds_workflows.calibration_plan import (
@@ -72,6 +80,41 @@ def _normalised_camera_and_surface_errors(fit: SelfCalibration, true,
             errors.append((fitted.offset_mm - truth.offset_mm)
                           / fit.sigma_of(f"surface {index} offset"))
     return np.array(errors)
+
+
+def test_the_jacobian_by_groups_of_columns_is_the_one_of_each_column_alone() -> None:
+    """Every kind of parameter (camera pose and intrinsics, beams, emitters, surfaces' angles
+    and levels, the line plane, declared tolerances): stepping the columns that share no
+    residual together gives the Jacobian that stepping each column alone gives, in a
+    fraction of the residual evaluations."""
+    rng = np.random.default_rng(5)
+    designed = random_layout(load_rig(STELIUM), rng)
+    rig = replace(designed, tolerances=Tolerances(emitter_mm=0.3, line_plane_deg=0.5))
+    surfaces = declared(protocol_readings(), SEED_READINGS)
+    ids, diode, frame, pixels, covariance = _spots(rig, surfaces, rng)
+    line_count = 300
+    line = LineObservations(rng.integers(0, len(surfaces), line_count),
+                            rng.uniform([1700.0, 800.0], [2100.0, 1300.0], (line_count, 2)),
+                            np.full(line_count, 0.1))
+    assert rig.line_laser is not None
+    model = RigModel(rig, ids, surfaces, line=line,
+                     line_plane=(rig.line_laser.normal, rig.line_laser.emitter_mm))
+    kinds = {p.kind.name.split()[0] for p in model.table.parameters}
+    assert {"camera", "beam", "emitter", "surface", "line"} <= kinds
+    observations = Observations(diode, frame, pixels, spot_whitening(covariance), line.sigma_px)
+    x = rng.normal(0.0, 0.2, model.size) * model.table.scales
+    free = np.ones(model.size, bool)
+    free[rng.choice(model.size, 5, replace=False)] = False
+    base = residuals(model, observations, x)
+    alone = []
+    for k in np.flatnonzero(free):
+        stepped = x.copy()
+        stepped[k] += 1e-6 * model.table.scales[k]
+        alone.append((residuals(model, observations, stepped) - base) / (stepped[k] - x[k]))
+    np.testing.assert_allclose(jacobian(model, observations, x, free), np.column_stack(alone),
+                               rtol=1e-9, atol=1e-12)
+    groups = FreeProblem.of(model, observations, x, free).groups
+    assert len(groups) < free.sum() / 4, (len(groups), free.sum())
 
 
 @pytest.mark.parametrize("seed", [11, 12])

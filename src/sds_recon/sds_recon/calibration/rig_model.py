@@ -244,6 +244,35 @@ class RigModel:
         hits = ray_plane_points(centre, rays, surface_normals, surface_offsets)
         return (hits - point) @ normal
 
+    @property
+    def prior_parameters(self) -> np.ndarray:
+        """The parameters with a declared tolerance, in the order of `prior_residuals`."""
+        return self._prior_index
+
+    def shared_parameters(self) -> np.ndarray:
+        """The parameters every spot and line pixel depends on: the camera's pose and its
+        declared intrinsics."""
+        return np.array([*range(6), *self._intrinsics.values()], int)
+
+    def spot_parameters(self, diode: int, frame: int) -> np.ndarray:
+        """The parameters a spot of one diode (index into `laser_ids`) on one surface (index
+        into `surfaces`) depends on."""
+        beam, emitter = self._beam_index[diode], self._emitter_index[diode]
+        own = [beam, beam + 1, *([emitter, emitter + 1] if emitter >= 0 else [])]
+        return np.array([*self.shared_parameters(), *own, *self._surface_parameters(frame)],
+                        int)
+
+    def line_parameters(self, frame: int) -> np.ndarray:
+        """The parameters a line pixel on one surface depends on."""
+        plane = [self.size - 3, self.size - 2, self.size - 1] if self.line is not None else []
+        return np.array([*self.shared_parameters(), *self._surface_parameters(frame), *plane],
+                        int)
+
+    def _surface_parameters(self, frame: int) -> list[int]:
+        """One surface's angles and fill level, where they are parameters."""
+        tilt, offset = self._tilt_index[frame], self._offset_index[frame]
+        return [*([tilt, tilt + 1] if tilt >= 0 else []), *([offset] if offset >= 0 else [])]
+
     def prior_residuals(self, x: np.ndarray) -> np.ndarray:
         """Each declared tolerance's residual: the parameter's change in its own σ."""
         return x[self._prior_index] / self._prior_sigma
