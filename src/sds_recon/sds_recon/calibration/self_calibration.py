@@ -102,7 +102,8 @@ class Observations:
 
 def residuals(model: RigModel, observations: Observations, x: np.ndarray) -> np.ndarray:
     """Every whitened residual at the full parameter vector `x`: spots (2 each), line pixels,
-    declared tolerances; NaN (a beam that misses its surface) counts as 1000 σ."""
+    declared tolerances, in that order (`residual_rows` follows it); NaN (a beam that misses
+    its surface) counts as 1000 σ."""
     o = observations
     spot = np.einsum("nij,nj->ni", o.whitening, model.predict(x, o.diode, o.frame) - o.pixels)
     parts = [spot.ravel()]
