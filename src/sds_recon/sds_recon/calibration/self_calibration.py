@@ -161,14 +161,14 @@ def forward_differences(residuals_of: Callable[[np.ndarray], np.ndarray], values
     """Forward-difference Jacobian of `residuals_of` at `values` (residuals `base`), column j
     stepped by `steps[j]` over its `rows`; each of `groups` (`column_groups`) in one
     evaluation. The same as stepping one column at a time, for a fraction of the cost."""
-    jacobian = np.zeros((len(base), len(values)))
+    derivatives = np.zeros((len(base), len(values)))
     for group in groups:
         stepped = values.copy()
         stepped[group] += steps[group]
         change = residuals_of(stepped) - base
         for column, step in zip(group, stepped[group] - values[group], strict=True):
-            jacobian[rows[column], column] = change[rows[column]] / step
-    return jacobian
+            derivatives[rows[column], column] = change[rows[column]] / step
+    return derivatives
 
 
 def jacobian(model: RigModel, observations: Observations, x: np.ndarray, free: np.ndarray
