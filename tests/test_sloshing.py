@@ -6,6 +6,7 @@ import json
 import re
 import subprocess
 import sys
+import warnings
 from dataclasses import replace
 from pathlib import Path
 
@@ -133,6 +134,22 @@ def test_a_growing_oscillation_gets_an_honest_sigma_not_a_vanishing_one() -> Non
     assert component.decay_rate_s < 0   # growing
     assert 1e-4 < f_sigma < 0.1 and z_sigma > 1e-4, (f_sigma, z_sigma)
     assert abs(component.natural_frequency_hz - np.hypot(2.0, 3.4 / (2 * np.pi))) < 4 * f_sigma
+
+
+def test_a_candidate_that_grows_beyond_the_floats_is_no_fit_and_no_warning() -> None:
+    """On that growing record the one-component candidate runs off to a rate at which it
+    grows past the floats' range over the window, fitting the last sample alone: its
+    Jacobian's norms overflow. It is no fit (no warning on the console, not a σ from
+    infinities), and a fit that follows the growth is the one reported."""
+    t = np.arange(0, 8.0, 1 / 30)
+    y = 1e-12 * np.exp(3.4 * t) * np.cos(2 * np.pi * 2.0 * t) \
+        + np.random.default_rng(4).normal(0, 0.02, len(t))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        fit = fit_damped_sinusoids(t, y)
+    growing = min(fit.components, key=lambda c: c.decay_rate_s)
+    assert growing.natural_frequency_hz == pytest.approx(np.hypot(2.0, 3.4 / (2 * np.pi)),
+                                                         abs=0.1)
 
 
 def test_classical_estimators_on_one_decay() -> None:

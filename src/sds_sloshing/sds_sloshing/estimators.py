@@ -454,7 +454,10 @@ def _fit_components(tau: np.ndarray, values: np.ndarray, poles: np.ndarray
     # Columns scaled to unit norm before the inverse: a growing component's columns reach
     # e^30 at the window's end, and pinv's cut-off, relative to them, zeroed the variance of
     # every rate and frequency (σ 1e-26 Hz reported for a 2 Hz component known to ±0.1 Hz).
-    scale = np.linalg.norm(full_jacobian, axis=0)
+    with np.errstate(over="ignore", invalid="ignore"):
+        scale = np.linalg.norm(full_jacobian, axis=0)
+    if not np.isfinite(scale).all():   # a component grown beyond 1e154 spans one sample
+        return parameters, np.full((len(parameters), len(parameters)), np.nan), np.inf
     scale[scale == 0] = 1.0
     scaled = full_jacobian / scale
     covariance = variance * np.linalg.pinv(scaled.T @ scaled) / np.outer(scale, scale)
