@@ -392,6 +392,46 @@ def _nonlinear_columns(tau: np.ndarray, columns: np.ndarray, linear: np.ndarray,
     return np.nan_to_num(jac, nan=0.0, posinf=0.0, neginf=0.0)
 
 
+class _VariableProjection:
+    """Offset and amplitudes solved linearly for given rates and frequencies p = (α₁, ω₁, …):
+    the residual and Kaufman's Jacobian in p alone. The last p's solution is kept, since
+    the solver asks for the Jacobian where it has just asked for the residual."""
+
+    def __init__(self, tau: np.ndarray, values: np.ndarray) -> None:
+        self.tau = tau
+        self.values = values
+        self._last_p = b""
+        self._last: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None] | None = None
+
+    def at(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+        """Design matrix, least-squares amplitudes, residual and an orthonormal basis of the
+        columns at p (None where the model overflows)."""
+        if self._last is None or p.tobytes() != self._last_p:
+            with np.errstate(over="ignore", invalid="ignore"):
+                columns = _model_columns(self.tau, p[0::2], p[1::2])
+            if not np.isfinite(columns).all():
+                self._last = (columns, np.zeros(columns.shape[1]),
+                              np.full(len(self.values), 1e12), None)
+            else:
+                basis, triangle = np.linalg.qr(columns)
+                linear, *_ = np.linalg.lstsq(triangle, basis.T @ self.values, rcond=None)
+                self._last = (columns, linear, columns @ linear - self.values, basis)
+            self._last_p = p.tobytes()
+        return self._last
+
+    def residual(self, p: np.ndarray) -> np.ndarray:
+        """Model minus record at p, the amplitudes solved."""
+        return self.at(p)[2]
+
+    def jacobian(self, p: np.ndarray) -> np.ndarray:
+        """The residual's derivative in p, the amplitudes' change projected out (Kaufman)."""
+        columns, linear, _, basis = self.at(p)
+        if basis is None:
+            return np.zeros((len(self.values), len(p)))
+        derivative = _nonlinear_columns(self.tau, columns, linear, len(p) // 2)
+        return derivative - basis @ (basis.T @ derivative)
+
+
 def _fit_components(tau: np.ndarray, values: np.ndarray, poles: np.ndarray
                     ) -> tuple[np.ndarray, np.ndarray, float]:
     """Nonlinear least squares of offset + damped sinusoids from initial poles.
@@ -409,38 +449,10 @@ def _fit_components(tau: np.ndarray, values: np.ndarray, poles: np.ndarray
     """
     count = len(poles)
     start = np.column_stack([-poles.real, poles.imag]).ravel()
-
-    last: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]] = {}
-
-    def projected(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
-        """Design matrix, least-squares amplitudes, residual and an orthonormal basis of the
-        columns at p (None where the model overflows); the Jacobian reuses the residual's."""
-        key = p.tobytes()
-        if key not in last:
-            last.clear()
-            with np.errstate(over="ignore", invalid="ignore"):
-                columns = _model_columns(tau, p[0::2], p[1::2])
-            if not np.isfinite(columns).all():
-                last[key] = (columns, np.zeros(columns.shape[1]),
-                             np.full(len(values), 1e12), None)
-            else:
-                basis, triangle = np.linalg.qr(columns)
-                linear, *_ = np.linalg.lstsq(triangle, basis.T @ values, rcond=None)
-                last[key] = (columns, linear, columns @ linear - values, basis)
-        return last[key]
-
-    def residual(p: np.ndarray) -> np.ndarray:
-        return projected(p)[2]
-
-    def jacobian(p: np.ndarray) -> np.ndarray:
-        columns, linear, _, basis = projected(p)
-        if basis is None:
-            return np.zeros((len(values), len(p)))
-        derivative = _nonlinear_columns(tau, columns, linear, count)
-        return derivative - basis @ (basis.T @ derivative)
-
-    result = least_squares(residual, start, jac=jacobian, method="lm", x_scale="jac")
-    columns, linear, fitted_residual, basis = projected(result.x)
+    projection = _VariableProjection(tau, values)
+    result = least_squares(projection.residual, start, jac=projection.jacobian, method="lm",
+                           x_scale="jac")
+    columns, linear, fitted_residual, basis = projection.at(result.x)
     parameters = np.concatenate([result.x, linear])
     if basis is None:   # the model overflows at the end point: no fit (the caller skips it)
         return parameters, np.full((len(parameters), len(parameters)), np.nan), np.inf
