@@ -9,8 +9,8 @@ repeated (FFmpeg's concat, no re-encoding). Each measurement runs in a new proce
 - offline: `sds process --video` (tracking, reconstruction, result files, analysis, report),
   wall time and peak resident memory; decoding the same video alone for the ratio;
 - live: the per-frame pipeline the nodes' code forms (sds_workflows.pipeline.FramePipeline:
-  tracker, reconstruct_frame, reconstruct_line, with drop.yaml's parameters) on each decoded frame,
-  ms per frame (median, p95) and the process's peak resident memory.
+  tracker, frame_points and InstantFits, reconstruct_line, with drop.yaml's parameters) on
+  each decoded frame, ms per frame (median, p95) and the process's peak resident memory.
 Then it fits how each dimension's cost grows above its smallest case, cost − cost₀ ∝
 (x − x₀)^b (b = 1: linear), and prints the table.
 """

@@ -121,13 +121,3 @@ def frame_points(rig: Rig, laser_ids: ArrayLike, pixels: ArrayLike, sigma_px: Ar
                              np.asarray(pixels, dtype=float).reshape(-1, 2)[found],
                              np.asarray(sigma_px, dtype=float)[found], beam_weight,
                              default_sigma_px)
-
-
-def reconstruct_frame(rig: Rig, laser_ids: ArrayLike, pixels: ArrayLike, sigma_px: ArrayLike,
-                      lost: ArrayLike, beam_weight: float = 0.5, default_sigma_px: float = 0.1
-                      ) -> tuple[SurfacePoints, SurfaceFits]:
-    """One frame's spots to its surface as measured: `frame_points`, then fitted (Eq. 12 and
-    the modes, outliers rejected). Under a rolling shutter the node and `sds process` fit at
-    the frame's time instead (`sds_recon.instant`)."""
-    points = frame_points(rig, laser_ids, pixels, sigma_px, lost, beam_weight, default_sigma_px)
-    return points, fit_surface(points, rig.container.radius_mm)
