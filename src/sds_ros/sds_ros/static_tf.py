@@ -19,7 +19,6 @@ from std_msgs.msg import Header
 from tf2_msgs.msg import TFMessage
 
 TF_STATIC_TOPIC = "/tf_static"
-TF_MESSAGE_TYPE = "tf2_msgs/msg/TFMessage"
 WORLD_FRAME = "world"
 CAMERA_FRAME = "camera_optical"
 LATERAL_FRAME = "lateral_optical"

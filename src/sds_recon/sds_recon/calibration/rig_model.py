@@ -153,11 +153,6 @@ class RigModel:
         """Number of parameters."""
         return len(self.table)
 
-    @property
-    def prior_count(self) -> int:
-        """Number of parameters with a declared tolerance (each adds one residual)."""
-        return len(self._prior_index)
-
     def intrinsics(self, x: np.ndarray) -> CameraModel:
         """The camera model for parameters `x` (the rig file's, its declared intrinsics
         changed)."""
