@@ -16,6 +16,7 @@ from conftest import DOMAIN_ID, REPO
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.subscription import Subscription
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
@@ -43,6 +44,7 @@ class Probe:
         self.executor.add_node(self.node)
         self._thread = threading.Thread(target=self.executor.spin, daemon=True)
         self._thread.start()
+        self._subscriptions: dict[str, Subscription] = {}
 
     def collect(self, msg_type: type, topic: str, qos: QoSProfile = RELIABLE,
                 on_message: Callable | None = None) -> list:
@@ -54,8 +56,13 @@ class Probe:
             if on_message:
                 on_message(msg)
 
-        self.node.create_subscription(msg_type, topic, callback, qos)
+        self._subscriptions[topic] = self.node.create_subscription(msg_type, topic, callback,
+                                                                   qos)
         return received
+
+    def unsubscribe(self, topic: str) -> None:
+        """Stop receiving `topic` (its list keeps what came)."""
+        self.node.destroy_subscription(self._subscriptions.pop(topic))
 
     def close(self) -> None:
         self.executor.shutdown(timeout_sec=2.0)

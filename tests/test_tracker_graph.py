@@ -122,9 +122,15 @@ def drop_run(repo, tmp_path_factory) -> DropRun:
                 probe.node.count_publishers(topic) for topic in
                 ("/tracker/spots", "/tracker/line", "/recon/points", "/recon/surface_fit")):
             time.sleep(0.1)
-        probe.collect(Image, "/camera/image")
+        images = probe.collect(Image, "/camera/image")
         # Subscribed once the graph runs: a transient-local reader still gets it.
         tf_static = probe.collect(TFMessage, "/tf_static", static_tf_qos())
+        # The image subscription only starts the camera: 30 more 4K frames would cost this
+        # process and the shared-memory transport what the best-effort previews then lack.
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and not images:
+            time.sleep(0.01)
+        probe.unsubscribe("/camera/image")
         deadline = time.monotonic() + 120
         # The LED's two switches too: a reliable sample dropped under load is only resent at
         # the writer's next heartbeat, after the last frame's spots may have come.
@@ -178,8 +184,11 @@ def test_live_spots_and_points_come_at_once_and_are_not_recorded(drop_run: DropR
     the recording keeps only the filtered ones."""
     filtered = {m.frame_index: m for m in drop_run.spots}
     live = {m.frame_index: m for m in drop_run.live_spots}
-    # Best-effort on one machine: a preview may miss a frame, but not many.
-    assert len(live) >= 25 and len(drop_run.live_clouds) >= 25, drop_run.log
+    # Best-effort: under load the transport drops a preview now and then, and a tracker
+    # behind its frames sheds them. 17 runs on 2 cores (none shed), with a CPU hog or with
+    # the probe taking every frame: up to 6 of 30 lost, in runs of 1-3 frames.
+    missed = sorted(set(filtered) - set(live))
+    assert len(live) >= 20 and len(drop_run.live_clouds) >= 20, (missed, drop_run.log)
     for frame, message in live.items():
         assert all(s.flags & LaserSpot.FLAG_NOT_FILTERED for s in message.spots)
         assert message.header.stamp == filtered[frame].header.stamp
