@@ -32,7 +32,6 @@ from pathlib import Path
 import numpy as np
 from sds_model.rig import Tolerances, load_rig
 from sds_recon.calibration.plan import predict
-from sds_workflows.calibration_plan import Accuracy
 from sds_workflows.calibration_trial import (
     SEED_READINGS,
     AsBuilt,
@@ -53,14 +52,15 @@ def main() -> None:
                              "seed's table, +-0.5 deg about its axis, 0.15 across)")
     args = parser.parse_args()
     declared_rig = replace(load_rig(RIG), tolerances=Tolerances(emitter_mm=0.3))
-    accuracy, as_built = Accuracy(), AsBuilt()
+    as_built = AsBuilt()
     if args.inclinometer_deg is not None:
-        accuracy = Accuracy(table_deg=args.inclinometer_deg)
         as_built = AsBuilt(readings=replace(
             SEED_READINGS, about_axis_deg=args.inclinometer_deg * np.sqrt(3.0),
             across_deg=args.inclinometer_deg))
+    accuracy = as_built.readings.accuracy()
     prediction = predict(declared_rig, [accuracy.declare(s) for s in protocol_readings()])
-    print(f"tilted frames read to sigma {as_built.readings.tilt_sigma_deg:.3f} deg")
+    print(f"tilted frames read to sigma {accuracy.table_deg:.3f} deg about the table's axis, "
+          f"{accuracy.across_axis_deg:.3f} deg across it")
     print(f"planner, StELIUM rig with emitters to 0.3 mm, the README's protocol: unseen tilt "
           f"sigma {prediction.worst_tilt_deg:.3f} deg, heights {prediction.worst_height_mm:.3f}"
           f" mm, camera Z {prediction.sigmas[prediction.names.index('camera Z')]:.3f} mm\n")

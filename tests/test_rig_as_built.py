@@ -19,7 +19,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 from sds_model.rig import RigError, Tolerances, load_rig, save_rig
 from sds_recon.calibration.laser_files import read_surfaces
-from sds_recon.calibration.lasers import KnownSurface
+from sds_recon.calibration.lasers import Accuracy, KnownSurface
 from sds_recon.calibration.model_check import check_model
 from sds_recon.calibration.plan import HEIGHT_GOAL_MM, plan, predict, tilt_shares
 from sds_recon.calibration.rig_calibration import calibrate_rig
@@ -36,7 +36,6 @@ from sds_recon.calibration.self_calibration import (
 from sds_sim.tilt_series import declared, true_surfaces
 from sds_sim.true_rig import RigErrors, random_layout, true_rig
 from sds_workflows.calibration_plan import (
-    Accuracy,
     default_surfaces,
     plan_protocol,
     plan_text,
@@ -91,6 +90,7 @@ def test_the_jacobian_by_groups_of_columns_is_the_one_of_each_column_alone() -> 
     designed = random_layout(load_rig(STELIUM), rng)
     rig = replace(designed, tolerances=Tolerances(emitter_mm=0.3, line_plane_deg=0.5))
     surfaces = declared(protocol_readings(), SEED_READINGS)
+    surfaces[3] = replace(surfaces[3], tilt_y_sigma_rad=0.0)   # one angle read exactly
     ids, diode, frame, pixels, covariance = _spots(rig, surfaces, rng)
     line_count = 300
     line = LineObservations(rng.integers(0, len(surfaces), line_count),
@@ -101,6 +101,8 @@ def test_the_jacobian_by_groups_of_columns_is_the_one_of_each_column_alone() -> 
                      line_plane=(rig.line_laser.normal, rig.line_laser.emitter_mm))
     kinds = {p.kind.name.split()[0] for p in model.table.parameters}
     assert {"camera", "beam", "emitter", "surface", "line"} <= kinds
+    assert "surface 3 tilt x" in model.table.names and "surface 3 tilt y" not in \
+        model.table.names
     observations = Observations(diode, frame, pixels, spot_whitening(covariance), line.sigma_px)
     x = rng.normal(0.0, 0.2, model.size) * model.table.scales
     free = np.ones(model.size, bool)
@@ -193,14 +195,26 @@ def test_the_rig_file_carries_its_tolerances(tmp_path: Path) -> None:
 
 
 def test_the_surfaces_csv_takes_declared_sigmas(tmp_path: Path) -> None:
+    """tilt_sigma_deg is each angle's σ, an angle's own column (0 too) comes before it; the
+    fit's priors are what was declared."""
     path = tmp_path / "surfaces.csv"
-    path.write_text("frame,tilt_x_deg,tilt_y_deg,offset_mm,tilt_sigma_deg,offset_sigma_mm\n"
-                    "0,0,0,0,0.05,0.05\n1,10,0,0,0.3,\n2,0,0,-5,0.05,0.05\n")
+    path.write_text("frame,tilt_x_deg,tilt_y_deg,offset_mm,tilt_sigma_deg,tilt_y_sigma_deg,"
+                    "offset_sigma_mm\n0,0,0,0,0.05,,0.05\n1,10,0,0,0.3,0.15,\n"
+                    "2,0,0,-5,0.05,0,0.05\n")
     surfaces = read_surfaces(path)
-    assert surfaces[1].tilt_sigma_rad == pytest.approx(np.radians(0.3))
+    assert surfaces[0].tilt_y_sigma_rad == pytest.approx(np.radians(0.05))
+    assert surfaces[1].tilt_x_sigma_rad == pytest.approx(np.radians(0.3))
+    assert surfaces[1].tilt_y_sigma_rad == pytest.approx(np.radians(0.15))
+    assert surfaces[2].tilt_y_sigma_rad == 0.0 and surfaces[2].has_sigma
     assert surfaces[1].offset_sigma_mm == 0.0 and surfaces[2].offset_mm == -5.0
-    path.write_text("frame,tilt_x_deg,tilt_y_deg,tilt_sigma_deg\n0,0,0,-0.1\n")
-    with pytest.raises(ValueError, match="line 2: tilt_sigma_deg"):
+    rig = load_rig(STELIUM)
+    table = RigModel(rig, [d.laser_id for d in rig.diodes],
+                     [s for _, s in sorted(surfaces.items())]).table
+    priors = dict(zip(table.names, table.prior_sigmas, strict=True))
+    assert np.degrees(priors["surface 1 tilt y"]) == pytest.approx(0.15)
+    assert "surface 2 tilt x" in priors and "surface 2 tilt y" not in priors
+    path.write_text("frame,tilt_x_deg,tilt_y_deg,tilt_x_sigma_deg\n0,0,0,-0.1\n")
+    with pytest.raises(ValueError, match="line 2: tilt_sigma_deg, tilt_x_sigma_deg"):
         read_surfaces(path)
 
 
@@ -241,18 +255,26 @@ def test_the_planner_predicts_the_fits_sigma_and_asks_first_for_a_second_fill_le
         1.0 - (gradient @ exact.covariance @ gradient)
         / (gradient @ planned.covariance @ gradient), abs=0.02)
 
+    # A table read better across its axis than about it: the plan written, each angle its σ.
     rig_file = save_rig(rig, tmp_path / "rig.yaml")
-    done = subprocess.run([SDS, "calibrate", "plan", "--rig", str(rig_file), "--out",
+    done = subprocess.run([SDS, "calibrate", "plan", "--rig", str(rig_file),
+                           "--table-across-sigma-deg", "0.15", "--out",
                            str(tmp_path / "plan.csv")], capture_output=True, text=True,
                           timeout=300)
     assert done.returncode == 0, done.stderr
     assert "camera Z mm" in done.stdout
     assert "the planned protocol with better knowledge" in done.stdout, done.stdout
     assert "what sets the unseen tilt's sigma" in done.stdout, done.stdout
-    written = read_surfaces(tmp_path / "plan.csv")
-    assert len(written) == len(planned.surfaces)
-    assert [s.offset_mm for _, s in sorted(written.items())] == \
-        [s.offset_mm for s in planned.surfaces]
+    written = [s for _, s in sorted(read_surfaces(tmp_path / "plan.csv").items())]
+    across = plan_protocol(rig, Accuracy(table_across_deg=0.15))[-1]
+    assert [(s.offset_mm, s.tilt_x_rad, s.tilt_y_rad) for s in written] == \
+        [(s.offset_mm, s.tilt_x_rad, s.tilt_y_rad) for s in across.surfaces]
+    np.testing.assert_allclose(
+        [(s.tilt_x_sigma_rad, s.tilt_y_sigma_rad, s.offset_sigma_mm) for s in written],
+        [(s.tilt_x_sigma_rad, s.tilt_y_sigma_rad, s.offset_sigma_mm) for s in across.surfaces],
+        rtol=1e-5)
+    assert np.degrees(written[1].tilt_y_sigma_rad) == pytest.approx(0.15)
+    assert across.worst_tilt_deg < planned.worst_tilt_deg
 
 
 def test_the_readmes_protocol_is_the_plan_for_the_stelium_rig_and_meets_the_height_goal(

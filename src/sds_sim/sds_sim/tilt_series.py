@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 from sds_model.paths import CONFIG
 from sds_model.rig import Rig
-from sds_recon.calibration.lasers import KnownSurface
+from sds_recon.calibration.lasers import Accuracy, KnownSurface
 
 from sds_sim.render import FrameRenderer, FrameTruth
 from sds_sim.scenario import load_scenario
@@ -55,10 +55,12 @@ class ReadingErrors:
     level_deg: float = 0.0         # both angles of a level frame, normal σ (a spirit level)
     offset_mm: float = 0.0         # every fill level, normal σ (a measured volume)
 
-    @property
-    def tilt_sigma_deg(self) -> float:
-        """The σ a user declares for a tilted frame's angles (the larger of the two)."""
-        return max(self.about_axis_deg / np.sqrt(3.0), self.across_deg)
+    def accuracy(self, factor: float = 1.0) -> Accuracy:
+        """What a user declares who knows these accuracies (`factor` × them: 0.1 declares them
+        ten times too tight): the angle about a tilted frame's axis, uniform ±, as its σ."""
+        return Accuracy(table_deg=factor * self.about_axis_deg / np.sqrt(3.0),
+                        table_across_deg=factor * self.across_deg,
+                        level_deg=factor * self.level_deg, fill_mm=factor * self.offset_mm)
 
 
 def true_surfaces(readings: list[KnownSurface], errors: ReadingErrors,
@@ -86,13 +88,10 @@ def true_surfaces(readings: list[KnownSurface], errors: ReadingErrors,
 
 def declared(readings: list[KnownSurface], errors: ReadingErrors, factor: float = 1.0
              ) -> list[KnownSurface]:
-    """The readings with the σ a user declares for them (`factor` × the true accuracy: 0.1
-    declares it ten times too tight)."""
-    return [replace(r, tilt_sigma_rad=float(np.radians(
-                        factor * (errors.level_deg if r.tilt_x_rad == r.tilt_y_rad == 0.0
-                                  else errors.tilt_sigma_deg))),
-                    offset_sigma_mm=factor * errors.offset_mm if r.offset_mm != 0.0 else 0.0)
-            for r in readings]
+    """The readings with the σ a user declares for them, each angle its own (`factor` × the
+    true accuracy: 0.1 declares it ten times too tight)."""
+    accuracy = errors.accuracy(factor)
+    return [accuracy.declare(r) for r in readings]
 
 
 def render_surfaces(rig: Rig, surfaces: list[KnownSurface], scale: float = 1.0, seed: int = 0,

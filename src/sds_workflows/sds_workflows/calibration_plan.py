@@ -11,13 +11,13 @@ that pay, and the planned protocol is written as the surfaces CSV `sds calibrate
 from __future__ import annotations
 
 import csv
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 from sds_model.rig import Rig
 from sds_recon.calibration.laser_files import read_surfaces
-from sds_recon.calibration.lasers import KnownSurface
+from sds_recon.calibration.lasers import Accuracy, KnownSurface
 from sds_recon.calibration.plan import (
     HEIGHT_GOAL_MM,
     LEAST_GAIN,
@@ -45,23 +45,6 @@ INCLINOMETER_DEG = (0.1, 0.05)
 """Tilted frames read to these σ (a digital inclinometer on the table) in the what-if lines."""
 MEASURED_EMITTER_MM = 0.1
 """The emitters' σ in the what-if line for a holder measured after printing."""
-
-
-@dataclass(frozen=True)
-class Accuracy:
-    """How well the user reads each kind of known surface (one σ)."""
-
-    table_deg: float = 0.5 / np.sqrt(3.0)   # a tilted frame's angles (the seed: ±0.5°)
-    level_deg: float = 0.05                  # a level frame's (a spirit level)
-    fill_mm: float = 0.05                    # a fill level (a measured volume)
-
-    def declare(self, surface: KnownSurface) -> KnownSurface:
-        """The surface with the σ its kind is read to. The first fill level is the world's
-        Z = 0 and a tilt keeps the liquid's volume: only another fill level is uncertain."""
-        level = surface.tilt_x_rad == 0.0 and surface.tilt_y_rad == 0.0
-        return replace(surface, tilt_sigma_rad=float(np.radians(
-            self.level_deg if level else self.table_deg)),
-            offset_sigma_mm=self.fill_mm if surface.offset_mm != 0.0 else 0.0)
 
 
 def candidate_levels_mm(rig: Rig) -> list[float]:
@@ -93,7 +76,7 @@ def plan_protocol(rig: Rig, accuracy: Accuracy, candidates_csv: Path | None = No
     absent: `accuracy`'s) replaces the default candidates."""
     base, candidates = default_surfaces(rig, accuracy)
     if candidates_csv is not None:
-        candidates = [s if s.tilt_sigma_rad or s.offset_sigma_mm else accuracy.declare(s)
+        candidates = [s if s.has_sigma else accuracy.declare(s)
                       for _, s in sorted(read_surfaces(candidates_csv).items())]
     return plan(rig, base, candidates)
 
@@ -106,7 +89,7 @@ def what_would_meet_the_goals(rig: Rig, accuracy: Accuracy, planned: Prediction
     sensitivity = unseen_sensitivity(rig)
     whatif = []
     for sigma_deg in INCLINOMETER_DEG:
-        better = replace(accuracy, table_deg=sigma_deg)
+        better = accuracy.with_inclinometer(sigma_deg)
         whatif.append((f"tilted frames read to {sigma_deg:g} deg (an inclinometer)",
                        predict(rig, [better.declare(s) for s in planned.surfaces],
                                sensitivity)))
@@ -184,9 +167,10 @@ def write_protocol(prediction: Prediction, path: Path) -> None:
     """The planned surfaces as the surfaces CSV of `sds calibrate rig` (frame k = image k)."""
     with path.open("w", newline="") as file:
         writer = csv.writer(file)
-        writer.writerow(["frame", "tilt_x_deg", "tilt_y_deg", "offset_mm", "tilt_sigma_deg",
-                         "offset_sigma_mm"])
+        writer.writerow(["frame", "tilt_x_deg", "tilt_y_deg", "offset_mm", "tilt_x_sigma_deg",
+                         "tilt_y_sigma_deg", "offset_sigma_mm"])
         for frame, s in enumerate(prediction.surfaces):
             writer.writerow([frame, f"{np.degrees(s.tilt_x_rad):.6g}",
                              f"{np.degrees(s.tilt_y_rad):.6g}", f"{s.offset_mm:.6g}",
-                             f"{np.degrees(s.tilt_sigma_rad):.6g}", f"{s.offset_sigma_mm:.6g}"])
+                             f"{np.degrees(s.tilt_x_sigma_rad):.6g}",
+                             f"{np.degrees(s.tilt_y_sigma_rad):.6g}", f"{s.offset_sigma_mm:.6g}"])

@@ -92,7 +92,11 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
                               "12.5, 22.5, 32.5 deg and fill levels every 10 mm up to where "
                               "a 35 deg tilt reaches the wall, inside the container)")
     planned.add_argument("--table-sigma-deg", type=float, default=0.5 / 3**0.5,
-                         help="σ of a tilt table reading [deg] (default: ±0.5 deg, uniform)")
+                         help="σ of a tilted frame's angle about the table's axis [deg] "
+                              "(default: ±0.5 deg, uniform)")
+    planned.add_argument("--table-across-sigma-deg", type=float,
+                         help="σ of its other angle, across the table's axis [deg] (default: "
+                              "--table-sigma-deg)")
     planned.add_argument("--level-sigma-deg", type=float, default=0.05,
                          help="σ of a level frame's angles [deg] (a spirit level)")
     planned.add_argument("--fill-sigma-mm", type=float, default=0.05,
@@ -159,8 +163,8 @@ def run_rig(args: argparse.Namespace) -> int:
 def run_plan(args: argparse.Namespace) -> int:
     """The planned protocol: a table of predicted σ, and its surfaces CSV with --out."""
     from sds_model.rig import load_rig
+    from sds_recon.calibration.lasers import Accuracy
     from sds_workflows.calibration_plan import (
-        Accuracy,
         plan_protocol,
         plan_text,
         shares_text,
@@ -171,11 +175,13 @@ def run_plan(args: argparse.Namespace) -> int:
 
     if args.out is not None:
         refuse_existing(args.out, args.overwrite)
-    for name in ("table_sigma_deg", "level_sigma_deg", "fill_sigma_mm"):
-        if not getattr(args, name) > 0:
+    for name in ("table_sigma_deg", "table_across_sigma_deg", "level_sigma_deg",
+                 "fill_sigma_mm"):
+        if getattr(args, name) is not None and not getattr(args, name) > 0:
             raise CommandError(f"--{name.replace('_', '-')} must be positive")
     rig = load_rig(args.rig)
-    accuracy = Accuracy(args.table_sigma_deg, args.level_sigma_deg, args.fill_sigma_mm)
+    accuracy = Accuracy(args.table_sigma_deg, args.table_across_sigma_deg, args.level_sigma_deg,
+                        args.fill_sigma_mm)
     steps = plan_protocol(rig, accuracy, args.candidates)
     print(plan_text(steps))
     if not steps[-1].meets_goals():

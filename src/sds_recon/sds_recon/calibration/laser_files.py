@@ -12,11 +12,15 @@ from sds_model.rig import LaserDiode, LineLaser, Rig
 
 from sds_recon.calibration.lasers import KnownSurface, calibrate_beams, calibrate_line_plane
 
+SIGMA_COLUMNS = ("tilt_sigma_deg", "tilt_x_sigma_deg", "tilt_y_sigma_deg", "offset_sigma_mm")
+"""The surfaces CSV's optional σ columns."""
+
 
 def read_surfaces(path: Path) -> dict[int, KnownSurface]:
     """Known surface per frame from a CSV: frame, tilt_x_deg, tilt_y_deg[, offset_mm]
-    [, tilt_sigma_deg (σ of each of the two angles), offset_sigma_mm] (absent or empty σ:
-    exact).
+    [, tilt_sigma_deg (σ of each of the two angles), tilt_x_sigma_deg, tilt_y_sigma_deg (σ of
+    one angle, instead of tilt_sigma_deg: a table read better across its axis than about it),
+    offset_sigma_mm] (absent or empty σ: exact).
 
     The simulator's truth/frames.csv has the first four columns.
     """
@@ -25,17 +29,20 @@ def read_surfaces(path: Path) -> dict[int, KnownSurface]:
         for line, row in enumerate(csv.DictReader(file), start=2):
             try:
                 frame = int(row["frame"])
+                sigma = {name: float(row.get(name) or 0.0) for name in SIGMA_COLUMNS}
+                # an angle's own column, where given (0 too), before the column of both
+                tilt_sigma_deg = [sigma[column] if row.get(column) else sigma["tilt_sigma_deg"]
+                                  for column in ("tilt_x_sigma_deg", "tilt_y_sigma_deg")]
                 surface = KnownSurface(
                     float(row.get("offset_mm") or 0.0), np.radians(float(row["tilt_x_deg"])),
-                    np.radians(float(row["tilt_y_deg"])),
-                    np.radians(float(row.get("tilt_sigma_deg") or 0.0)),
-                    float(row.get("offset_sigma_mm") or 0.0))
+                    np.radians(float(row["tilt_y_deg"])), np.radians(tilt_sigma_deg[0]),
+                    np.radians(tilt_sigma_deg[1]), sigma["offset_sigma_mm"])
             except (KeyError, TypeError, ValueError) as error:
                 raise ValueError(f"{path}: line {line} needs frame, tilt_x_deg, tilt_y_deg "
                                  f"(numbers): {error!r}") from error
-            if not (surface.tilt_sigma_rad >= 0 and surface.offset_sigma_mm >= 0):
-                raise ValueError(f"{path}: line {line}: tilt_sigma_deg and offset_sigma_mm "
-                                 "must not be negative")
+            if not all(value >= 0 for value in sigma.values()):
+                raise ValueError(f"{path}: line {line}: {', '.join(SIGMA_COLUMNS)} must not be "
+                                 "negative")
             surfaces[frame] = surface
     return surfaces
 

@@ -25,18 +25,60 @@ CONSENSUS_POINTS = 2000
 @dataclass(frozen=True)
 class KnownSurface:
     """A flat liquid surface of known pose: Z = offset − X tan γx − Y tan γy (world, mm), and
-    how well it is known: σ of each of its two angles [rad] and of its offset [mm] (0: exact)."""
+    how well it is known: σ of γx, of γy [rad] and of its offset [mm] (0: exact)."""
 
     offset_mm: float = 0.0
     tilt_x_rad: float = 0.0
     tilt_y_rad: float = 0.0
-    tilt_sigma_rad: float = 0.0
+    tilt_x_sigma_rad: float = 0.0
+    tilt_y_sigma_rad: float = 0.0
     offset_sigma_mm: float = 0.0
+
+    @property
+    def has_sigma(self) -> bool:
+        """Whether any of its angles or its offset was read with a σ (is not exact)."""
+        return bool(self.tilt_x_sigma_rad or self.tilt_y_sigma_rad or self.offset_sigma_mm)
 
     def intersect(self, origin: np.ndarray, rays: np.ndarray) -> np.ndarray:
         """Where rays from `origin` meet this surface (N×3 mm); NaN for rays that miss it."""
         normal = np.array([np.tan(self.tilt_x_rad), np.tan(self.tilt_y_rad), 1.0])
         return ray_plane_points(origin, rays, normal, self.offset_mm)
+
+
+@dataclass(frozen=True)
+class Accuracy:
+    """How well the user reads each kind of known surface (one σ each)."""
+
+    table_deg: float = 0.5 / np.sqrt(3.0)   # a tilted frame's angle about the table's axis
+                                             # (the seed: ±0.5°)
+    table_across_deg: float | None = None    # its other angle, across the axis (None: as
+                                             # table_deg; the table's own alignment)
+    level_deg: float = 0.05                  # both angles of a level frame (a spirit level)
+    fill_mm: float = 0.05                    # a fill level (a measured volume)
+
+    @property
+    def across_axis_deg(self) -> float:
+        """σ of a tilted frame's angle across the table's axis [deg]."""
+        return self.table_deg if self.table_across_deg is None else self.table_across_deg
+
+    def declare(self, surface: KnownSurface) -> KnownSurface:
+        """The surface with the σ its kind is read to: a tilted frame's larger angle is the one
+        set about the table's axis. The first fill level is the world's Z = 0 and a tilt keeps
+        the liquid's volume: only another fill level is uncertain."""
+        if surface.tilt_x_rad == 0.0 and surface.tilt_y_rad == 0.0:
+            sigma_x_deg = sigma_y_deg = self.level_deg
+        elif abs(surface.tilt_x_rad) >= abs(surface.tilt_y_rad):
+            sigma_x_deg, sigma_y_deg = self.table_deg, self.across_axis_deg
+        else:
+            sigma_x_deg, sigma_y_deg = self.across_axis_deg, self.table_deg
+        return replace(surface, tilt_x_sigma_rad=float(np.radians(sigma_x_deg)),
+                       tilt_y_sigma_rad=float(np.radians(sigma_y_deg)),
+                       offset_sigma_mm=self.fill_mm if surface.offset_mm != 0.0 else 0.0)
+
+    def with_inclinometer(self, sigma_deg: float) -> Accuracy:
+        """The tilted frames' two angles read to `sigma_deg` (each as before, if better)."""
+        return replace(self, table_deg=min(self.table_deg, sigma_deg),
+                       table_across_deg=min(self.across_axis_deg, sigma_deg))
 
 
 @dataclass(frozen=True)

@@ -123,7 +123,8 @@ def _likely_cause(fit: SelfCalibration, by_surface: dict[int, float],
     kinds = {fit.table.parameters[fit.table.index(name)].kind for name, _ in pulled}
     if SURFACE_TILT_KIND in kinds or SURFACE_OFFSET_KIND in kinds:
         return ("a tolerance declared too tight: the tilt table's or fill level's accuracy "
-                "(tilt_sigma_deg, offset_sigma_mm), or a misread table angle")
+                "(tilt_sigma_deg or tilt_x/y_sigma_deg, offset_sigma_mm), or a misread table "
+                "angle")
     if EMITTER_KIND in kinds:
         return "an emitter's tolerance declared too tight, or a moved emitter"
     if pulled:

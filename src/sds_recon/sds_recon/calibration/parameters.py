@@ -4,8 +4,8 @@ user declared, and what calibration data determine it.
 The fit (`self_calibration.py`), its report (`rig_report.py`) and the planner (`plan.py`) read
 this one description. A parameter is a small change from the rig file's value (a rotation or
 tilt [rad], a shift [mm]); its prior, where the user declared a tolerance (rig file
-`tolerances:`, the surfaces CSV's `tilt_sigma_deg` / `offset_sigma_mm`), is a residual
-value / σ_prior in the fit, so that it moves only as far as the data require.
+`tolerances:`, the surfaces CSV's σ columns), is a residual value / σ_prior in the fit, so
+that it moves only as far as the data require.
 """
 
 from __future__ import annotations

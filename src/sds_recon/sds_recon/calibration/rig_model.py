@@ -93,9 +93,10 @@ def _parameters(rig: Rig, laser_ids: list[int], surfaces: list[KnownSurface],
             table += [Parameter(f"emitter {laser_id} {axis}", EMITTER_KIND, prior)
                       for axis in "ab"]
     for index, surface in enumerate(surfaces):
-        if surface.tilt_sigma_rad > 0:
-            table += [Parameter(f"surface {index} tilt {axis}", SURFACE_TILT_KIND,
-                                surface.tilt_sigma_rad) for axis in "xy"]
+        table += [Parameter(f"surface {index} tilt {axis}", SURFACE_TILT_KIND, sigma)
+                  for axis, sigma in zip("xy", (surface.tilt_x_sigma_rad,
+                                                surface.tilt_y_sigma_rad), strict=True)
+                  if sigma > 0]
         if surface.offset_sigma_mm > 0:
             table.append(Parameter(f"surface {index} offset", SURFACE_OFFSET_KIND,
                                    surface.offset_sigma_mm))
@@ -129,9 +130,10 @@ class RigModel:
         self._emitter_index = np.array([names.index(f"emitter {i} a")
                                         if f"emitter {i} a" in names else -1
                                         for i in laser_ids], int)
-        self._tilt_index = np.array([names.index(f"surface {k} tilt x")
-                                     if f"surface {k} tilt x" in names else -1
-                                     for k in range(len(surfaces))], int)
+        self._tilt_index = np.array([[names.index(f"surface {k} tilt {axis}")
+                                      if f"surface {k} tilt {axis}" in names else -1
+                                      for axis in "xy"] for k in range(len(surfaces))],
+                                    int).reshape(-1, 2)
         self._offset_index = np.array([names.index(f"surface {k} offset")
                                        if f"surface {k} offset" in names else -1
                                        for k in range(len(surfaces))], int)
@@ -186,7 +188,7 @@ class RigModel:
         offsets [mm], Z = offset − X tan γx − Y tan γy."""
         tilts = self._tilts.copy()
         read = self._tilt_index >= 0
-        tilts[read] += x[self._tilt_index[read][:, None] + np.arange(2)].reshape(-1, 2)
+        tilts[read] += x[self._tilt_index[read]]
         offsets = self._offsets.copy()
         level = self._offset_index >= 0
         offsets[level] += x[self._offset_index[level]]
@@ -265,8 +267,8 @@ class RigModel:
 
     def _surface_parameters(self, frame: int) -> list[int]:
         """One surface's angles and fill level, where they are parameters."""
-        tilt, offset = self._tilt_index[frame], self._offset_index[frame]
-        return [*([tilt, tilt + 1] if tilt >= 0 else []), *([offset] if offset >= 0 else [])]
+        indices = [*self._tilt_index[frame], self._offset_index[frame]]
+        return [int(k) for k in indices if k >= 0]
 
     def prior_residuals(self, x: np.ndarray) -> np.ndarray:
         """Each declared tolerance's residual: the parameter's change in its own σ."""

@@ -161,7 +161,8 @@ def _surfaces(fit: SelfCalibration) -> list[dict[str, Any]]:
             "frame": index,
             "read_tilt_deg": [_deg(read.tilt_x_rad), _deg(read.tilt_y_rad)],
             "read_offset_mm": _mm(read.offset_mm),
-            "declared_tilt_sigma_deg": _deg(read.tilt_sigma_rad),
+            "declared_tilt_sigma_deg": [_deg(read.tilt_x_sigma_rad),
+                                        _deg(read.tilt_y_sigma_rad)],
             "declared_offset_sigma_mm": _mm(read.offset_sigma_mm),
             "fitted_tilt_deg": [_deg(fitted.tilt_x_rad), _deg(fitted.tilt_y_rad)],
             "fitted_offset_mm": _mm(fitted.offset_mm)}
@@ -211,15 +212,16 @@ def report_text(report: dict[str, Any]) -> str:
                      f"{_plus_minus(line['normal_sigma_deg'], 4)} deg, offset "
                      f"{_plus_minus(line['offset_sigma_mm'])} mm")
     fitted_surfaces = [row for row in report["surfaces"]
-                       if row["declared_tilt_sigma_deg"] or row["declared_offset_sigma_mm"]]
+                       if any(row["declared_tilt_sigma_deg"]) or row["declared_offset_sigma_mm"]]
     if fitted_surfaces:
-        lines.append("surface  read tilt x, y [deg] +- sigma   fitted tilt x, y [deg]   "
+        lines.append("surface  read tilt x, y [deg] +- sigma x, y     fitted tilt x, y [deg]   "
                      "read offset +- sigma   fitted offset [mm]")
         for row in fitted_surfaces:
             read, fitted = row["read_tilt_deg"], row["fitted_tilt_deg"]
+            declared = "{:.3g}, {:.3g}".format(*row["declared_tilt_sigma_deg"])
             lines.append(
                 f"{row['frame']:>7}  {read[0]:+8.3f} {read[1]:+8.3f}"
-                f" +- {row['declared_tilt_sigma_deg']:<6.3g}   {fitted[0]:+8.3f} "
+                f" +- {declared:<13}   {fitted[0]:+8.3f} "
                 f"{fitted[1]:+8.3f}   {row['read_offset_mm']:+7.3f} +- "
                 f"{row['declared_offset_sigma_mm']:<6.3g} {row['fitted_offset_mm']:+8.3f}")
     for laser_id, why in report["unidentified"].items():
