@@ -3,6 +3,7 @@ turned and moved camera, wall reflections (issue: first use on a real rig)."""
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from dataclasses import replace
@@ -202,15 +203,22 @@ def test_sds_calibrate_rig_writes_rig_report_and_overlays(tmp_path: Path) -> Non
     for k, image in enumerate(series.images):
         images.append(tmp_path / f"tilt_{k}.png")
         cv2.imwrite(str(images[-1]), image)
+    # The last frame read as a table does (each angle its own σ), the others exactly.
     surfaces = tmp_path / "surfaces.csv"
-    surfaces.write_text("frame,tilt_x_deg,tilt_y_deg\n"
-                        + "".join(f"{k},{a},0\n" for k, a in enumerate(ANGLES)))
+    surfaces.write_text("frame,tilt_x_deg,tilt_y_deg,tilt_x_sigma_deg,tilt_y_sigma_deg\n"
+                        + "".join(f"{k},{a},0,,\n" for k, a in enumerate(ANGLES[:-1]))
+                        + f"{len(ANGLES) - 1},{ANGLES[-1]},0,0.29,0.15\n")
     out = tmp_path / "calibrated.yaml"
     command = [SDS, "calibrate", "rig", "--rig", str(nominal_path), "--images",
                *map(str, images), "--surfaces", str(surfaces), "--out", str(out)]
     done = subprocess.run(command, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     assert "camera turned" in done.stdout
+    declared = [line for line in done.stdout.splitlines() if "+- 0.29, 0.15" in line]
+    assert len(declared) == 1 and declared[0].split()[0] == str(len(ANGLES) - 1), done.stdout
+    report = json.loads((tmp_path / "calibrated.report.json").read_text())
+    assert report["surfaces"][-1]["declared_tilt_sigma_deg"] == [0.29, 0.15]
+    assert report["surfaces"][0]["declared_tilt_sigma_deg"] == [0.0, 0.0]
     rig = load_rig(out)
     assert rig.calibration is not None and len(rig.calibration["camera"]["rotation_sigma_deg"]) == 3
     assert all(d.direction_sigma_deg is not None for d in rig.tracked_diodes)
