@@ -67,7 +67,8 @@ def main() -> None:
           f" mm, camera Z {prediction.sigmas[prediction.names.index('camera Z')]:.3f} mm\n")
     print("seed  wrong/spots  calibrated/visible  chi2/dof (range) | 10x tight | today  "
           "unseen tilt deg, RMSE mm: declared | today  drop RMSE mm, missed  "
-          "error/sigma RMS camera, beams, surfaces  all errors' chi2/k (p)  spots' error/sigma  s")
+          "error/sigma RMS camera, beams, surfaces  all errors' chi2/k (p)  spots' error/sigma  "
+          "35 deg: error x, y / the fit's sigma x, y deg  s")
     rows = []
     for seed in range(args.first_seed, args.first_seed + args.rigs):
         start = time.perf_counter()
@@ -78,6 +79,7 @@ def main() -> None:
         shown_drop = "-" if drop is None else \
             f"{drop.heights.rmse_mm:.3f}, {drop.missed}/{drop.spots}"
         n = r["normalised"]
+        error_35, sigma_35 = r["unseen"].frame_tilt_errors_deg[-1], r["unseen_sigma_deg"][-1]
         print(f"{seed:>4}  {r['wrong']:>3}/{r['spots']:<5}  {len(r['calibrated']):>6}/"
               f"{len(r['visible']):<4} {len(r['unidentified'])} unid.  "
               f"{check.chi2_per_dof:.3f} ({check.expected[0]:.2f}-{check.expected[1]:.2f}) | "
@@ -87,7 +89,9 @@ def main() -> None:
               f"{r['today_unseen'].tilt_error_deg:.3f}, {r['today_unseen'].heights.rmse_mm:.3f}"
               f"  {shown_drop}  {n.camera:.2f}, {n.beams:.2f}, {n.surfaces:.2f}"
               f"  {n.joint_chi2 / n.joint_count:.2f} (p {n.joint_p:.2f})"
-              f"  {r['spot_sigma_rms']:.2f}  {time.perf_counter() - start:.0f}", flush=True)
+              f"  {r['spot_sigma_rms']:.2f}  {error_35[0]:+.3f}, {error_35[1]:+.3f} / "
+              f"{sigma_35[0]:.3f}, {sigma_35[1]:.3f}  {time.perf_counter() - start:.0f}",
+              flush=True)
     tilt = [r["unseen"].tilt_error_deg for r in rows]
     rmse = [r["unseen"].heights.rmse_mm for r in rows]
     today_tilt = [r["today_unseen"].tilt_error_deg for r in rows]
@@ -124,6 +128,14 @@ def main() -> None:
     print(f"- all errors against the fit's covariance (honest: p uniform on 0-1): p "
           f"{', '.join(f'{v:.2f}' for v in joint_p)}; below 0.01: "
           f"{sum(v < 0.01 for v in joint_p)}")
+    ratios = np.array([r["unseen"].frame_tilt_errors_deg[-1] / r["unseen_sigma_deg"][-1]
+                       for r in rows]).ravel()
+    sigmas = np.array([r["unseen_sigma_deg"][-1] for r in rows])
+    print(f"- the unseen 35 deg frame's tilts against the declared fit's own sigma (its "
+          f"covariance carried to the surface; honest: RMS about 1, a little above for the "
+          f"frame's own tracking): RMS {np.sqrt(np.mean(ratios**2)):.2f}, largest "
+          f"{np.abs(ratios).max():.2f}, beyond 3: {int(np.sum(np.abs(ratios) > 3))} of "
+          f"{len(ratios)}; sigma {sigmas.min():.3f}-{sigmas.max():.3f} deg")
     spots = [r["spot_sigma_rms"] for r in rows]
     print(f"- the calibration's spots against the truth, error/sigma RMS (honest: 1): "
           f"{min(spots):.2f}-{max(spots):.2f}")

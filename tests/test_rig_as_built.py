@@ -21,7 +21,14 @@ from sds_model.rig import RigError, Tolerances, load_rig, save_rig
 from sds_recon.calibration.laser_files import read_surfaces
 from sds_recon.calibration.lasers import Accuracy, KnownSurface
 from sds_recon.calibration.model_check import check_model
-from sds_recon.calibration.plan import HEIGHT_GOAL_MM, plan, predict, tilt_shares
+from sds_recon.calibration.plan import (
+    HEIGHT_GOAL_MM,
+    plan,
+    predict,
+    tilt_shares,
+    unseen_sensitivity,
+    unseen_tilt_sigmas_deg,
+)
 from sds_recon.calibration.rig_calibration import calibrate_rig
 from sds_recon.calibration.rig_model import LineObservations, RigModel
 from sds_recon.calibration.self_calibration import (
@@ -235,6 +242,9 @@ def test_the_planner_predicts_the_fits_sigma_and_asks_first_for_a_second_fill_le
     for name in ("camera rotation about X", "camera rotation about Z", "camera Z"):
         predicted = planned.sigmas[planned.names.index(name)]
         assert fit.sigma_of(name) == pytest.approx(predicted, rel=0.25), name
+    # and so are the unseen surfaces' tilt σ that the fit's own covariance gives
+    own = unseen_tilt_sigmas_deg(unseen_sensitivity(fit.rig), fit.names, fit.covariance)
+    np.testing.assert_allclose(own.max(axis=1), planned.tilt_sigma_deg, rtol=0.25)
 
     # Where the goals are out of reach, what would reach them: each better knowledge lowers
     # the predicted tilt σ, a table read to 0.05° (an inclinometer) the most.

@@ -20,7 +20,7 @@ from sds_model.paths import CONFIG
 from sds_model.rig import Rig, Tolerances, load_rig
 from sds_recon.calibration.lasers import KnownSurface, calibrate_beams
 from sds_recon.calibration.parameters import CAMERA_ROTATION, CAMERA_SHIFT, LINE_PLANE
-from sds_recon.calibration.plan import diagonal
+from sds_recon.calibration.plan import diagonal, unseen_sensitivity, unseen_tilt_sigmas_deg
 from sds_recon.calibration.rig_calibration import RigCalibration
 from sds_recon.calibration.rig_model import across_axes
 from sds_recon.calibration.rig_report import beam_sigma_deg, calibrated_rig
@@ -79,10 +79,12 @@ def height_errors(errors_mm: list[np.ndarray], sigmas_mm: list[np.ndarray]) -> H
 
 @dataclass(frozen=True)
 class UnseenSeries:
-    """A rig on a tilt series: largest tilt error [deg], the heights of the points the fits
-    kept, and how many points the fits rejected."""
+    """A rig on a tilt series: largest tilt error [deg], each frame's two tilt errors
+    (fitted − true, frames × 2 [deg]), the heights of the points the fits kept, and how many
+    points the fits rejected."""
 
     tilt_error_deg: float
+    frame_tilt_errors_deg: np.ndarray
     heights: HeightErrors
     rejected: int
 
@@ -104,13 +106,15 @@ def unseen(rig: Rig, series: TiltSeries) -> UnseenSeries:
         plane, rejected = fits.plane, fits.rejected
         if plane is None:
             raise ValueError(f"too few points ({len(points.laser_ids)}) for a plane")
-        tilt_err.append(max(abs(np.degrees(np.arctan(-plane.p10) - surface.tilt_x_rad)),
-                            abs(np.degrees(np.arctan(-plane.p01) - surface.tilt_y_rad))))
+        tilt_err.append(np.degrees([np.arctan(-plane.p10) - surface.tilt_x_rad,
+                                    np.arctan(-plane.p01) - surface.tilt_y_rad]))
         error = points.points_mm[:, 2] - truth.spot_mm[points.laser_ids, 2]
         errors.append(error[~rejected])
         sigmas.append(points.height_sigma_mm[~rejected])
         rejected_count += int(rejected.sum())
-    return UnseenSeries(max(tilt_err), height_errors(errors, sigmas), rejected_count)
+    frame_errors = np.array(tilt_err)
+    return UnseenSeries(float(np.abs(frame_errors).max()), frame_errors,
+                        height_errors(errors, sigmas), rejected_count)
 
 
 @dataclass(frozen=True)
@@ -413,7 +417,8 @@ def as_built_trial(seed: int, rig_file: Path, scale: float = 1.0,
     """Calibrate a random rig as built (seeded) by the README's protocol, with its tolerances
     declared, with them declared ten times too tight, and as today's model (emitters and the
     table exact); check each on an unseen series about the diagonal and (with `drop`) the
-    declared one on a 1 g sloshing drop."""
+    declared one on a 1 g sloshing drop; the declared fit's own σ of the unseen surfaces'
+    tilts (UNSEEN_TILTS_DEG × 2, from its covariance) beside them."""
     as_built = as_built or AsBuilt()
     first = first_use(seed, rig_file, scale, as_built)
     true, nominal, readings, truths, series = (first.true, first.nominal, first.readings,
@@ -438,6 +443,9 @@ def as_built_trial(seed: int, rig_file: Path, scale: float = 1.0,
             "geometry": geometry_errors(rigs["declared"], scaled_true, result),
             "normalised": _normalised_errors(result, nominal, scaled_true, truths),
             "unseen": unseen(rigs["declared"], other),
+            "unseen_sigma_deg": unseen_tilt_sigmas_deg(unseen_sensitivity(rigs["declared"]),
+                                                       result.fit.names,
+                                                       result.fit.covariance),
             "today_unseen": unseen(rigs["today"], other),
             "drop": sloshing_drop(rigs["declared"], true, scale, seed) if drop
             else None}

@@ -184,6 +184,20 @@ def unseen_sensitivity(rig: Rig) -> UnseenSensitivity:
     return UnseenSensitivity(model.table.names, tilt_gradients, height_gradients)
 
 
+def unseen_tilt_sigmas_deg(sensitivity: UnseenSensitivity, names: list[str],
+                           covariance: np.ndarray) -> np.ndarray:
+    """σ of each unseen diagonal surface's two tilts [deg] (UNSEEN_TILTS_DEG × 2) that the
+    parameters `names` with `covariance` give (a fit's own, or a plan's: NaN, a parameter
+    held fixed, counts as known)."""
+    known = np.nan_to_num(covariance)
+    sigmas = []
+    for unseen in range(len(UNSEEN_TILTS_DEG)):
+        gradient, _ = sensitivity.rows(names, unseen)
+        sigmas.append(np.degrees(np.sqrt(np.einsum("ki,kl,li->i", gradient, known,
+                                                   gradient))))
+    return np.array(sigmas)
+
+
 def predict(rig: Rig, surfaces: list[KnownSurface],
             sensitivity: UnseenSensitivity | None = None) -> Prediction:
     """The posterior σ of every parameter after calibrating `rig` (its tolerances as priors)
@@ -201,17 +215,16 @@ def predict(rig: Rig, surfaces: list[KnownSurface],
     information = (design * scales).T @ (design * scales)
     posterior = np.linalg.pinv(information, rcond=1e-12) * np.outer(scales, scales)
     sigmas = np.sqrt(np.clip(np.diag(posterior), 0.0, None))
-    tilt_sigma, height_sigma, tilt_gradients = [], [], []
+    tilt_sigmas = unseen_tilt_sigmas_deg(sensitivity, model.table.names, posterior)
+    height_sigma = []
     for unseen in range(len(UNSEEN_TILTS_DEG)):
-        tilt_gradient, height_gradient = sensitivity.rows(model.table.names, unseen)
-        tilt_variance = np.einsum("ki,kl,li->i", tilt_gradient, posterior, tilt_gradient)
+        _, height_gradient = sensitivity.rows(model.table.names, unseen)
         height_variance = np.einsum("ki,kl,li->i", height_gradient, posterior, height_gradient)
-        tilt_sigma.append(float(np.degrees(np.sqrt(np.max(tilt_variance)))))
-        tilt_gradients.append(tilt_gradient[:, int(np.argmax(tilt_variance))])
         height_sigma.append(float(np.sqrt(np.mean(height_variance))))
-    return Prediction(list(surfaces), model.table, sigmas, np.array(tilt_sigma),
-                      np.array(height_sigma), posterior,
-                      tilt_gradients[int(np.argmax(tilt_sigma))])
+    worst_unseen, worst_axis = np.unravel_index(int(np.argmax(tilt_sigmas)), tilt_sigmas.shape)
+    worst_gradient = sensitivity.rows(model.table.names, int(worst_unseen))[0][:, worst_axis]
+    return Prediction(list(surfaces), model.table, sigmas, tilt_sigmas.max(axis=1),
+                      np.array(height_sigma), posterior, worst_gradient)
 
 
 GROUP_OF_KIND = {BEAM_KIND: "beams' leans", EMITTER_KIND: "emitters' places",
