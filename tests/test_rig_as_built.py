@@ -36,6 +36,7 @@ from sds_recon.calibration.self_calibration import (
     Observations,
     SelfCalibration,
     jacobian,
+    residual_rows,
     residuals,
     self_calibrate,
     spot_whitening,
@@ -122,7 +123,8 @@ def test_the_jacobian_by_groups_of_columns_is_the_one_of_each_column_alone() -> 
         alone.append((residuals(model, observations, stepped) - base) / (stepped[k] - x[k]))
     np.testing.assert_allclose(jacobian(model, observations, x, free), np.column_stack(alone),
                                rtol=1e-9, atol=1e-12)
-    groups = FreeProblem.of(model, observations, x, free).groups
+    groups = FreeProblem.of(model, observations, x, free,
+                            residual_rows(model, observations)).groups
     assert len(groups) < free.sum() / 4, (len(groups), free.sum())
 
 

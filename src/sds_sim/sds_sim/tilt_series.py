@@ -70,14 +70,13 @@ def true_surfaces(readings: list[KnownSurface], errors: ReadingErrors,
     Z = 0 by definition)."""
     truths = []
     for reading in readings:
-        level = reading.tilt_x_rad == 0.0 and reading.tilt_y_rad == 0.0
-        if level:
+        if reading.is_level:
             tilt = rng.normal(0.0, errors.level_deg, 2)
         else:
-            about_x = abs(reading.tilt_x_rad) >= abs(reading.tilt_y_rad)
             about = rng.uniform(-1.0, 1.0) * errors.about_axis_deg
             across = rng.normal(0.0, errors.across_deg)
-            tilt = np.array([about, across]) if about_x else np.array([across, about])
+            tilt = np.array([about, across]) if reading.tilted_about_x \
+                else np.array([across, about])
         tilt_x, tilt_y = np.radians(tilt)
         # the first fill level is the world's Z = 0, and a tilt keeps the liquid's volume
         offset = rng.normal(0.0, errors.offset_mm) if reading.offset_mm != 0.0 else 0.0

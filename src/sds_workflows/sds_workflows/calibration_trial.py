@@ -83,10 +83,14 @@ class UnseenSeries:
     (fitted − true, frames × 2 [deg]), the heights of the points the fits kept, and how many
     points the fits rejected."""
 
-    tilt_error_deg: float
     frame_tilt_errors_deg: np.ndarray
     heights: HeightErrors
     rejected: int
+
+    @property
+    def tilt_error_deg(self) -> float:
+        """The largest tilt error of any frame, either angle [deg]."""
+        return float(np.abs(self.frame_tilt_errors_deg).max())
 
 
 def unseen(rig: Rig, series: TiltSeries) -> UnseenSeries:
@@ -112,9 +116,7 @@ def unseen(rig: Rig, series: TiltSeries) -> UnseenSeries:
         errors.append(error[~rejected])
         sigmas.append(points.height_sigma_mm[~rejected])
         rejected_count += int(rejected.sum())
-    frame_errors = np.array(tilt_err)
-    return UnseenSeries(float(np.abs(frame_errors).max()), frame_errors,
-                        height_errors(errors, sigmas), rejected_count)
+    return UnseenSeries(np.array(tilt_err), height_errors(errors, sigmas), rejected_count)
 
 
 @dataclass(frozen=True)

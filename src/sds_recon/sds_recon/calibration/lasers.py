@@ -35,6 +35,17 @@ class KnownSurface:
     offset_sigma_mm: float = 0.0
 
     @property
+    def is_level(self) -> bool:
+        """Whether both its angles are 0 (a level frame)."""
+        return self.tilt_x_rad == 0.0 and self.tilt_y_rad == 0.0
+
+    @property
+    def tilted_about_x(self) -> bool:
+        """Whether γx is the angle the table was set to (the larger of the two), γy the one
+        across the table's axis."""
+        return abs(self.tilt_x_rad) >= abs(self.tilt_y_rad)
+
+    @property
     def has_sigma(self) -> bool:
         """Whether any of its angles or its offset was read with a σ (is not exact)."""
         return bool(self.tilt_x_sigma_rad or self.tilt_y_sigma_rad or self.offset_sigma_mm)
@@ -65,9 +76,9 @@ class Accuracy:
         """The surface with the σ its kind is read to: a tilted frame's larger angle is the one
         set about the table's axis. The first fill level is the world's Z = 0 and a tilt keeps
         the liquid's volume: only another fill level is uncertain."""
-        if surface.tilt_x_rad == 0.0 and surface.tilt_y_rad == 0.0:
+        if surface.is_level:
             sigma_x_deg = sigma_y_deg = self.level_deg
-        elif abs(surface.tilt_x_rad) >= abs(surface.tilt_y_rad):
+        elif surface.tilted_about_x:
             sigma_x_deg, sigma_y_deg = self.table_deg, self.across_axis_deg
         else:
             sigma_x_deg, sigma_y_deg = self.across_axis_deg, self.table_deg

@@ -171,11 +171,13 @@ def forward_differences(residuals_of: Callable[[np.ndarray], np.ndarray], values
     return derivatives
 
 
-def jacobian(model: RigModel, observations: Observations, x: np.ndarray, free: np.ndarray
-             ) -> np.ndarray:
+def jacobian(model: RigModel, observations: Observations, x: np.ndarray, free: np.ndarray,
+             rows: list[np.ndarray] | None = None) -> np.ndarray:
     """Forward-difference Jacobian of the residuals in the free parameters, steps of 1e-6 of
-    each parameter's scale."""
-    problem = FreeProblem.of(model, observations, x, free)
+    each parameter's scale (`rows`: `residual_rows` of the model and observations, computed
+    here if not given)."""
+    problem = FreeProblem.of(model, observations, x, free,
+                             rows if rows is not None else residual_rows(model, observations))
     values = x[free]
     return forward_differences(problem.residuals, values, problem.residuals(values),
                                1e-6 * model.table.scales[free], problem.rows, problem.groups)
@@ -230,14 +232,15 @@ def self_calibrate(rig: Rig, laser_ids: list[int], surfaces: list[KnownSurface],
         free[:6] = False
     fixed: dict[str, str] = {}
     x = np.zeros(model.size)
+    rows = residual_rows(model, observations)   # whichever parameters are free
     # What the data cannot determine is fixed before solving (linearised at the rig file,
     # with the spots' own σ): left free, the solver runs off along those directions.
     while (worst := least_determined(table, free, uncertainty(
-            jacobian(model, observations, x, free), scales[free], 1.0)[0])) is not None:
+            jacobian(model, observations, x, free, rows), scales[free], 1.0)[0])) is not None:
         free[worst] = False
         fixed[table.names[worst]] = table.parameters[worst].advice
     while True:
-        problem = FreeProblem.of(model, observations, x, free)
+        problem = FreeProblem.of(model, observations, x, free, rows)
         solution = least_squares(
             problem.residuals, x[free], jac=problem.solver_jacobian,
             x_scale=scales[free], method="trf", xtol=1e-12, ftol=1e-12, gtol=1e-12)
@@ -284,12 +287,12 @@ class FreeProblem:
     groups: list[np.ndarray]        # of free parameters (`column_groups`)
 
     @classmethod
-    def of(cls, model: RigModel, observations: Observations, x: np.ndarray, free: np.ndarray
-           ) -> FreeProblem:
-        """The problem in the free parameters of `free`."""
-        rows = [r for r, is_free in zip(residual_rows(model, observations), free, strict=True)
-                if is_free]
-        return cls(model, observations, x, free, rows, column_groups(rows))
+    def of(cls, model: RigModel, observations: Observations, x: np.ndarray, free: np.ndarray,
+           rows: list[np.ndarray]) -> FreeProblem:
+        """The problem in the free parameters of `free` (`rows`: every parameter's
+        `residual_rows`)."""
+        free_rows = [r for r, is_free in zip(rows, free, strict=True) if is_free]
+        return cls(model, observations, x, free, free_rows, column_groups(free_rows))
 
     def with_values(self, values: np.ndarray) -> np.ndarray:
         """The full parameter vector with the free ones at `values` (a new vector)."""
