@@ -225,6 +225,9 @@ def test_the_surfaces_csv_takes_declared_sigmas(tmp_path: Path) -> None:
     path.write_text("frame,tilt_x_deg,tilt_y_deg,tilt_x_sigma_deg\n0,0,0,-0.1\n")
     with pytest.raises(ValueError, match="line 2: tilt_sigma_deg, tilt_x_sigma_deg"):
         read_surfaces(path)
+    path.write_text("frame,tilt_x_deg,tilt_y_deg,tilt_y_sigma_deg\n0,0,0,abc\n")
+    with pytest.raises(ValueError, match=r"line 2 needs .* σ column"):
+        read_surfaces(path)
 
 
 def test_the_planner_predicts_the_fits_sigma_and_asks_first_for_a_second_fill_level(

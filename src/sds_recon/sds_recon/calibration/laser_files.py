@@ -39,7 +39,8 @@ def read_surfaces(path: Path) -> dict[int, KnownSurface]:
                     np.radians(tilt_sigma_deg[1]), sigma["offset_sigma_mm"])
             except (KeyError, TypeError, ValueError) as error:
                 raise ValueError(f"{path}: line {line} needs frame, tilt_x_deg, tilt_y_deg "
-                                 f"(numbers): {error!r}") from error
+                                 f"(and any offset or σ column) as numbers: {error!r}"
+                                 ) from error
             if not all(value >= 0 for value in sigma.values()):
                 raise ValueError(f"{path}: line {line}: {', '.join(SIGMA_COLUMNS)} must not be "
                                  "negative")
