@@ -20,7 +20,7 @@ from sds_msgs.msg import (
 def test_spot_flags_are_distinct_bits():
     flags = [LaserSpot.FLAG_LOST, LaserSpot.FLAG_SATURATED, LaserSpot.FLAG_REFLECTION_SUSPECTED,
              LaserSpot.FLAG_OFF_PATH, LaserSpot.FLAG_HAMPEL_REPLACED,
-             LaserSpot.FLAG_NOT_FILTERED]
+             LaserSpot.FLAG_NOT_FILTERED, LaserSpot.FLAG_AMBIGUOUS]
     assert all(f and f & (f - 1) == 0 for f in flags)
     assert len(set(flags)) == len(flags)
 

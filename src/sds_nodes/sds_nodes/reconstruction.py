@@ -25,12 +25,12 @@ from sds_ros.point_cloud import points_to_cloud, stamp_s
 from sds_ros.qos import live_qos, start_when_consumed, stream_qos
 from sds_ros.shedding import LiveShedding, report_on_console, waited_s
 from sds_ros.static_tf import TF_STATIC_TOPIC, rig_transforms, static_tf_qos
+from sds_tracker.spots import is_measured
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import String
 
 from sds_msgs.msg import (
     LaserLineProfile,
-    LaserSpot,
     LaserSpotArray,
     SurfaceFit,
 )
@@ -116,11 +116,12 @@ class ReconstructionNode(HostedNode):
         self.create_subscription(LaserLineProfile, "line", self._on_line, stream_qos())
 
     def _frame_points(self, msg: LaserSpotArray) -> SurfacePoints:
-        """The frame's spots triangulated (Eq. 9), lost ones left out."""
+        """The frame's spots triangulated (Eq. 9), those not measured (lost, or the Hampel
+        filter's prediction) left out."""
         spots = msg.spots
         return frame_points(
             self._rig, [s.laser_id for s in spots], [[s.x_px, s.y_px] for s in spots],
-            [s.sigma_px for s in spots], [bool(s.flags & LaserSpot.FLAG_LOST) for s in spots],
+            [s.sigma_px for s in spots], [not is_measured(s.flags) for s in spots],
             self._beam_weight, self._default_sigma)
 
     def _sample_offsets_s(self, points: SurfacePoints) -> np.ndarray | None:

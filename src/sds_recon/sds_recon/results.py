@@ -21,7 +21,8 @@ import pyarrow.csv as pa_csv
 from numpy.typing import ArrayLike
 
 FLAGS_DOC = ("bit flags: 1 lost, 2 saturated, 4 reflection suspected, 8 off its image path, "
-             "16 replaced by the Hampel filter")
+             "16 replaced by the Hampel filter (its prediction, no measurement), "
+             "64 ambiguous (its blob as likely another diode's: lost)")
 COLUMNS: dict[str, dict[str, str]] = {
     "spots": {
         "frame": "frame index, from 0",
@@ -33,7 +34,7 @@ COLUMNS: dict[str, dict[str, str]] = {
         "y_raw_px": "spot centre before the Hampel filter, row [px]",
         "sigma_px": "one-sigma uncertainty of the centre [px]",
         "intensity": "peak intensity of the spot [0-255]",
-        "valid": "1 found, 0 lost",
+        "valid": "1 measured in this frame, 0 lost or replaced by the Hampel filter",
         "flags": FLAGS_DOC,
     },
     "points": {

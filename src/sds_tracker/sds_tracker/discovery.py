@@ -70,7 +70,7 @@ def find_spots(red: np.ndarray, offset: tuple[int, int] = (0, 0),
         return SpotCandidates(np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros(0))
     # The tracker's centroid, with each blob's own start as its prior and path.
     tracker = SpotTracker({k: np.array([p, p]) for k, p in enumerate(starts)},
-                          replace(s, path_tolerance_px=1e9))
+                          replace(s, path_tolerance_px=1e9), exclusive=False)
     for k, start in enumerate(starts):
         tracker.previous[k] = start
     estimates = tracker.update(image, offset)

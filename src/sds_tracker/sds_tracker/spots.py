@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from scipy.optimize import linear_sum_assignment
+from scipy.sparse.csgraph import connected_components
 
 from sds_tracker.kernels import (
     background_step,
@@ -15,8 +18,36 @@ from sds_tracker.kernels import (
     symmetric_centre,
 )
 
-LOST, SATURATED, REFLECTION_SUSPECTED, OFF_PATH, HAMPEL_REPLACED, NOT_FILTERED = 1, 2, 4, 8, 16, 32
+LOST, SATURATED, REFLECTION_SUSPECTED, OFF_PATH, HAMPEL_REPLACED, NOT_FILTERED, AMBIGUOUS = \
+    1, 2, 4, 8, 16, 32, 64
 """Flag bits, the same as sds_msgs/LaserSpot's."""
+NOT_MEASURED = LOST | HAMPEL_REPLACED
+"""Flags of a spot whose position is no measurement of this frame: not found (or given up as
+ambiguous), or the Hampel filter's prediction in place of what was seen."""
+SAME_BLOB_PX = 3.0
+"""Two diodes' spots whose centres lie closer than this [px] are one blob: the light of two
+spots this close merges into one above the threshold, so it cannot be both diodes'."""
+AMBIGUITY_MARGIN = 4.0
+"""How much better (in χ² units: squared distances over their σ) one diode's claim on a
+shared blob must be than the next one's for that blob to be its spot; closer claims leave
+the blob to neither diode (both flagged AMBIGUOUS). 4 is a likelihood ratio of e² ≈ 7."""
+LOST_COST = 9.0
+"""What reporting a diode lost costs in a joint assignment [χ²]: a candidate within its
+path's gate (3 σ, below 9) is preferred to no spot, but not at the price of another
+diode's better claim."""
+CANDIDATES_PER_DIODE = 3
+"""Blobs a diode in a shared-blob conflict may take: its search's choice and the next ones
+its search finds without them."""
+UNASSIGNABLE = 1e6
+"""The cost of a pairing that is not allowed (a blob that is not among a diode's candidates)."""
+PATH_GATE_SIGMAS = 3.0
+"""A path's gate (`path_tolerance_px`, or a weak beam's own) is this many σ of a spot's
+distance from its path."""
+
+
+def is_measured(flags: int) -> bool:
+    """True when a spot's position was measured in its frame (see NOT_MEASURED)."""
+    return not flags & NOT_MEASURED
 PROFILE_STEP_PX = 0.25
 """Bin width [px] of the laser line's cross profile that is subtracted from a spot."""
 SYMMETRY_SEARCH_PX = 4
@@ -65,6 +96,70 @@ class SpotEstimate:
     flags: int
 
 
+def assign_claims(options: dict[int, list[SpotEstimate]],
+                  cost: Callable[[int, np.ndarray], float]) -> dict[int, SpotEstimate]:
+    """Each diode's spot from its candidates (`options`, full-frame estimates), no blob to
+    two diodes, at the least total `cost` (diode, centre → χ²) with LOST_COST for a diode
+    left without one (`scipy.optimize.linear_sum_assignment`). A diode whose blob an
+    assignment within AMBIGUITY_MARGIN of the best would change (given to another diode, or
+    taken from it) gets no spot: lost, flagged AMBIGUOUS."""
+    ids = list(options)
+    centres: list[np.ndarray] = []
+    entries: dict[tuple[int, int], SpotEstimate] = {}
+    for row, laser_id in enumerate(ids):
+        for estimate in options[laser_id]:
+            centre = np.array([estimate.x_px, estimate.y_px])
+            near = [k for k, c in enumerate(centres) if np.hypot(*(c - centre)) < SAME_BLOB_PX]
+            column = near[0] if near else len(centres)
+            if not near:
+                centres.append(centre)
+            if (row, column) not in entries:
+                entries[(row, column)] = estimate
+    matrix = np.full((len(ids), len(centres) + len(ids)), UNASSIGNABLE)
+    for (row, column), estimate in entries.items():
+        matrix[row, column] = cost(ids[row], np.array([estimate.x_px, estimate.y_px]))
+    matrix[np.arange(len(ids)), len(centres) + np.arange(len(ids))] = LOST_COST
+    best, total = _solve(matrix)
+    ambiguous: set[int] = set()
+    for row, column in enumerate(best):
+        if column >= len(centres):
+            continue
+        forbidden = matrix.copy()
+        forbidden[row, column] = UNASSIGNABLE
+        other, other_total = _solve(forbidden)
+        if other_total - total < AMBIGUITY_MARGIN:
+            ambiguous |= {k for k in range(len(ids)) if other[k] != best[k]}
+    result = {}
+    for row, laser_id in enumerate(ids):
+        if row in ambiguous:
+            result[laser_id] = SpotEstimate(laser_id, np.nan, np.nan, np.nan, 0.0,
+                                            LOST | AMBIGUOUS)
+        elif best[row] < len(centres):
+            result[laser_id] = entries[(row, best[row])]
+        else:
+            result[laser_id] = SpotEstimate(laser_id, np.nan, np.nan, np.nan, 0.0, LOST)
+    return result
+
+
+def _solve(matrix: np.ndarray) -> tuple[np.ndarray, float]:
+    """Each row's column in the least-cost assignment, and its total cost."""
+    rows, columns = linear_sum_assignment(matrix)
+    assigned = np.empty(len(matrix), dtype=int)
+    assigned[rows] = columns
+    return assigned, float(matrix[rows, columns].sum())
+
+
+def shared_blobs(positions: np.ndarray, same_blob_px: float) -> list[list[int]]:
+    """Groups of the positions (N×2 px) that lie within `same_blob_px` of another of the
+    group (chained), each group of two or more as indices in ascending order."""
+    if len(positions) < 2:
+        return []
+    close = np.linalg.norm(positions[:, None] - positions[None], axis=2) < same_blob_px
+    count, labels = connected_components(close, directed=False)
+    groups = [np.flatnonzero(labels == label).tolist() for label in range(count)]
+    return [group for group in groups if len(group) > 1]
+
+
 def distance_to_path(point: np.ndarray, path: np.ndarray) -> float:
     """Shortest distance [px] from a point to a polyline."""
     return float(distances_to_paths(point[None], path[None])[0])
@@ -92,10 +187,13 @@ class SpotTracker:
     """
 
     def __init__(self, paths: dict[int, np.ndarray], settings: SpotSettings | None = None,
-                 tolerances_px: dict[int, float] | None = None) -> None:
+                 tolerances_px: dict[int, float] | None = None, exclusive: bool = True) -> None:
         """`tolerances_px`: a path's own gate [px] where it is known less well than
-        `path_tolerance_px` (a weakly calibrated beam); the others use that."""
+        `path_tolerance_px` (a weakly calibrated beam); the others use that. `exclusive`
+        (diodes): a blob is one path's spot at most (`_one_blob_one_diode`); off, where the
+        paths are starts on blobs not yet told apart (discovery), two may settle on one."""
         self.settings = settings or SpotSettings()
+        self.exclusive = exclusive
         self.paths = {i: np.asarray(p, dtype=float) for i, p in paths.items()}
         self.tolerance_px = {i: max(self.settings.path_tolerance_px,
                                     (tolerances_px or {}).get(i, 0.0)) for i in self.paths}
@@ -128,7 +226,7 @@ class SpotTracker:
         settled = self._track_batch(image, origin, tracked) if tracked else {}
         if line is not None and len(line[0]) < 2:
             line = None
-        estimates = []
+        estimates: dict[int, SpotEstimate] = {}
         for laser_id, path in self.paths.items():
             estimate = settled.get(laser_id)
             if estimate is None:
@@ -144,10 +242,76 @@ class SpotTracker:
                 if estimate.flags & LOST and previous is None and line is not None:
                     estimate = self._acquire_on_line(image, origin, laser_id, path, line) \
                         or estimate
+            estimates[laser_id] = estimate
+        if self.exclusive:
+            estimates = self._one_blob_one_diode(image, origin, estimates, line)
+        for laser_id, estimate in estimates.items():
             self.previous[laser_id] = None if estimate.flags & LOST else \
                 np.array([estimate.x_px, estimate.y_px])
-            estimates.append(estimate)
+        return list(estimates.values())
+
+    def _one_blob_one_diode(self, image: np.ndarray, origin: np.ndarray,
+                            estimates: dict[int, SpotEstimate],
+                            line: tuple[np.ndarray, np.ndarray] | None
+                            ) -> dict[int, SpotEstimate]:
+        """The frame's estimates with no blob given to two diodes.
+
+        Each search above is one diode's. Where several diodes' spots fall on one blob
+        (`shared_blobs`), those diodes are assigned jointly (`assign_claims`): each one's
+        candidates are the blobs its own search finds (up to CANDIDATES_PER_DIODE, without
+        the blobs other diodes hold), each costs `claim_cost`, and being lost costs
+        LOST_COST. The blobs of an assignment that another, almost as good (by
+        AMBIGUITY_MARGIN), gives to other diodes are nobody's: those diodes are reported
+        lost, flagged AMBIGUOUS. Each round settles one group of claimants for good (their
+        blobs are then held), so it ends.
+        """
+        settled: set[int] = set()
+        for _ in range(len(estimates)):
+            found = [i for i, e in estimates.items() if not e.flags & LOST]
+            positions = np.array([[estimates[i].x_px, estimates[i].y_px]
+                                  for i in found]).reshape(-1, 2)
+            groups = [[found[k] for k in group] for group in shared_blobs(positions,
+                                                                          SAME_BLOB_PX)]
+            groups = [group for group in groups if not set(group) <= settled]
+            if not groups:
+                break
+            claimants = groups[0]
+            held = [positions[k] for k, i in enumerate(found) if i not in claimants]
+            options = {i: self._candidates(image, origin, i, estimates[i], line, held)
+                       for i in claimants}
+            estimates.update(assign_claims(options, self.claim_cost))
+            settled |= set(claimants)
         return estimates
+
+    def _candidates(self, image: np.ndarray, origin: np.ndarray, laser_id: int,
+                    first: SpotEstimate, line: tuple[np.ndarray, np.ndarray] | None,
+                    held: list[np.ndarray]) -> list[SpotEstimate]:
+        """A diode's spot candidates in this frame, best first: `first` (its search's
+        choice), then what its full search finds with each earlier candidate's blob and the
+        `held` blobs (other diodes' spots) left out, up to CANDIDATES_PER_DIODE."""
+        candidates = [first]
+        excluded = list(held)
+        while len(candidates) < CANDIDATES_PER_DIODE:
+            excluded.append(np.array([candidates[-1].x_px, candidates[-1].y_px]))
+            estimate = self._track(image, origin, laser_id, self.paths[laser_id], line,
+                                   excluded=excluded)
+            position = np.array([estimate.x_px, estimate.y_px])
+            if estimate.flags & LOST or min(np.hypot(*(position - taken))
+                                            for taken in excluded) < SAME_BLOB_PX:
+                break
+            candidates.append(estimate)
+        return candidates
+
+    def claim_cost(self, laser_id: int, centre: np.ndarray) -> float:
+        """How badly a blob centred at `centre` (full-frame px) fits a diode [χ²]: its
+        distance from the diode's path over the path's σ (its gate / PATH_GATE_SIGMAS) and,
+        for a spot tracked in the previous frame, its move over `prior_sigma_px`."""
+        sigma_path = self.tolerance_px[laser_id] / PATH_GATE_SIGMAS
+        cost = (distance_to_path(centre, self.paths[laser_id]) / sigma_path) ** 2
+        previous = self.previous[laser_id]
+        if previous is not None:
+            cost += float(np.sum((centre - previous) ** 2)) / self.settings.prior_sigma_px**2
+        return float(cost)
 
     def _track_batch(self, image: np.ndarray, origin: np.ndarray,
                      ids: list[int]) -> dict[int, SpotEstimate]:
@@ -237,10 +401,13 @@ class SpotTracker:
 
     def _track(self, image: np.ndarray, origin: np.ndarray, laser_id: int, path: np.ndarray,
                line: tuple[np.ndarray, np.ndarray] | None = None,
-               refined: LineFreeSpot | None = None) -> SpotEstimate:
+               refined: LineFreeSpot | None = None,
+               excluded: list[np.ndarray] | None = None) -> SpotEstimate:
         """The full per-spot search; `refined`: a tracked spot's measurement without the
         line's light around its last position, as update() made it (a spot being acquired
-        is measured so around the blob this search chooses)."""
+        is measured so around the blob this search chooses); `excluded`: centres [px] of
+        blobs that are not this diode's (another diode's spot): no blob within SAME_BLOB_PX
+        or its own radius of one is a candidate."""
         s = self.settings
         lost = SpotEstimate(laser_id, np.nan, np.nan, np.nan, 0.0, LOST)
         box = np.round(self._search_box(laser_id, path) - np.tile(origin, 2)).astype(int)
@@ -264,7 +431,10 @@ class SpotTracker:
         priors = np.ones(count - 1) if previous is None else np.exp(
             -np.sum((centres - previous) ** 2, axis=1) / (2 * s.prior_sigma_px**2))
         tolerance = self.tolerance_px[laser_id]
-        near_path = off_paths <= tolerance + 2 * np.sqrt(stats[1:, cv2.CC_STAT_AREA] / np.pi)
+        radii = np.sqrt(stats[1:, cv2.CC_STAT_AREA] / np.pi)
+        near_path = off_paths <= tolerance + 2 * radii
+        for taken in excluded or []:
+            near_path &= np.hypot(*(centres - taken).T) > np.maximum(SAME_BLOB_PX, radii)
         candidates = [(bool(off_paths[k] <= tolerance), float(masses[k] * priors[k]),
                        float(masses[k]), k + 1, centres[k]) for k in np.flatnonzero(near_path)]
         if not candidates:

@@ -48,7 +48,7 @@ class TrackerConfig:
     hampel_window: int = 5
     hampel_k: float = 3.0
     hampel_floor_px: float = 0.5
-    path_heights_mm: tuple[float, float] = (-30.0, 40.0)   # surface heights the paths span
+    path_heights_mm: tuple[float, float] = (-40.0, 40.0)   # surface heights the paths span
     stills: bool = False   # every frame a still of its own surface: no motion prior, no Hampel
 
 

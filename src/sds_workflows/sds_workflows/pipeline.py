@@ -41,7 +41,7 @@ from sds_ros.point_cloud import stamp_ns
 from sds_ros.static_tf import LATERAL_FRAME
 from sds_sloshing.surface_series import RecordingError
 from sds_tracker.line import LineProfile
-from sds_tracker.spots import LOST
+from sds_tracker.spots import is_measured
 from sds_tracker.tracker import FrameTracker, TrackedSpot, parse_seeds, tracker_config
 
 GRAPH = CONFIG / "graphs" / "drop.yaml"
@@ -254,7 +254,7 @@ class FramePipeline:
         for index, spots in released:
             points = frame_points(
                 self.rig, [s.laser_id for s in spots], [[s.x_px, s.y_px] for s in spots],
-                [s.sigma_px for s in spots], [bool(s.flags & LOST) for s in spots],
+                [s.sigma_px for s in spots], [not is_measured(s.flags) for s in spots],
                 self.beam_weight, self.default_sigma_px)
             time_s = self._times_s.pop(index)
             self._unfitted[index] = (time_s, spots, points)

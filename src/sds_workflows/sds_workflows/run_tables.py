@@ -26,7 +26,7 @@ from sds_sloshing.surface_series import (
     SurfaceSeries,
     surface_series_from_rows,
 )
-from sds_tracker.spots import LOST
+from sds_tracker.spots import is_measured
 
 from sds_workflows.pipeline import PipelineStep
 
@@ -61,7 +61,7 @@ class RunTables:
 
     def add_spots(self, frame: int, time_s: float, rows: list[tuple]) -> None:
         """Spot rows (laser_id, x, y, x_raw, y_raw, sigma, intensity, flags) of a frame."""
-        self.writer.add("spots", [(frame, time_s, i, x, y, xr, yr, s, p, int(not f & LOST),
+        self.writer.add("spots", [(frame, time_s, i, x, y, xr, yr, s, p, int(is_measured(f)),
                                    f) for i, x, y, xr, yr, s, p, f in rows])
 
     def add_points(self, frame: int, time_s: float, points: SurfacePoints,
