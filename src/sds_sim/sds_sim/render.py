@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -45,6 +45,8 @@ class FrameTruth:
     vibration_rad: np.ndarray     # camera roll-off about its x, y axes
     spot_time_s: np.ndarray       # N: when each spot's centre is exposed (its row's time)
     line_time_s: np.ndarray       # per line row: when that row is exposed
+    gain: float = 1.0             # the auto exposure's gain on the whole frame
+    glint_px: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # one-frame glints
 
 
 def vibration_rad(d: Disturbances, time_s: float) -> np.ndarray:
@@ -73,8 +75,10 @@ class FrameRenderer:
                                 if rig.line_laser is not None else np.zeros((0, 3)))
         sensor = scenario.sensor
         self.shutter = RollingShutter(sensor.readout_s, sensor.readout_direction)
+        self.falloff = self._falloff()
         self.background = self._background()
         self.occluded = self._occlusions()
+        self.gains = self._gains()
         sigma = scenario.sensor.read_noise
         margin = NOISE_BANK_MARGIN_PX
         bank = self.rng.normal(0.0, sigma, (self.height + margin, self.width + margin, 3))
@@ -90,6 +94,38 @@ class FrameRenderer:
             return base, angles
         shake = RigidTransform.from_rotation_vector([angles[0], angles[1], 0.0], np.zeros(3))
         return shake.compose(base), angles
+
+    def _falloff(self) -> np.ndarray | None:
+        """Per pixel, the light's share that reaches the sensor (H×W): vignetting (a
+        quadratic fall to 1 − `vignetting` at the corners) times the ambient light's linear
+        gradient across the frame (± `ambient_gradient` / 2, in a seeded direction); None
+        where both are 0. The gradient scales the whole scene: a lamp beside the rig."""
+        sensor = self.scenario.sensor
+        if not sensor.vignetting and not sensor.ambient_gradient:
+            return None
+        ys, xs = np.mgrid[0:self.height, 0:self.width].astype(np.float32)
+        u = (xs - (self.width - 1) / 2) / (self.width / 2)
+        v = (ys - (self.height - 1) / 2) / (self.height / 2)
+        falloff = 1.0 - sensor.vignetting * (u**2 + v**2) / 2.0
+        if sensor.ambient_gradient:
+            angle = self.rng.uniform(0.0, 2 * np.pi)
+            along = (np.cos(angle) * u + np.sin(angle) * v) / np.sqrt(2.0)
+            falloff *= 1.0 + sensor.ambient_gradient / 2 * along
+        return falloff.astype(np.float32)
+
+    def _gains(self) -> np.ndarray:
+        """The auto exposure's gain per frame: a log random walk of `gain_step` per frame,
+        held within `gain_range` (all 1 without a step)."""
+        sensor = self.scenario.sensor
+        count = self.scenario.frame_count
+        if not sensor.gain_step:
+            return np.ones(count)
+        low, high = np.log(sensor.gain_range)
+        gains = np.zeros(count)
+        for index in range(1, count):
+            gains[index] = np.clip(gains[index - 1] + self.rng.normal(0.0, sensor.gain_step),
+                                   low, high)
+        return np.exp(gains)
 
     def _background(self) -> np.ndarray:
         """Static scene: dim textured surroundings, black liquid, the container's rim."""
@@ -107,6 +143,8 @@ class FrameRenderer:
             thickness = max(1, round(3 * self.scale))
             cv2.polylines(image, [polygon], True, 1.8 * level, thickness=thickness,
                           lineType=cv2.LINE_AA, shift=4)
+        if self.falloff is not None:
+            image *= self.falloff
         gray = np.clip(np.round(image), 0, 255).astype(np.uint8)
         return np.dstack([gray, gray, gray])
 
@@ -185,15 +223,37 @@ class FrameRenderer:
             line_mm = self._timed_line_points(surface, pose, time_s)
             line_rows, line_x, _ = self._line(line_mm, pose)
         if optics.speckle > 0:
-            red.speckle(self.rng, optics.speckle)
+            red.speckle(self.rng, optics.speckle, max(optics.speckle_grain_px * self.scale, 0.3))
+        glint_px = self._glints(red, surface, pose, time_s)
         led_y = s.events.led_position_px[1] * self.scale
         led_time_s = time_s + float(self.shutter.row_time_s(led_y, self.height))
         led = s.events.led_on_s <= led_time_s < s.events.led_off_s
-        frame = self._compose(red, vibration, led)
+        gain = float(self.gains[min(index, len(self.gains) - 1)])
+        frame = self._compose(red, vibration, led, gain)
         truth = FrameTruth(index, time_s, spot_px, exposure_px, spot_mm, visible, reflection_px,
                            line_rows, line_x, line_mm, led, vibration, time_s + delays,
-                           time_s + self.shutter.row_time_s(line_rows, self.height))
+                           time_s + self.shutter.row_time_s(line_rows, self.height), gain,
+                           glint_px)
         return frame, truth
+
+    def _glints(self, red: _Layer, surface: Surface, pose: RigidTransform, time_s: float
+                ) -> np.ndarray:
+        """One-frame glints (ambient light off the moving liquid, foam): a Poisson number at
+        `glint_rate_per_s`, at uniform points of the liquid, each a point of light blurred by
+        the lens, up to `glint_peak`; their pixels (K×2)."""
+        d = self.scenario.disturbances
+        if d.glint_rate_per_s <= 0:
+            return np.zeros((0, 2))
+        count = self.rng.poisson(d.glint_rate_per_s / self.scenario.fps)
+        radius_mm = surface.radius_mm * np.sqrt(self.rng.uniform(0.0, 1.0, count))
+        azimuth = self.rng.uniform(0.0, 2 * np.pi, count)
+        x_mm, y_mm = radius_mm * np.cos(azimuth), radius_mm * np.sin(azimuth)
+        points = np.column_stack([x_mm, y_mm, surface.height(x_mm, y_mm, time_s)])
+        pixels = self.camera.project(pose.apply(points)).reshape(-1, 2)
+        sigma_px = max(PSF_SIGMA_PX * self.scale, 0.4) * 1.5
+        for pixel in pixels[np.isfinite(pixels).all(axis=1)]:
+            red.gaussian(pixel, sigma_px**2 * np.eye(2), d.glint_peak * self.rng.uniform(0.3, 1))
+        return pixels
 
     def _spot_delays(self, surface: Surface, pose: RigidTransform, time_s: float
                      ) -> np.ndarray:
@@ -246,16 +306,30 @@ class FrameRenderer:
                          PSF_SIGMA_PX * self.scale)
         return rows, np.interp(rows, ys, xs), width
 
-    def _compose(self, red: _Layer, vibration: np.ndarray, led: bool) -> np.ndarray:
-        frame = self.background.copy()
+    def _compose(self, red: _Layer, vibration: np.ndarray, led: bool, gain: float = 1.0
+                 ) -> np.ndarray:
+        """The frame: the background (shaken, times the gain), the lasers' light (through
+        the falloff, times the gain, with shot noise, the halo of what saturates, the excess
+        bleeding into green and blue), the LED, read noise."""
+        frame = self.background.copy() if gain == 1.0 else \
+            cv2.convertScaleAbs(self.background, alpha=gain)
+        sensor = self.scenario.sensor
         if vibration.any():
             shift = self._vibration_shift(vibration)
             frame = cv2.warpAffine(frame, np.array([[1, 0, shift[0]], [0, 1, shift[1]]]),
                                    (self.width, self.height), borderMode=cv2.BORDER_REFLECT)
+        bloom_px = sensor.bloom_sigma_px * self.scale
+        pad = int(np.ceil(3 * bloom_px)) if sensor.bloom_fraction > 0 else 0
         for (y0, y1, x0, x1), values in red.windows():
-            if self.scenario.sensor.shot_noise:
+            if self.falloff is not None:
+                values = values * self.falloff[y0:y1, x0:x1]
+            values = values * np.float32(gain)
+            if sensor.shot_noise:
                 values = values + np.sqrt(np.maximum(values, 0)) * \
                     self.rng.standard_normal(values.shape).astype(np.float32)
+            if pad:
+                (y0, y1, x0, x1), values = self._bloom(frame, (y0, y1, x0, x1), values, pad,
+                                                       bloom_px)
             region = frame[y0:y1, x0:x1].astype(np.float32)
             region[..., 2] += values
             excess = np.maximum(region[..., 2] - 255.0, 0.0) * SATURATION_BLEED
@@ -272,6 +346,20 @@ class FrameRenderer:
             cv2.add(frame, self._noise_up[window], dst=frame)
             cv2.subtract(frame, self._noise_down[window], dst=frame)
         return frame
+
+    def _bloom(self, frame: np.ndarray, bounds: Bounds, values: np.ndarray, pad: int,
+               sigma_px: float) -> Window:
+        """A window's light widened by `pad` px with the halo of its saturated part: the
+        red light beyond 255 over the frame, times `bloom_fraction`, spread by a Gaussian
+        of `sigma_px`."""
+        y0, y1, x0, x1 = bounds
+        p0, p1 = max(y0 - pad, 0), min(y1 + pad, self.height)
+        q0, q1 = max(x0 - pad, 0), min(x1 + pad, self.width)
+        padded = np.zeros((p1 - p0, q1 - q0), np.float32)
+        padded[y0 - p0:y1 - p0, x0 - q0:x1 - q0] = values
+        excess = np.maximum(frame[p0:p1, q0:q1, 2].astype(np.float32) + padded - 255.0, 0.0)
+        halo = cv2.GaussianBlur(excess, (0, 0), sigma_px, borderType=cv2.BORDER_CONSTANT)
+        return (p0, p1, q0, q1), padded + self.scenario.sensor.bloom_fraction * halo
 
     def _vibration_shift(self, vibration: np.ndarray) -> np.ndarray:
         """Image shift [px] of the scene's centre under the vibration (moves the background)."""
@@ -324,13 +412,17 @@ class _Layer:
         profile[rows[inside] - y0] = peak * np.exp(-0.5 * (d / sigma_px) ** 2)
         self._windows.append((bounds, profile))
 
-    def speckle(self, rng: np.random.Generator, strength: float) -> None:
-        """Multiply every window by a grainy (≈1 px) positive speckle pattern."""
+    def speckle(self, rng: np.random.Generator, contrast: float, grain_px: float) -> None:
+        """Multiply every window by laser speckle: the intensity of a random complex field
+        correlated over `grain_px` (σ), whose statistics are exponential (fully developed:
+        contrast 1), mixed with its mean to the given `contrast` (σ / mean)."""
         for index, (bounds, values) in enumerate(self._windows):
-            blurred = cv2.GaussianBlur(rng.standard_normal(values.shape).astype(np.float32),
-                                       (0, 0), 0.7)
-            grain = blurred / max(float(blurred.std()), 1e-6)
-            self._windows[index] = (bounds, values * np.clip(1 + strength * grain, 0, None))
+            field_re, field_im = (cv2.GaussianBlur(
+                rng.standard_normal(values.shape).astype(np.float32), (0, 0), grain_px)
+                for _ in range(2))
+            intensity = field_re**2 + field_im**2
+            intensity /= max(float(intensity.mean()), 1e-12)
+            self._windows[index] = (bounds, values * (1 + contrast * (intensity - 1)))
 
     def windows(self) -> list[Window]:
         """Each window's bounds (y0, y1, x0, x1) and values, overlapping windows merged."""

@@ -41,8 +41,11 @@ class Optics:
     spot_peak: float = 420.0          # peak red level of a spot; above 255 it saturates
     line_width_mm: float = 0.8
     line_peak: float = 230.0
-    speckle: float = 0.1              # speckle contrast left after the exposure averages the
-                                      # moving pattern (0: none; a frozen pattern is ~0.3)
+    speckle: float = 0.1              # speckle contrast (σ/mean of a spot's light) left after
+                                      # the exposure averages the moving pattern: 0 none, 1
+                                      # fully developed (a still's frozen pattern)
+    speckle_grain_px: float = 0.7     # the grain's size (σ [px at full resolution]): about
+                                      # 1.22 λ N / pixel pitch, 1-3 px on a GoPro
     exposure_s: float = 1 / 60
     blur_samples: int = 5             # sub-exposure samples for motion blur
     line_rays: int = 600
@@ -60,6 +63,13 @@ class Sensor:
     readout_s: float = 0.0            # rolling shutter: rows read over this time (0: global)
     readout_direction: str = "top_to_bottom"
     bitrate_mbit_s: float = 60.0      # H.264 at full resolution (a GoPro HERO5 at 4K, as stated)
+    bloom_fraction: float = 0.0       # share of the light beyond saturation spread as a halo
+    bloom_sigma_px: float = 4.0       # the halo's σ [px at full resolution]
+    gain_step: float = 0.0            # auto exposure: per-frame σ of the gain's log random walk
+    gain_range: tuple[float, float] = (0.7, 1.4)   # the gain stays within these
+    ambient_gradient: float = 0.0     # ambient light: brightness change across the frame
+                                      # (fraction, one direction drawn per run)
+    vignetting: float = 0.0           # brightness lost at the frame's corners (fraction)
 
 
 @dataclass(frozen=True)
@@ -69,6 +79,8 @@ class Disturbances:
     reflection_strength: float = 0.0         # relative to a spot; 0: no wall reflections
     occlusion_rate_per_s: float = 0.0        # short dropouts of single spots
     occlusion_frames: tuple[int, int] = (2, 5)
+    glint_rate_per_s: float = 0.0            # one-frame glints anywhere on the liquid
+    glint_peak: float = 300.0                # a glint's peak red level
     vibration_start_s: float | None = None   # catapult launch: the camera rings
     vibration_amplitude_deg: float = 0.05
     vibration_frequency_hz: float = 24.0
