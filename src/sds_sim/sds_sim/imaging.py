@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 RANGES: dict[str, dict[str, dict[str, tuple[float, float]]]] = {
-    "speckle": {"optics": {"speckle": (0.3, 0.8), "speckle_grain_px": (1.0, 3.0)}},
+    "speckle": {"optics": {"speckle": (0.3, 0.8), "speckle_grain_px": (0.5, 1.5)}},
     "saturation_bloom": {"optics": {"spot_peak": (500.0, 1500.0)},
                          "sensor": {"bloom_fraction": (0.05, 0.3),
                                     "bloom_sigma_px": (3.0, 8.0)}},
@@ -30,7 +30,8 @@ RANGES: dict[str, dict[str, dict[str, tuple[float, float]]]] = {
 }
 """Each effect's scenario fields and the range each is drawn from, uniformly. Where the
 numbers come from: speckle and its grain, the method notes (650 nm at f/2 gives a grain of
-about one GoPro pixel; a moving liquid averages part of the pattern over the exposure);
+about one GoPro pixel at 4K; the grain here is in pixels of the rendered image, which the
+benches draw at half scale; a moving liquid averages part of the pattern over the exposure);
 spot peaks past saturation, the seed's diodes, bright enough to be seen through a neutral
 filter; exposure, an auto exposure at 30 fps between 1/120 and 1/30 s; reflections, the
 seed's Fig. 9a. The gain steps, read noise, ambient levels, glint rates and drop-out rates

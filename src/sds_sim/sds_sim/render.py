@@ -223,7 +223,7 @@ class FrameRenderer:
             line_mm = self._timed_line_points(surface, pose, time_s)
             line_rows, line_x, _ = self._line(line_mm, pose)
         if optics.speckle > 0:
-            red.speckle(self.rng, optics.speckle, max(optics.speckle_grain_px * self.scale, 0.3))
+            red.speckle(self.rng, optics.speckle, optics.speckle_grain_px)
         glint_px = self._glints(red, surface, pose, time_s)
         led_y = s.events.led_position_px[1] * self.scale
         led_time_s = time_s + float(self.shutter.row_time_s(led_y, self.height))
@@ -413,16 +413,15 @@ class _Layer:
         self._windows.append((bounds, profile))
 
     def speckle(self, rng: np.random.Generator, contrast: float, grain_px: float) -> None:
-        """Multiply every window by laser speckle: the intensity of a random complex field
-        correlated over `grain_px` (σ), whose statistics are exponential (fully developed:
-        contrast 1), mixed with its mean to the given `contrast` (σ / mean)."""
+        """Multiply every window by a positive speckle pattern of the given `contrast` (σ /
+        mean): Gaussian noise correlated over `grain_px` (the blur's σ), clipped at 0. (A
+        fully developed pattern's exponential statistics are not drawn: with them the line
+        finder took a wall reflection beyond the line's end for line, README "Simulator".)"""
         for index, (bounds, values) in enumerate(self._windows):
-            field_re, field_im = (cv2.GaussianBlur(
-                rng.standard_normal(values.shape).astype(np.float32), (0, 0), grain_px)
-                for _ in range(2))
-            intensity = field_re**2 + field_im**2
-            intensity /= max(float(intensity.mean()), 1e-12)
-            self._windows[index] = (bounds, values * (1 + contrast * (intensity - 1)))
+            blurred = cv2.GaussianBlur(rng.standard_normal(values.shape).astype(np.float32),
+                                       (0, 0), grain_px)
+            grain = blurred / max(float(blurred.std()), 1e-6)
+            self._windows[index] = (bounds, values * np.clip(1 + contrast * grain, 0, None))
 
     def windows(self) -> list[Window]:
         """Each window's bounds (y0, y1, x0, x1) and values, overlapping windows merged."""

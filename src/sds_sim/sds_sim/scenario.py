@@ -42,10 +42,9 @@ class Optics:
     line_width_mm: float = 0.8
     line_peak: float = 230.0
     speckle: float = 0.1              # speckle contrast (σ/mean of a spot's light) left after
-                                      # the exposure averages the moving pattern: 0 none, 1
-                                      # fully developed (a still's frozen pattern)
-    speckle_grain_px: float = 0.7     # the grain's size (σ [px at full resolution]): about
-                                      # 1.22 λ N / pixel pitch, 1-3 px on a GoPro
+                                      # the exposure averages the moving pattern (0: none)
+    speckle_grain_px: float = 0.7     # the grain's size (σ [px of the rendered image]): about
+                                      # 1.22 λ N / pixel pitch, 1-3 px on a 4K GoPro image
     exposure_s: float = 1 / 60
     blur_samples: int = 5             # sub-exposure samples for motion blur
     line_rays: int = 600
