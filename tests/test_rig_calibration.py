@@ -82,9 +82,10 @@ def test_self_calibration_of_a_random_true_rig(seed: int) -> None:
 def test_tilts_about_the_second_axis_pin_down_camera_beams_and_line_plane() -> None:
     result = trial(3, STELIUM, drop=False, second_axis=True)
     two = result["two_axis"]
-    # One axis: the camera's rotation about it is this rig's worst (0.17°, σ 0.1°); three
-    # tilts about the other axis determine it, the beams and the line plane.
-    assert np.max(np.abs(result["geometry"].camera_deg)) > 0.1
+    # One axis leaves the camera's rotation about it to its prior: the fit's own σ is 0.1°
+    # (its error was 0.17° on one noise draw of these images and 0.03° on another, within
+    # it); three tilts about the other axis determine it, the beams and the line plane.
+    assert np.max(result["geometry"].camera_sigma_deg) > 0.05
     assert np.max(np.abs(two.camera_deg)) < 0.02 and np.max(two.camera_sigma_deg) < 0.02
     assert np.max(np.abs(two.camera_mm)) < 0.1
     assert np.median(list(two.beams_deg.values())) < 0.01

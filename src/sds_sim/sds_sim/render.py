@@ -413,15 +413,16 @@ class _Layer:
         self._windows.append((bounds, profile))
 
     def speckle(self, rng: np.random.Generator, contrast: float, grain_px: float) -> None:
-        """Multiply every window by a positive speckle pattern of the given `contrast` (σ /
-        mean): Gaussian noise correlated over `grain_px` (the blur's σ), clipped at 0. (A
-        fully developed pattern's exponential statistics are not drawn: with them the line
-        finder took a wall reflection beyond the line's end for line, README "Simulator".)"""
+        """Multiply every window by laser speckle: the intensity of a random complex field
+        correlated over `grain_px` (the blur's σ), whose statistics are exponential (fully
+        developed: contrast 1), mixed with its mean to the given `contrast` (σ / mean)."""
         for index, (bounds, values) in enumerate(self._windows):
-            blurred = cv2.GaussianBlur(rng.standard_normal(values.shape).astype(np.float32),
-                                       (0, 0), grain_px)
-            grain = blurred / max(float(blurred.std()), 1e-6)
-            self._windows[index] = (bounds, values * np.clip(1 + contrast * grain, 0, None))
+            field_re, field_im = (cv2.GaussianBlur(
+                rng.standard_normal(values.shape).astype(np.float32), (0, 0), grain_px)
+                for _ in range(2))
+            intensity = field_re**2 + field_im**2
+            intensity /= max(float(intensity.mean()), 1e-12)
+            self._windows[index] = (bounds, values * (1 + contrast * (intensity - 1)))
 
     def windows(self) -> list[Window]:
         """Each window's bounds (y0, y1, x0, x1) and values, overlapping windows merged."""

@@ -42,7 +42,8 @@ class Optics:
     line_width_mm: float = 0.8
     line_peak: float = 230.0
     speckle: float = 0.1              # speckle contrast (σ/mean of a spot's light) left after
-                                      # the exposure averages the moving pattern (0: none)
+                                      # the exposure averages the moving pattern: 0 none, 1
+                                      # fully developed (exponential; a still's frozen one)
     speckle_grain_px: float = 0.7     # the grain's size (σ [px of the rendered image]): about
                                       # 1.22 λ N / pixel pitch, 1-3 px on a 4K GoPro image
     exposure_s: float = 1 / 60

@@ -73,7 +73,7 @@ def track_line(image: np.ndarray, offset: tuple[int, int], expected_x: np.ndarra
                                     read_noise)
     x = x + x0
     flags = np.where(top >= s.saturation_level, SATURATED_LINE, 0).astype(np.uint8)
-    x = _continuous(x, s)
+    x = _without_islands(_continuous(x, s), local_rows, s)
     found = np.isfinite(x)
     return LineProfile(x[found], (local_rows + y0)[found].astype(float), sigma[found],
                        peak[found], flags[found])
@@ -89,6 +89,33 @@ def _continuous(x: np.ndarray, s: LineSettings) -> np.ndarray:
     median = median_filter(filled, size=2 * s.continuity_rows + 1, mode="nearest")
     result = x.copy()
     result[np.abs(x - median) > s.continuity_px] = np.nan
+    return result
+
+
+def _without_islands(x: np.ndarray, rows: np.ndarray, s: LineSettings) -> np.ndarray:
+    """NaN on every short run of samples (fewer than 2 `continuity_rows` + 1 rows) that is
+    cut off from the others: by more than `continuity_rows` rows without a sample, or by a
+    step across the line of more than 3 `continuity_px` beyond its slope (the median of its
+    samples' steps). Such a run is a blob beside the line's end (a wall reflection: one 12
+    rows long stood 19 px beside a 35° still's line, 4 rows beyond its end) or a speckle
+    grain, not the line, which is long; the running median cannot tell such a run from the
+    line where it is all there is on its rows."""
+    found = np.flatnonzero(np.isfinite(x))
+    if len(found) < 2:
+        return x
+    row_steps = np.diff(rows[found]).astype(float)
+    column_steps = np.diff(x[found])
+    slope = float(np.median(column_steps / row_steps))
+    cut = (row_steps > s.continuity_rows + 1) | \
+        (np.abs(column_steps - slope * row_steps) > 3 * s.continuity_px)
+    breaks = np.flatnonzero(cut) + 1
+    runs = np.split(found, breaks)
+    if len(runs) < 2:
+        return x
+    result = x.copy()
+    for run in runs:
+        if rows[run[-1]] - rows[run[0]] + 1 < 2 * s.continuity_rows + 1:
+            result[run] = np.nan
     return result
 
 
