@@ -15,6 +15,7 @@ import pytest
 from sds_model.rig import load_rig, save_rig
 from sds_recon.calibration.identification import IdentificationSettings, identify_spots
 from sds_recon.calibration.lasers import KnownSurface
+from sds_recon.calibration.parameters import CAMERA_ROTATION
 from sds_recon.calibration.rig_calibration import calibrate_rig
 from sds_recon.calibration.rig_model import RigModel
 from sds_recon.calibration.self_calibration import (
@@ -289,3 +290,31 @@ def test_the_line_is_found_on_calibration_images_far_from_the_level_one() -> Non
         error = pixels[:, 0] - np.interp(pixels[:, 1], truth.line_rows, truth.line_x_px)
         assert len(pixels) >= 50 and inside.all(), index
         assert np.mean(np.abs(error) < 0.5) >= 0.95, (index, np.sort(np.abs(error))[-5:])
+
+
+def test_what_the_protocol_determines_is_fitted_however_noisy_the_spots() -> None:
+    """The README's protocol (tilts about both axes, a second fill level) determines the
+    camera's pose: with spots 8× noisier than their σ says (χ²/dof near 60; speckle made
+    them 3× noisier), the pose is still fitted, not kept from the rig file (it was: its σ,
+    scaled by the χ², passed the limit), and the fit's σ grows with its χ²."""
+    from sds_model.rig import Tolerances
+    from sds_workflows.calibration_trial import protocol_readings
+
+    rng = np.random.default_rng(21)
+    designed = random_layout(load_rig(STELIUM), rng)
+    true = true_rig(designed, RigErrors(emitter_sigma_mm=0.3), rng)
+    nominal = replace(designed, tolerances=Tolerances(emitter_mm=0.3))
+    surfaces = protocol_readings()
+    ids, diode, frame, pixels = _exact_spots(true, surfaces)
+    covariance = np.full((len(pixels), 1, 1), 0.05**2) * np.eye(2)   # σ 0.05 px declared
+    results = {}
+    for noise_px in (0.05, 0.4):
+        noisy = pixels + np.random.default_rng(22).normal(0, noise_px, pixels.shape)
+        results[noise_px] = self_calibrate(nominal, ids, surfaces, diode, frame, noisy,
+                                           covariance, fit_emitters=True)
+    honest, understated = results[0.05], results[0.4]
+    assert not honest.fixed
+    assert understated.chi2_per_dof > 40
+    assert not understated.fixed, understated.fixed
+    camera = [understated.names.index(name) for name in CAMERA_ROTATION]
+    assert np.all(understated.sigmas[camera] > 2 * honest.sigmas[camera])

@@ -33,6 +33,13 @@ from sds_recon.calibration.rig_model import LineObservations, RigModel
 SIGMA_FLOOR_PX = 0.02
 """Least spot or line-pixel σ [px] the fit believes (in any direction)."""
 
+DETERMINATION_SPOT_SIGMA_PX = 0.05
+"""The spots' σ [px] at which a parameter's σ is held against its limit to judge whether the
+data determine it (about the tracker's on a 4K spot): that is a question of the calibration
+data's geometry, not of how noisy its spots are. Judged at the spots' own σ and χ², noisier
+spots (or σ understated: χ²/dof of 60) left the camera's rotation kept from the rig file
+although the protocol's tilts about the second axis determine it; such a fit now fits it,
+and its σ (scaled by its χ²/dof) says how well."""
 NULL_SINGULAR = 1e-9
 """Singular values below this share of the largest (scaled Jacobian) are null directions."""
 
@@ -233,9 +240,14 @@ def self_calibrate(rig: Rig, laser_ids: list[int], surfaces: list[KnownSurface],
     fixed: dict[str, str] = {}
     x = np.zeros(model.size)
     rows = residual_rows(model, observations)   # whichever parameters are free
-    # What the data cannot determine is fixed before solving (linearised at the rig file,
-    # with the spots' own σ): left free, the solver runs off along those directions.
-    while (worst := least_determined(table, free, uncertainty(
+    # σ at the spots' own σ → σ at DETERMINATION_SPOT_SIGMA_PX (a parameter's σ scales with
+    # the spots'), for judging what the data determine.
+    spot_sigma_px = np.sqrt(np.trace(np.asarray(covariance_px2), axis1=1, axis2=2) / 2)
+    to_reference = DETERMINATION_SPOT_SIGMA_PX / max(float(np.median(spot_sigma_px)),
+                                                     SIGMA_FLOOR_PX) if len(pixels) else 1.0
+    # What the data cannot determine is fixed before solving (linearised at the rig file):
+    # left free, the solver runs off along those directions.
+    while (worst := least_determined(table, free, to_reference * uncertainty(
             jacobian(model, observations, x, free, rows), scales[free], 1.0)[0])) is not None:
         free[worst] = False
         fixed[table.names[worst]] = table.parameters[worst].advice
@@ -248,7 +260,8 @@ def self_calibrate(rig: Rig, laser_ids: list[int], surfaces: list[KnownSurface],
         dof = max(len(solution.fun) - int(free.sum()), 1)
         chi2 = float(np.sum(solution.fun**2))
         sigmas, covariance, singular = uncertainty(solution.jac, scales[free], chi2 / dof)
-        worst = least_determined(table, free, sigmas)
+        worst = least_determined(table, free,
+                                 to_reference * uncertainty(solution.jac, scales[free], 1.0)[0])
         if worst is None:
             break
         free[worst] = False
