@@ -2,14 +2,16 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from sds_model.paths import CONFIG
 from sds_model.rig import Rig
 from sds_recon.calibration.lasers import Accuracy, KnownSurface
 
+from sds_sim.imaging import merged
 from sds_sim.render import FrameRenderer, FrameTruth
 from sds_sim.scenario import load_scenario
 
@@ -24,6 +26,8 @@ class TiltSeries:
     images: list[np.ndarray]
     surfaces: list[KnownSurface]
     truths: list[FrameTruth]
+    repeats: list[list[np.ndarray]] = field(default_factory=list)   # more frames of each
+    repeat_truths: list[list[FrameTruth]] = field(default_factory=list)
 
 
 def render_tilt_series(rig: Rig, angles_deg: list[float], axis: str = "x", scale: float = 1.0,
@@ -94,17 +98,26 @@ def declared(readings: list[KnownSurface], errors: ReadingErrors, factor: float 
 
 
 def render_surfaces(rig: Rig, surfaces: list[KnownSurface], scale: float = 1.0, seed: int = 0,
-                    scenario: Path = TILT_TABLE) -> TiltSeries:
+                    scenario: Path = TILT_TABLE, frames: int = 1,
+                    imaging: dict[str, dict[str, Any]] | None = None) -> TiltSeries:
     """One still image of the rig's flat liquid on each surface (its true pose), with the
-    scenario's wall reflections and noise."""
-    base = load_scenario(scenario, {"scale": scale})
-    images, truths = [], []
+    scenario's wall reflections and noise (and `imaging`'s overrides of its sections,
+    `sds_sim.imaging.draw_imaging`); with `frames` > 1, that many consecutive frames of
+    each still (the liquid at rest, its speckle and noise new in every frame): the first is
+    the image, the others its repeats."""
+    base = load_scenario(scenario, merged({"scale": scale}, imaging or {}))
+    images, truths, repeats, repeat_truths = [], [], [], []
     for index, surface in enumerate(surfaces):
         still = replace(base, rig=rig, seed=seed + index, tilt_series_deg=(),
                         tilt_deg=(float(np.degrees(surface.tilt_x_rad)),
                                   float(np.degrees(surface.tilt_y_rad))),
-                        offset_mm=surface.offset_mm, duration_s=1.0, fps=30.0)
-        image, truth = FrameRenderer(still).render(0)
-        images.append(image)
-        truths.append(truth)
-    return TiltSeries(images, list(surfaces), truths)
+                        offset_mm=surface.offset_mm, duration_s=max(1.0, frames / 30.0),
+                        fps=30.0)
+        renderer = FrameRenderer(still)
+        rendered = [renderer.render(k) for k in range(frames)]
+        images.append(rendered[0][0])
+        truths.append(rendered[0][1])
+        repeats.append([image for image, _ in rendered[1:]])
+        repeat_truths.append([truth for _, truth in rendered[1:]])
+    return TiltSeries(images, list(surfaces), truths, repeats if frames > 1 else [],
+                      repeat_truths if frames > 1 else [])

@@ -96,6 +96,50 @@ def find_spots(red: np.ndarray, offset: tuple[int, int] = (0, 0),
                           np.array([estimates[k].peak for k in found])[unique])
 
 
+SAME_SPOT_PX = 1.0
+"""Farthest [px] a blob in another frame of the same still may lie from the first frame's to
+be the same spot: its frames differ by their speckle and noise (tenths of a pixel), a
+neighbouring blob or a reflection lies farther."""
+MIN_SCATTER_FRAMES = 3
+"""Fewest frames of a spot whose scatter is trusted as its uncertainty."""
+
+
+def averaged(frames: list[SpotCandidates], same_spot_px: float = SAME_SPOT_PX
+             ) -> SpotCandidates:
+    """The first frame's blobs, each averaged over the frames of the same still (the liquid
+    at rest, its speckle and noise new in every frame: seed Sec. 3.3.1 step 3, "a short
+    video"): with it, the nearest blob of every other frame within `same_spot_px`.
+
+    A blob seen in n frames is their mean; its covariance is the mean of their own
+    covariances over n, widened by the ratio of their scatter to it where that is larger
+    (from MIN_SCATTER_FRAMES frames on): what a still's frames say of a spot's error, speckle
+    included, beside what its photons say. Its peak is the frames' median."""
+    first = frames[0]
+    pixels, covariances, peaks = [], [], []
+    for k, pixel in enumerate(first.pixels):
+        seen, own, peak = [pixel], [first.covariance_px2[k]], [first.peak[k]]
+        for other in frames[1:]:
+            if len(other) == 0:
+                continue
+            distance = np.linalg.norm(other.pixels - pixel, axis=1)
+            nearest = int(np.argmin(distance))
+            if distance[nearest] <= same_spot_px:
+                seen.append(other.pixels[nearest])
+                own.append(other.covariance_px2[nearest])
+                peak.append(other.peak[nearest])
+        count = len(seen)
+        mean_covariance = np.mean(own, axis=0)
+        widen = 1.0
+        if count >= MIN_SCATTER_FRAMES:
+            scatter = np.cov(np.array(seen).T, ddof=1)
+            widen = max(1.0, float(np.trace(scatter) / np.trace(mean_covariance)))
+        pixels.append(np.mean(seen, axis=0))
+        covariances.append(mean_covariance * widen / count)
+        peaks.append(float(np.median(peak)))
+    return SpotCandidates(np.array(pixels).reshape(-1, 2),
+                          np.array(covariances).reshape(-1, 2, 2), np.array(peaks))
+
+
 def _on_line_covariance(along: np.ndarray, sigma_px: float) -> np.ndarray:
     """The covariance [px²] of a spot overlapping the line: ON_LINE_SIGMA_PX along and across
     the line's unit direction `along`, or the spot's own σ where that is larger."""

@@ -27,9 +27,9 @@ from sds_recon.calibration.rig_calibration import calibrate_rig as fit_rig
 from sds_recon.calibration.rig_model import LineObservations
 from sds_recon.calibration.rig_report import calibrated_rig, report_text, rig_report
 from sds_recon.triangulation import beam_image_path
-from sds_tracker.discovery import SpotCandidates, find_spots
+from sds_tracker.discovery import SpotCandidates, averaged, find_spots
 from sds_tracker.line import LineSettings, seek_line
-from sds_tracker.plateaus import changed_pixels, find_plateaus
+from sds_tracker.plateaus import Plateau, changed_pixels, find_plateaus
 from sds_tracker.tracker import flat_line_px, line_reach_px
 
 REGION_MARGIN_MM = 8.0
@@ -42,6 +42,11 @@ STILL_S = 0.5
 """Shortest still stretch of a calibration video that counts as a plateau [s]."""
 STILL_PX = 4
 """Most changed pixels (half resolution) between two frames of a still stretch."""
+FRAMES_PER_STILL = 5
+"""Frames of each still stretch of a calibration video whose spots are averaged (its middle
+frame and those around it): speckle on the liquid is new in every frame, so their mean is
+closer by about √5 and their scatter says how close (a still photo keeps one pattern). Five
+full 4K frames per surface hold about 1.1 GB for the protocol's eleven."""
 
 
 @dataclass(frozen=True)
@@ -75,23 +80,27 @@ def known_surfaces(path: Path) -> list[KnownSurface]:
 
 
 def calibration_frames(paths: list[Path], rig: Rig, count: int
-                       ) -> tuple[list[np.ndarray], list[str]]:
+                       ) -> tuple[list[np.ndarray], list[str], list[list[np.ndarray]] | None]:
     """Images of the known surfaces (one per surface) from image files, or from the still
-    stretches of one video file (VIDEO_SUFFIXES)."""
+    stretches of one video file (VIDEO_SUFFIXES), with each stretch's further frames
+    (`read_video_plateaus`; None for image files); a name for each image."""
     if len(paths) == 1 and paths[0].suffix.lower() in VIDEO_SUFFIXES:
         return read_video_plateaus(paths[0], rig, count)
     if len(paths) != count:
         raise ValueError(f"{len(paths)} images but {count} known surfaces")
-    return read_images(paths), [str(p) for p in paths]
+    return read_images(paths), [str(p) for p in paths], None
 
 
 def read_video_plateaus(path: Path, rig: Rig, count: int, min_still_s: float = STILL_S
-                        ) -> tuple[list[np.ndarray], list[str]]:
+                        ) -> tuple[list[np.ndarray], list[str], list[list[np.ndarray]]]:
     """The middle frame (BGR) of each of the `count` still stretches of a tilt-table video,
-    and a name for each; a one-line error (ValueError) when it has another number of them.
+    a name for each, and the stretch's further frames around it (FRAMES_PER_STILL in all,
+    where it is that long); a one-line error (ValueError) when it has another number of
+    stretches.
 
     Two passes: the first measures each frame's change inside the container's region (red
-    channel, half resolution), the second keeps only the plateaus' middle frames.
+    channel, half resolution), the second keeps only the plateaus' middle frames and those
+    around them.
     """
     region = Region(*rig.container_region_px(rig.camera))
     source = open_source(str(path))
@@ -114,7 +123,9 @@ def read_video_plateaus(path: Path, rig: Rig, count: int, min_still_s: float = S
         raise ValueError(f"{path}: {len(plateaus)} still stretches of {min_still_s:g} s or more "
                          f"({found or 'none'}), but {count} known surfaces")
     wanted = {p.middle: p for p in plateaus}
+    around = {index: k for k, p in enumerate(plateaus) for index in _around_middle(p)}
     images, names = [], []
+    repeats: list[list[np.ndarray]] = [[] for _ in plateaus]
     source = open_source(str(path))
     try:
         for frame in source.frames():
@@ -123,15 +134,29 @@ def read_video_plateaus(path: Path, rig: Rig, count: int, min_still_s: float = S
                 p = wanted[frame.index]
                 names.append(f"{path.name} frame {frame.index} (still {p.first / fps:.2f}–"
                              f"{p.last / fps:.2f} s)")
-            if len(images) == len(wanted):
+            elif frame.index in around:
+                repeats[around[frame.index]].append(frame.image)
+            if frame.index >= max(around, default=-1) and len(images) == len(wanted):
                 break
     finally:
         source.close()
-    return images, names
+    names = [f"{name}, spots averaged over {1 + len(more)} frames"
+             for name, more in zip(names, repeats, strict=True)]
+    return images, names, repeats
 
 
-def observe(rig: Rig, images: list[np.ndarray]) -> CalibrationImages:
-    """Blobs and line centres in each image (BGR, full frame), inside the container region."""
+def _around_middle(plateau: Plateau) -> range:
+    """The FRAMES_PER_STILL frames of a still stretch centred on its middle (fewer where it
+    is shorter)."""
+    first = max(plateau.first, plateau.middle - FRAMES_PER_STILL // 2)
+    return range(first, min(plateau.last, first + FRAMES_PER_STILL - 1) + 1)
+
+
+def observe(rig: Rig, images: list[np.ndarray],
+            repeats: list[list[np.ndarray]] | None = None) -> CalibrationImages:
+    """Blobs and line centres in each image (BGR, full frame), inside the container region;
+    with `repeats`, more frames of each image's still (the same surface at rest), whose blobs
+    each image's are averaged with (`sds_tracker.discovery.averaged`)."""
     margin = int(np.ceil(REGION_MARGIN_MM * rig.surface_px_per_mm()))
     region = Region(*rig.container_region_px(rig.camera, margin))
     rows, _ = flat_line_px(rig)
@@ -145,7 +170,12 @@ def observe(rig: Rig, images: list[np.ndarray]) -> CalibrationImages:
             if len(rows) else None
         line_px = (profile.y_px, profile.x_px) if profile is not None and \
             len(profile.y_px) > len(rows) // 4 else None
-        spots.append(find_spots(red, (region.x, region.y), line=line_px))
+        found = find_spots(red, (region.x, region.y), line=line_px)
+        if repeats and repeats[index]:
+            found = averaged([found, *(find_spots(select(frame, region, "red"),
+                                                  (region.x, region.y), line=line_px)
+                                       for frame in repeats[index])])
+        spots.append(found)
         if profile is not None:
             keep = np.linspace(0, len(profile.x_px) - 1,
                                min(LINE_SAMPLES_PER_FRAME, len(profile.x_px))).astype(int)
@@ -158,12 +188,14 @@ def observe(rig: Rig, images: list[np.ndarray]) -> CalibrationImages:
 
 
 def calibrate_images(rig: Rig, images: list[np.ndarray], surfaces: list[KnownSurface],
-                     settings: CalibrationSettings | None = None
+                     settings: CalibrationSettings | None = None,
+                     repeats: list[list[np.ndarray]] | None = None
                      ) -> tuple[RigCalibration, CalibrationImages]:
-    """Self-calibrate the rig from images of the known surfaces (one surface per image)."""
+    """Self-calibrate the rig from images of the known surfaces (one surface per image; with
+    `repeats`, more frames of each, whose spots are averaged with its own)."""
     if len(images) != len(surfaces):
         raise ValueError(f"{len(images)} images but {len(surfaces)} known surfaces")
-    found = observe(rig, images)
+    found = observe(rig, images, repeats)
     line = found.line if len(found.line.frame) else None
     result = fit_rig(rig, surfaces, [s.pixels for s in found.spots],
                      [s.covariance_px2 for s in found.spots], line, settings)
@@ -178,8 +210,8 @@ def calibrate_rig(rig: Rig, paths: list[Path], surfaces_csv: Path, rig_path: Pat
     `rig_path` with its report and overlays beside it (`source`: the command, for the rig
     file's header)."""
     surfaces = known_surfaces(surfaces_csv)
-    images, names = calibration_frames(paths, rig, len(surfaces))
-    result, found = calibrate_images(rig, images, surfaces, settings)
+    images, names, repeats = calibration_frames(paths, rig, len(surfaces))
+    result, found = calibrate_images(rig, images, surfaces, settings, repeats)
     rig_path.parent.mkdir(parents=True, exist_ok=True)
     return write_calibration(rig, result, found, images, names, rig_path, source), result
 
