@@ -1,7 +1,7 @@
 """Calibration on rigs as built, by the README's protocol, against today's model.
 
 Usage: python bench/rig_as_built.py [--rigs 20] [--first-seed 7000] [--no-drop]
-                                    [--inclinometer-deg S]
+                                    [--inclinometer-deg S] [--imaging] [--frames N]
 
 Each trial (`sds_workflows.calibration_trial.as_built_trial`): a random diode layout, its
 beams leaning (σ 0.6°, up to 3°), emitters off their drawn places (σ 0.3 mm per axis), the
@@ -20,7 +20,10 @@ against the fit's covariance (χ² per parameter and its p-value); the spots the
 used against the renderer's truth, in the σ the tracker gave them. Prints one row per rig, the
 summary against the goals, and the planner's prediction. With `--inclinometer-deg S`, each
 tilted frame's two angles are read to σ S (a digital inclinometer on the table) and declared
-so.
+so. With `--imaging`, every rig's images (the protocol's and the unseen series') get a real
+camera's effects, drawn per rig (`sds_sim.imaging`); with `--frames N`, the calibration
+averages N frames of each still (as `sds calibrate rig --video` does); the 1 g drop keeps the
+scenario's imaging.
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ from pathlib import Path
 import numpy as np
 from sds_model.rig import Tolerances, load_rig
 from sds_recon.calibration.plan import predict
+from sds_sim.imaging import EFFECTS
 from sds_workflows.calibration_trial import (
     SEED_READINGS,
     AsBuilt,
@@ -51,13 +55,17 @@ def main() -> None:
     parser.add_argument("--inclinometer-deg", type=float,
                         help="the tilted frames' angles read to this sigma (default: the "
                              "seed's table, +-0.5 deg about its axis, 0.15 across)")
+    parser.add_argument("--imaging", action="store_true",
+                        help="a real camera's imaging, drawn per rig (sds_sim.imaging)")
+    parser.add_argument("--frames", type=int, default=1,
+                        help="frames of each still the calibration averages")
     args = parser.parse_args()
     declared_rig = replace(load_rig(RIG), tolerances=Tolerances(emitter_mm=0.3))
-    as_built = AsBuilt()
+    as_built = AsBuilt(imaging=EFFECTS if args.imaging else (), frames=args.frames)
     if args.inclinometer_deg is not None:
         as_built = AsBuilt(readings=replace(
             SEED_READINGS, about_axis_deg=args.inclinometer_deg * np.sqrt(3.0),
-            across_deg=args.inclinometer_deg))
+            across_deg=args.inclinometer_deg), imaging=as_built.imaging, frames=args.frames)
     accuracy = as_built.readings.accuracy()
     prediction = predict(declared_rig, [accuracy.declare(s) for s in protocol_readings()])
     print(f"tilted frames read to sigma {accuracy.table_deg:.3f} deg about the table's axis, "

@@ -26,6 +26,7 @@ from sds_recon.calibration.rig_model import across_axes
 from sds_recon.calibration.rig_report import beam_sigma_deg, calibrated_rig
 from sds_recon.calibration.self_calibration import spot_whitening
 from sds_recon.reconstruction import fit_surface, reconstruct_spots
+from sds_sim.imaging import draw_imaging
 from sds_sim.render import FrameRenderer
 from sds_sim.scenario import load_scenario
 from sds_sim.tilt_series import (
@@ -42,6 +43,8 @@ from sds_tracker.tracker import FrameTracker
 
 from sds_workflows.rig_calibration import CalibrationImages, calibrate_images
 
+IMAGING_STREAM = 45
+"""The second key of a rig's imaging draws' random stream (the first is its seed)."""
 ANGLES = [0.0, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0, 35.0]
 """The seed's tilt table (Table 3)."""
 SECOND_AXIS = [12.5, 22.5, 32.5]
@@ -291,6 +294,15 @@ class AsBuilt:
     readings: ReadingErrors = SEED_READINGS
     camera_file_sigmas: float = 1.0     # the camera file off by this many of its `sigma:`
     declared_emitter_mm: float = 0.3    # the rig file's tolerances.emitter_mm
+    imaging: tuple[str, ...] = ()       # a real camera's effects drawn per rig (sds_sim.imaging)
+    frames: int = 1                     # frames of each still the calibration averages
+
+    def imaging_for(self, seed: int) -> dict[str, dict[str, Any]] | None:
+        """The scenario overrides of this rig's imaging (drawn from its own stream, so the
+        rig's other draws do not change), or None without effects."""
+        if not self.imaging:
+            return None
+        return draw_imaging(np.random.default_rng((seed, IMAGING_STREAM)), self.imaging)
 
 
 def protocol_readings() -> list[KnownSurface]:
@@ -406,11 +418,13 @@ def first_use(seed: int, rig_file: Path, scale: float = 1.0, as_built: AsBuilt |
     designed, true = rig_as_built(base, as_built, rng)
     readings = protocol_readings()
     truths = true_surfaces(readings, as_built.readings, rng)
-    series = render_surfaces(true, truths, scale, seed)
+    series = render_surfaces(true, truths, scale, seed, frames=as_built.frames,
+                             imaging=as_built.imaging_for(seed))
     nominal = replace(designed, camera=base.camera.scaled(scale),
                       tolerances=Tolerances(emitter_mm=as_built.declared_emitter_mm))
     result, found = calibrate_images(nominal, series.images, declared(readings,
-                                                                     as_built.readings))
+                                                                     as_built.readings),
+                                     repeats=series.repeats or None)
     return FirstUse(true, nominal, readings, truths, series, result, found)
 
 
@@ -427,13 +441,15 @@ def as_built_trial(seed: int, rig_file: Path, scale: float = 1.0,
                                                first.truths, first.series)
     result, found = first.result, first.found
     tight, _ = calibrate_images(nominal, series.images,
-                                declared(readings, as_built.readings, factor=0.1))
+                                declared(readings, as_built.readings, factor=0.1),
+                                repeats=series.repeats or None)
     today, _ = calibrate_images(replace(nominal, tolerances=Tolerances(), camera_sigma={}),
                                 series.images, readings)
     wrong = wrong_identities(result, found, series)
     visible = [i for i in range(len(true.diodes))
                if sum(t.visible[i] for t in series.truths) >= 3]
-    other = render_surfaces(true, diagonal_surfaces(), scale, seed + 1000)
+    other = render_surfaces(true, diagonal_surfaces(), scale, seed + 1000,
+                            imaging=as_built.imaging_for(seed))
     scaled_true = replace(true, camera=true.camera.scaled(scale))
     rigs = {"declared": first.calibrated, "today": calibrated_rig(
         replace(nominal, tolerances=Tolerances(), camera_sigma={}), today)}
