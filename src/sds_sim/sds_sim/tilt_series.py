@@ -27,7 +27,6 @@ class TiltSeries:
     surfaces: list[KnownSurface]
     truths: list[FrameTruth]
     repeats: list[list[np.ndarray]] = field(default_factory=list)   # more frames of each
-    repeat_truths: list[list[FrameTruth]] = field(default_factory=list)
 
 
 def render_tilt_series(rig: Rig, angles_deg: list[float], axis: str = "x", scale: float = 1.0,
@@ -106,7 +105,7 @@ def render_surfaces(rig: Rig, surfaces: list[KnownSurface], scale: float = 1.0, 
     each still (the liquid at rest, its speckle and noise new in every frame): the first is
     the image, the others its repeats."""
     base = load_scenario(scenario, merged({"scale": scale}, imaging or {}))
-    images, truths, repeats, repeat_truths = [], [], [], []
+    images, truths, repeats = [], [], []
     for index, surface in enumerate(surfaces):
         still = replace(base, rig=rig, seed=seed + index, tilt_series_deg=(),
                         tilt_deg=(float(np.degrees(surface.tilt_x_rad)),
@@ -118,6 +117,4 @@ def render_surfaces(rig: Rig, surfaces: list[KnownSurface], scale: float = 1.0, 
         images.append(rendered[0][0])
         truths.append(rendered[0][1])
         repeats.append([image for image, _ in rendered[1:]])
-        repeat_truths.append([truth for _, truth in rendered[1:]])
-    return TiltSeries(images, list(surfaces), truths, repeats if frames > 1 else [],
-                      repeat_truths if frames > 1 else [])
+    return TiltSeries(images, list(surfaces), truths, repeats if frames > 1 else [])

@@ -29,6 +29,12 @@ BACKGROUND_SCALE = 4
 """The background is estimated on the region shrunk by this factor (cheap, spots vanish)."""
 BACKGROUND_KERNEL_PX = 9
 """Opening kernel at the shrunk scale: wider than any spot, narrower than the rim's bends."""
+SAME_SPOT_PX = 1.0
+"""Farthest [px] a blob in another frame of the same still may lie from the first frame's to
+be the same spot: its frames differ by their speckle and noise (tenths of a pixel), a
+neighbouring blob or a reflection lies farther."""
+MIN_SCATTER_FRAMES = 3
+"""Fewest frames of a spot whose scatter is trusted as its uncertainty."""
 
 
 @dataclass(frozen=True)
@@ -94,14 +100,6 @@ def find_spots(red: np.ndarray, offset: tuple[int, int] = (0, 0),
     unique = spots[_first_of_duplicates(pixels[spots], tolerance_px=1.0)]
     return SpotCandidates(pixels[unique], covariance[unique],
                           np.array([estimates[k].peak for k in found])[unique])
-
-
-SAME_SPOT_PX = 1.0
-"""Farthest [px] a blob in another frame of the same still may lie from the first frame's to
-be the same spot: its frames differ by their speckle and noise (tenths of a pixel), a
-neighbouring blob or a reflection lies farther."""
-MIN_SCATTER_FRAMES = 3
-"""Fewest frames of a spot whose scatter is trusted as its uncertainty."""
 
 
 def averaged(frames: list[SpotCandidates], same_spot_px: float = SAME_SPOT_PX

@@ -260,8 +260,9 @@ def self_calibrate(rig: Rig, laser_ids: list[int], surfaces: list[KnownSurface],
         dof = max(len(solution.fun) - int(free.sum()), 1)
         chi2 = float(np.sum(solution.fun**2))
         sigmas, covariance, singular = uncertainty(solution.jac, scales[free], chi2 / dof)
+        # `uncertainty` scales σ by √(χ²/dof) where that is above 1: undone for the judgement
         worst = least_determined(table, free,
-                                 to_reference * uncertainty(solution.jac, scales[free], 1.0)[0])
+                                 to_reference * sigmas / np.sqrt(max(chi2 / dof, 1.0)))
         if worst is None:
             break
         free[worst] = False
