@@ -288,6 +288,7 @@ def test_sds_calibrate_camera_writes_camera_and_report(shared_data: Path, tmp_pa
 
 
 def test_sds_calibrate_camera_refuses_a_bad_board(tmp_path: Path) -> None:
+    (tmp_path / "x.png").write_bytes(b"")   # it exists: the board is what is refused
     result = subprocess.run(
         [SDS, "calibrate", "camera", "--model", "pinhole",
          "--images", str(tmp_path / "x.png"), "--board", "9by6", "--square", "1"],

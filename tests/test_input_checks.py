@@ -51,8 +51,7 @@ def test_a_refusal_loads_no_numerical_library() -> None:
     neither SciPy, Numba nor Matplotlib (they took 3-4 s before every `sds` refusal), while
     every entry point the workflows package names is there when asked for."""
     heavy = ("scipy", "numba", "matplotlib")
-    probe = ("import sys, sds_cli.cli, sds_workflows.errors\n"
-             "sds_workflows.errors.input_errors()\n"
+    probe = ("import sys, sds_cli.cli, sds_model.errors\n"
              f"print([m for m in {heavy!r} if m in sys.modules])")
     done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
                           timeout=60, check=True)
@@ -67,7 +66,7 @@ def test_a_refusal_loads_no_numerical_library() -> None:
 def test_run_refuses_a_missing_video_before_any_process_starts(tmp_path: Path) -> None:
     done = sds("run", "--video", str(tmp_path / "nope.mp4"), "--rig", str(RIG), "--out",
                str(tmp_path / "run"))
-    one_line_error(done, f"video file {tmp_path / 'nope.mp4'} does not exist")
+    one_line_error(done, f"argument --video: {tmp_path / 'nope.mp4'}: no such file")
     assert not (tmp_path / "run").exists()     # no graph started, no folder made
 
 
@@ -121,7 +120,8 @@ def test_view_refuses_an_image_scale_of_zero_and_leaves_no_file(tmp_path: Path) 
     recorder = McapRecorder(recording)
     recorder.add_topic("/t", "std_msgs/msg/Header")
     recorder.close()
-    one_line_error(sds("view", str(recording), "--image-scale", "0"), "scale is in (0, 1]")
+    one_line_error(sds("view", str(recording), "--image-scale", "0"),
+                   "argument --image-scale: 0 must be above 0")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run.mcap"]
 
 
@@ -154,7 +154,7 @@ def test_a_scenario_with_a_growing_mode_is_refused(tmp_path: Path) -> None:
 
 def test_resolution_refuses_a_camera_below_the_surface(tmp_path: Path) -> None:
     one_line_error(sds("resolution", "--height-mm", "-170", "--out", str(tmp_path / "r")),
-                   "the height must be positive")
+                   "argument --height-mm: -170 must be above 0")
     assert not (tmp_path / "r").exists()
 
 

@@ -25,8 +25,10 @@ def refused(done: subprocess.CompletedProcess, text: str) -> None:
 
 
 def recording(path: Path) -> bytes:
+    """A recording with one message (one without any would not block a retry)."""
     recorder = McapRecorder(path)
     recorder.add_topic("/t", "std_msgs/msg/Header")
+    recorder.write("/t", b"\x00\x01\x00\x00" + bytes(12), 1, 1)
     recorder.close()
     return path.read_bytes()
 

@@ -14,7 +14,9 @@ from pathlib import Path
 
 import av
 import pytest
-from sds_model.staging import STAGING_PREFIX, staged_file, staged_folder
+from sds_model.errors import InputError
+from sds_model.staging import STAGING_PREFIX, recover, staged_file, staged_folder
+from sds_record.mcap_files import McapRecorder, holds_messages
 from sds_sim.scenario import load_scenario
 from sds_sim.simulate import SimulationOutput, simulate
 
@@ -54,6 +56,92 @@ def test_a_folder_is_replaced_only_when_the_block_completes(tmp_path: Path) -> N
         (staging / "points.csv").write_text("half")
         raise KeyboardInterrupt
     assert not fresh.exists() and not staging_left(tmp_path)
+
+
+def dead_pid() -> int:
+    """The id of a process that has ended."""
+    child = subprocess.Popen([sys.executable, "-c", "pass"])
+    child.wait()
+    return child.pid
+
+
+def test_a_kill_at_any_point_of_the_commit_leaves_one_whole_run(tmp_path: Path) -> None:
+    """The commit is one swap of folders: killed after the new folder was made ready, the next
+    run completes it; killed after the old was moved aside, it is restored (or the ready one
+    put in its place). Either way one run, whole, and the leftovers named and removed."""
+    pid = dead_pid()
+    target = tmp_path / "out"
+    # Killed between "move the old aside" and "the new into place": both exist beside it.
+    (tmp_path / f".sds-old-{pid}-out").mkdir()
+    (tmp_path / f".sds-old-{pid}-out" / "points.csv").write_text("old")
+    (tmp_path / f".sds-ready-{pid}-out").mkdir()
+    (tmp_path / f".sds-ready-{pid}-out" / "points.csv").write_text("new")
+    (tmp_path / f"{STAGING_PREFIX}{pid}-other").mkdir()   # a dead run's unfinished output
+    done = recover(tmp_path)
+    assert (target / "points.csv").read_text() == "new"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+    assert len(done) == 3 and any("completed the commit" in line for line in done)
+    # Killed before the ready folder existed: the old one comes back.
+    target.rename(tmp_path / f".sds-old-{pid}-out")
+    (tmp_path / f"{STAGING_PREFIX}{pid}-out").mkdir()
+    done = recover(tmp_path)
+    assert (target / "points.csv").read_text() == "new" and len(done) == 2
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+    # A live process's staging (this one's) is left alone.
+    (tmp_path / f"{STAGING_PREFIX}{os.getpid()}-busy").mkdir()
+    assert recover(tmp_path) == [] and (tmp_path / f"{STAGING_PREFIX}{os.getpid()}-busy").exists()
+
+
+def test_the_next_run_names_and_removes_a_dead_runs_staging(tmp_path: Path) -> None:
+    """`sds process` into a folder beside a killed run's staging folder: the staging is named
+    on the console and removed."""
+    stale = tmp_path / f"{STAGING_PREFIX}{dead_pid()}-out"
+    stale.mkdir()
+    (stale / "points.csv").write_text("half")
+    done = subprocess.run([SDS, "process", "--video", str(tmp_path / "nope"), "--rig", RIG,
+                           "--out", str(tmp_path / "out")], capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 2   # refused before any work: nothing is touched
+    assert stale.exists()
+    with staged_folder(tmp_path / "out", []) as staging:
+        (staging / "points.csv").write_text("whole")
+    assert not stale.exists() and (tmp_path / "out" / "points.csv").read_text() == "whole"
+
+
+def test_files_beside_the_results_are_kept_by_links_not_copies(tmp_path: Path) -> None:
+    """A run's folder with its recording: the commit keeps it (the same file, not a copy of
+    gigabytes) and replaces only the results."""
+    target = tmp_path / "run"
+    (target / "results").mkdir(parents=True)
+    (target / "results" / "points.csv").write_text("old")
+    (target / "recording.mcap").write_bytes(b"recording")
+    inode = (target / "recording.mcap").stat().st_ino
+    with staged_folder(target, ["results", "analysis"]) as staging:
+        (staging / "results").mkdir()
+        (staging / "results" / "points.csv").write_text("new")
+    assert (target / "results" / "points.csv").read_text() == "new"
+    assert (target / "recording.mcap").stat().st_ino == inode
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+
+
+def test_a_recording_without_messages_does_not_block_the_retry(tmp_path: Path) -> None:
+    """What a graph that never started leaves (an MCAP without a message) is replaced without
+    --overwrite; a recording with messages, or a file that is no recording, is not."""
+    path = tmp_path / "recording.mcap"
+    McapRecorder(path).close()
+    assert not holds_messages(path)
+    recorder = McapRecorder(path)
+    recorder.add_topic("/t", "std_msgs/msg/Header")
+    recorder.write("/t", b"\x00\x01\x00\x00" + bytes(12), 1, 1)
+    recorder.close()
+    assert holds_messages(path)
+    with pytest.raises(InputError, match="overwrite"):
+        McapRecorder(path)
+    other = tmp_path / "notes.mcap"
+    other.write_text("someone's data")
+    assert holds_messages(other)
+    with pytest.raises(InputError):
+        McapRecorder(other)
 
 
 def test_a_file_appears_only_when_complete(tmp_path: Path) -> None:
@@ -210,3 +298,23 @@ def test_ctrl_c_during_the_demos_graph_is_an_interruption_not_a_failure(tmp_path
     assert "sds demo: interrupted: no results and no analysis written" in stderr, stderr
     assert not (tmp_path / "results").exists() and not (tmp_path / "analysis").exists()
     assert "FRAMES MISSING" not in demo.stdout.read()
+
+
+def test_a_report_that_fails_half_way_leaves_no_result(kick: SimulationOutput, tmp_path: Path,
+                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    """A fault while the report is written (after analysis.json, before report.html) is the
+    program's: it is raised, and no folder claims a result (the analysis once caught every
+    ValueError as "no analysis" and left analysis.json and modes.png, exit 0)."""
+    import sds_workflows.run_tables as run_tables
+    from sds_model.rig import load_rig
+    from sds_workflows.process import process_video
+
+    def half_a_report(analysis, out: Path, truth=None):
+        (out / "analysis.json").write_text("{}")
+        raise ValueError("a figure failed")
+
+    monkeypatch.setattr(run_tables, "write_report", half_a_report)
+    out = tmp_path / "results"
+    with pytest.raises(ValueError, match="a figure failed"):
+        process_video(kick.video, load_rig(RIG), out, progress=False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == []

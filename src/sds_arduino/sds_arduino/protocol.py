@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from sds_model.errors import InputError
 
 HEADER = "$SDS1"
 FIELDS = {"IMU": ("ax_mg", "ay_mg", "az_mg"), "TOF": ("range_mm", "status"), "TRG": ("level",),
@@ -27,7 +28,7 @@ FIELDS = {"IMU": ("ax_mg", "ay_mg", "az_mg"), "TOF": ("range_mm", "status"), "TR
 WRAP = 2**32
 
 
-class ProtocolError(ValueError):
+class ProtocolError(InputError):
     """A line that is not a valid version-1 record; the message says what is wrong, `reason`
     names the kind of fault (for counting)."""
 

@@ -1,7 +1,8 @@
 """The measuring chain as real node processes, with a progress bar (`sds demo`, `sds run`).
 
-The graph is config/graphs/drop.yaml (frame source → tracker → reconstruction, recorder) plus
-arduino.yaml (the serial bridge), and view.yaml (a live Rerun viewer) where there is a display.
+The graph is config/graphs/drop.yaml (frame source → tracker → reconstruction, recorder) and
+view.yaml (a live Rerun viewer) where there is a display, plus what the caller adds (arduino.yaml:
+the serial bridge; lateral.yaml: the side camera).
 `run_chain` starts it, counts the tracked frames, feeds a stand-in Arduino through a
 pseudo-terminal when given its lines, and stops the graph once every frame is in.
 """
@@ -24,7 +25,7 @@ from tqdm import tqdm
 from sds_bringup.launcher import Launcher
 from sds_bringup.ros_env import graph_domain_id, graph_environment
 
-GRAPHS = ("drop.yaml", "arduino.yaml", "view.yaml")
+GRAPHS = ("drop.yaml", "view.yaml")
 IDLE_TIMEOUT_S = 60.0
 BRIDGE_OPEN_S = 0.5
 """The bridge opens its port within this of publishing (it reads from its start)."""
@@ -51,8 +52,8 @@ def live_view() -> bool:
 
 def graph_entries(overrides: list[str], viewer: bool, extra: tuple[str, ...] = ()
                   ) -> list[NodeEntry]:
-    """The chain: drop.yaml and arduino.yaml, with view.yaml if `viewer`, and the `extra`
-    graph files (e.g. lateral.yaml), with overrides (the viewer's are left out without it)."""
+    """The chain: drop.yaml, with view.yaml if `viewer`, and the `extra` graph files (e.g.
+    arduino.yaml, lateral.yaml), with overrides (the viewer's are left out without it)."""
     graphs = (*GRAPHS, *extra) if viewer else tuple(g for g in (*GRAPHS, *extra)
                                                     if g != "view.yaml")
     entries = [e for name in graphs for e in load_graph(CONFIG / "graphs" / name)]

@@ -7,6 +7,8 @@ import random
 from collections.abc import Mapping
 from pathlib import Path
 
+from sds_model.errors import InputError
+
 # Measured in ../shared/docs/ros2-from-pypi.md: without these, 4K images between processes
 # fall to 0-8 fps; with them 4K mono8 and bgr8 run at 30 fps.
 LARGE_IMAGE_TRANSPORT = {
@@ -34,7 +36,7 @@ def graph_domain_id(requested: int | None, network: bool = False,
     if env.get("ROS_DOMAIN_ID"):
         return int(env["ROS_DOMAIN_ID"])
     if network:
-        raise ValueError("a graph across machines needs one domain on every machine: give "
+        raise InputError("a graph across machines needs one domain on every machine: give "
                          "--domain-id N (or set ROS_DOMAIN_ID) on each")
     return pick_domain_id()
 
@@ -48,11 +50,11 @@ def graph_environment(domain_id: int, base: Mapping[str, str] | None = None,
     named in ROS_STATIC_PEERS only, so that no other machine of the network joins the graph.
     """
     if not 0 <= domain_id <= MAX_DOMAIN_ID:
-        raise ValueError(f"ROS domain id {domain_id} is outside 0..{MAX_DOMAIN_ID}")
+        raise InputError(f"ROS domain id {domain_id} is outside 0..{MAX_DOMAIN_ID}")
     env = dict(os.environ if base is None else base)
     if network and not env.get("ROS_STATIC_PEERS") and \
             not env.get("ROS_AUTOMATIC_DISCOVERY_RANGE"):
-        raise ValueError("--network meets only the machines named in ROS_STATIC_PEERS (their "
+        raise InputError("--network meets only the machines named in ROS_STATIC_PEERS (their "
                          "addresses, ';'-separated); set it, or ROS_AUTOMATIC_DISCOVERY_RANGE="
                          "SUBNET to meet every machine of the subnet")
     env.update(LARGE_IMAGE_TRANSPORT)

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from sds_model.errors import InputError
 
 HERO5_TO_OPTICAL = np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 """Optical-frame vector = HERO5_TO_OPTICAL @ stored (Z, X, Y) sample (a proper rotation)."""
@@ -28,7 +29,7 @@ SIDECAR_COLUMNS = ("sensor", "t_s", "x", "y", "z")
 the sample in the camera's optical frame."""
 
 
-class CameraImuError(ValueError):
+class CameraImuError(InputError):
     """Telemetry that is there but cannot be read."""
 
 

@@ -18,6 +18,7 @@ from typing import Protocol, TypeVar
 import av
 import cv2
 import numpy as np
+from sds_model.errors import InputError
 
 CHANNELS = ("bgr", "red", "green", "blue", "gray")
 IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".bmp", ".jpg", ".jpeg", ".pgm", ".ppm")
@@ -29,7 +30,7 @@ READ_AHEAD = 3
 """Frames decoded ahead of their consumer by `read_ahead`."""
 
 
-class FrameSourceError(RuntimeError):
+class FrameSourceError(InputError):
     """A source that cannot be opened or that ended before its announced length."""
 
 

@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 from scipy.optimize import minimize_scalar
+from sds_model.errors import InputError
 
 from sds_camera.frame_source import VideoFileSource
 
@@ -79,9 +80,9 @@ def measure_readout(means: np.ndarray, flicker_hz: float, max_readout_s: float
     move from frame to frame: `standing_bands`). ValueError when the clip shows no bands (a
     global shutter, an exposure of whole flicker periods, a light that does not flicker)."""
     if means.ndim != 2 or len(means) < 3:
-        raise ValueError("a flicker clip of 3 frames or more is needed")
+        raise InputError("a flicker clip of 3 frames or more is needed")
     if not flicker_hz > 0 or not max_readout_s > 0:
-        raise ValueError("the flicker frequency and the longest readout must be positive")
+        raise InputError("the flicker frequency and the longest readout must be positive")
     height = means.shape[1]
     bands = means / np.maximum(means.mean(axis=0), 1e-6) - 1.0
     per_second = flicker_hz / height          # cycles per row for each second of readout
@@ -95,7 +96,7 @@ def measure_readout(means: np.ndarray, flicker_hz: float, max_readout_s: float
     coefficients, *_ = np.linalg.lstsq(design, bands.T, rcond=None)
     contrast = float(np.median(np.hypot(coefficients[0], coefficients[1])))
     if contrast < LEAST_CONTRAST:
-        raise ValueError(f"no flicker bands (contrast {contrast:.3f}): is the light flickering "
+        raise InputError(f"no flicker bands (contrast {contrast:.3f}): is the light flickering "
                          f"at {flicker_hz:g} Hz, and the exposure shorter than its period?")
     residual = bands.T - design @ coefficients             # rows × frames
     dof = bands.size - coefficients.size - 1
@@ -116,9 +117,9 @@ def video_readout(path: Path, flicker_hz: float) -> ReadoutEstimate:
     source = VideoFileSource(path)
     try:
         if not source.nominal_fps > 0:
-            raise ValueError(f"{path}: no frame rate (the longest readout is one frame period)")
+            raise InputError(f"{path}: no frame rate (the longest readout is one frame period)")
         if standing_bands(flicker_hz, source.nominal_fps):
-            raise ValueError(f"{path}: a {flicker_hz:g} Hz flicker at {source.nominal_fps:g} fps "
+            raise InputError(f"{path}: a {flicker_hz:g} Hz flicker at {source.nominal_fps:g} fps "
                              "makes bands that stand still, which cannot be told from the "
                              "scene: film at another frame rate (or an LED at another rate)")
         means = row_means(frame.image for frame in source.frames())

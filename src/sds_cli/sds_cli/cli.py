@@ -7,8 +7,13 @@ import importlib
 import os
 import signal
 import sys
+import time
+import traceback
+from pathlib import Path
 
-from sds_cli.commands import COMMANDS, CommandError
+from sds_model.errors import InputError
+
+from sds_cli.commands import COMMANDS, OneLineParser
 
 # FFmpeg and OpenCV print their own lines for a corrupt video; the commands say it in one.
 os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
@@ -32,7 +37,7 @@ class VersionAction(argparse.Action):
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of `sds` with every subcommand."""
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="sds",
         description="Sloshing Detection Subsystem: laser-based free-surface measurement.",
     )
@@ -42,14 +47,6 @@ def build_parser() -> argparse.ArgumentParser:
     for name in COMMANDS:
         importlib.import_module(f"sds_cli.commands.{name}").add_parser(commands)
     return parser
-
-
-def input_errors() -> tuple[type[BaseException], ...]:
-    """What bad input raises: a command's own CommandError and the workflows' input errors;
-    imported once such an error has happened."""
-    from sds_workflows.errors import input_errors as workflow_input_errors
-
-    return CommandError, *workflow_input_errors()
 
 
 def _is_interruption(error: BaseException | None) -> bool:
@@ -66,11 +63,40 @@ def interrupted() -> int:
     return 130
 
 
+def crash_log(error: BaseException, argv: list[str]) -> Path:
+    """Write the traceback of a fault of the program to a new file under the user's state
+    folder ($XDG_STATE_HOME/sds, default ~/.local/state/sds); its path."""
+    state = Path(os.environ.get("XDG_STATE_HOME") or Path.home() / ".local" / "state")
+    folder = state / "sds"
+    folder.mkdir(parents=True, exist_ok=True)
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    path = folder / f"crash-{stamp}-{os.getpid()}.log"
+    path.write_text(f"sds {' '.join(argv)}\n\n"
+                    + "".join(traceback.format_exception(error)))
+    return path
+
+
+def fault(command: str, error: BaseException, argv: list[str]) -> int:
+    """Report a fault of the program (not of the input) in one line that points to its
+    traceback; exit code 1."""
+    try:
+        where = f"the traceback is in {crash_log(error, argv)}"
+    except OSError:   # no state folder: the traceback goes to the console instead
+        traceback.print_exception(error)
+        where = "the traceback is above"
+    print(f"sds {command}: internal error ({type(error).__name__}: {error}); {where}; "
+          "please report it", file=sys.stderr)
+    return 1
+
+
 def main(argv: list[str] | None = None) -> None:
-    """Entry point of the `sds` command: bad input is one line and exit code 2; once the
-    command is done, its process ignores Ctrl-C."""
+    """Entry point of the `sds` command: bad input (`InputError`) is one line and exit code
+    2, a fault of the program one line, its traceback in a log file and exit code 1; once
+    the command is done, its process ignores Ctrl-C."""
+    command = "command"
     try:
         args = build_parser().parse_args(argv)
+        command = args.command
         # The libraries' warnings (e.g. an unfinished recording read up to its last chunk);
         # imported here so that `sds --help` does not pay for logging.
         import logging
@@ -78,14 +104,12 @@ def main(argv: list[str] | None = None) -> None:
         code = args.run(args)
     except KeyboardInterrupt:   # Ctrl-C outside a graph (a graph stops on its own signal)
         code = interrupted()
+    except InputError as error:
+        print(f"sds {command}: {error}", file=sys.stderr)
+        code = 2
     except Exception as error:
-        if _is_interruption(error):
-            code = interrupted()
-        elif isinstance(error, input_errors()):
-            print(f"sds {args.command}: {error}", file=sys.stderr)
-            code = 2
-        else:
-            raise
+        code = interrupted() if _is_interruption(error) else \
+            fault(command, error, sys.argv[1:] if argv is None else argv)
     finally:
         # Done, or refused: a Ctrl-C from now on has nothing to stop. Python exits with
         # threads, pools and compiled code still closing, part of it with SIGINT's default

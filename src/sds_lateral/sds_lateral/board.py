@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 from sds_model.camera.model import CameraModel
+from sds_model.errors import InputError
 from sds_model.geometry import RigidTransform
 from sds_recon.calibration.board import detect_corners
 
@@ -18,7 +19,7 @@ POSE_STEP = 1e-5
 """Finite-difference step of the pose's six parameters [rad, mm] for its Jacobian."""
 
 
-class BoardError(ValueError):
+class BoardError(InputError):
     """No usable checkerboard in the image; the message says what was looked for."""
 
 

@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from sds_arduino.clock import camera_offset_s
 from sds_camera.led import switch_sigma_s, switch_times_s
+from sds_model.errors import InputError
 
 
 @dataclass(frozen=True)
@@ -57,7 +58,7 @@ class LateralClock:
         return text
 
 
-class ClockError(ValueError):
+class ClockError(InputError):
     """No path links the side camera's clock to the top camera's."""
 
 

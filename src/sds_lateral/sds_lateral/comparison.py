@@ -26,6 +26,7 @@ from functools import cached_property
 
 import numpy as np
 from scipy.interpolate import CubicSpline
+from sds_model.errors import InputError
 from sds_recon.surface_fit import DEFAULT_MODES, HEIGHT_SIGMA_FLOOR_MM, modal_design
 
 LINE_LASER_ID = 65535
@@ -77,7 +78,7 @@ def top_surface_series(fits: np.ndarray, points: np.ndarray, radius_mm: float
     columns = [f"{name}_mm" for name in names]
     missing = [c for c in columns if c not in (fits.dtype.names or ())]
     if missing:
-        raise ValueError(f"the top camera's fits have no modal amplitudes {missing}")
+        raise InputError(f"the top camera's fits have no modal amplitudes {missing}")
     amplitudes = np.column_stack([fits[c] for c in columns])
     spots = points[(points["laser_id"] != LINE_LASER_ID) & (points["rejected"] == 0)]
     order = np.argsort(spots["frame"], kind="stable")
@@ -99,7 +100,7 @@ def top_surface_series(fits: np.ndarray, points: np.ndarray, radius_mm: float
     fitted = np.all(np.isfinite(amplitudes), axis=1) & np.all(np.isfinite(covariance),
                                                                   axis=(1, 2))
     if np.count_nonzero(fitted) < MIN_TOP_FRAMES:
-        raise ValueError(f"{np.count_nonzero(fitted)} top frames with a modal fit, too few "
+        raise InputError(f"{np.count_nonzero(fitted)} top frames with a modal fit, too few "
                          "to compare with the side camera")
     return TopSurfaceSeries(fits["t_s"][fitted], amplitudes[fitted], tuple(names),
                             covariance[fitted], radius_mm)

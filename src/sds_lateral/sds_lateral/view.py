@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 from sds_model.camera.files import camera_from_dict, camera_sigma, read_yaml
 from sds_model.camera.model import CameraModel, CameraModelError
+from sds_model.errors import InputError
 from sds_recon.calibration.board import Checkerboard
 
 VIEW_KEYS = ("camera", "fps", "led_roi_px", "boards")
@@ -16,7 +17,7 @@ BOARD_KEYS = ("inner_corners", "square_mm", "first_corner_mm", "row_direction",
               "column_direction", "placement_sigma_mm")
 
 
-class LateralViewError(ValueError):
+class LateralViewError(InputError):
     """A lateral view file that does not describe a usable side view; names file and field."""
 
 

@@ -23,6 +23,7 @@ import cv2
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 from sds_model.camera.model import CameraModel
+from sds_model.errors import InputError
 from sds_model.geometry import RigidTransform
 
 from sds_lateral.board import (
@@ -87,7 +88,7 @@ class WallProfiler:
         cosine = np.sum(normal * towards, axis=1) / np.linalg.norm(towards, axis=1)
         seen = cosine > np.cos(np.radians(max_incidence_deg))
         if not np.any(seen):
-            raise ValueError("the side camera sees no part of the wall within "
+            raise InputError("the side camera sees no part of the wall within "
                              f"{max_incidence_deg:g} degrees of its normal")
         rows = {}
         for height in (-band_mm, 0.0, band_mm):
@@ -95,7 +96,7 @@ class WallProfiler:
             rows[height] = pixels
         finite = np.isfinite(np.column_stack(list(rows.values()))).all(axis=1)
         if not np.any(finite):
-            raise ValueError("the side camera's image holds no part of the wall's band")
+            raise InputError("the side camera's image holds no part of the wall's band")
         columns_seen = rows[0.0][finite, 0]
         order = np.argsort(columns_seen)
         first, last = columns_seen[order[0]], columns_seen[order[-1]]

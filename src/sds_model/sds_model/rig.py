@@ -17,13 +17,14 @@ from scipy.spatial.transform import Rotation
 from sds_model.camera.files import camera_from_dict, camera_sigma, read_yaml
 from sds_model.camera.model import CameraModel, CameraModelError
 from sds_model.camera.rolling_shutter import RollingShutter, rolling_shutter
+from sds_model.errors import InputError
 from sds_model.geometry import RigidTransform
 
 WORLD_FRAME = ("origin on the container axis at the flat liquid surface (fill level), Z up "
                "against gravity, mm")
 
 
-class RigError(ValueError):
+class RigError(InputError):
     """A rig file that does not describe a usable rig; the message names the bad field."""
 
 

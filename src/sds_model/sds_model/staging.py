@@ -8,6 +8,7 @@ blocks the retry.
 
 from __future__ import annotations
 
+import logging
 import os
 import shutil
 import signal
@@ -17,25 +18,32 @@ from pathlib import Path
 
 STAGING_PREFIX = ".sds-partial-"
 """A staging folder's name: this, the process id, the target's name (hidden in listings)."""
+READY_PREFIX = ".sds-ready-"
+"""A complete staging folder about to replace its target (the next run finishes the swap)."""
+OLD_PREFIX = ".sds-old-"
+"""A target moved aside by the swap (removed once the new one is in place)."""
 HELD_SIGNALS = {signal.SIGINT, signal.SIGTERM}
 """Signals held off while the staged files move into place (a few renames)."""
+_log = logging.getLogger(__name__)
 
 
-def staging_path(target: Path) -> Path:
-    """The temporary sibling (folder or file) a run for `target` writes into."""
-    return target.parent / f"{STAGING_PREFIX}{os.getpid()}-{target.name}"
+def staging_path(target: Path, prefix: str = STAGING_PREFIX) -> Path:
+    """The temporary sibling (folder or file) a run for `target` writes into (or, with
+    another prefix, the swap's names for it)."""
+    return target.parent / f"{prefix}{os.getpid()}-{target.name}"
 
 
 @contextmanager
 def staged_folder(target: Path, replaces: Collection[str]) -> Iterator[Path]:
     """A fresh, empty staging folder beside `target` to write a run's files into.
 
-    When the block ends normally, every entry of the staging folder replaces the same-named
-    entry of `target` (created if absent), and the entries named in `replaces` that this run
-    did not write (an earlier run's table or figure) are removed, so that the folder holds one
-    run; other files in `target` are kept. SIGINT and SIGTERM wait until the renames are done.
-    When the block raises (an error, KeyboardInterrupt), the staging folder is removed and
-    `target` is untouched."""
+    When the block ends normally, the staging folder becomes `target` in one rename
+    (`commit`): with the entries of `target` that the run did not write and that `replaces`
+    does not name (other files in the folder) linked into it first, so that the folder holds
+    one run; SIGINT and SIGTERM wait until that is done. When the block raises (an error,
+    KeyboardInterrupt), the staging folder is removed and `target` is untouched. Leftovers of
+    killed runs beside `target` are dealt with first (`recover`)."""
+    recover(target.parent)
     staging = staging_path(target)
     if staging.exists():
         shutil.rmtree(staging)
@@ -49,23 +57,112 @@ def staged_folder(target: Path, replaces: Collection[str]) -> Iterator[Path]:
 
 
 def commit(staging: Path, target: Path, replaces: Collection[str]) -> None:
-    """Move the staged entries into `target` (see `staged_folder`), signals held off."""
+    """Make the complete `staging` folder `target` (see `staged_folder`), signals held off:
+    the kept entries are hard-linked into it, it is renamed "ready", the old target is moved
+    aside, the ready folder renamed into place and the old one removed. A kill at any point
+    leaves either the old or the new folder whole, and `recover` completes the swap."""
     held = signal.pthread_sigmask(signal.SIG_BLOCK, HELD_SIGNALS)
     try:
         if not target.exists():
             staging.rename(target)
             return
         written = {entry.name for entry in staging.iterdir()}
-        for name in set(replaces) - written:
-            _remove(target / name)
-        for entry in staging.iterdir():
-            destination = target / entry.name
-            if entry.is_dir() and destination.exists():
-                _remove(destination)
-            os.replace(entry, destination)
-        staging.rmdir()
+        for entry in target.iterdir():
+            if entry.name not in written and entry.name not in replaces:
+                _link(entry, staging / entry.name)
+        ready, old = staging_path(target, READY_PREFIX), staging_path(target, OLD_PREFIX)
+        staging.rename(ready)
+        try:
+            target.rename(old)
+        except OSError:   # a folder that cannot move (the working folder, a mount point)
+            _move_entries(ready, target)
+            return
+        ready.rename(target)
+        _remove(old)
     finally:   # a signal that came meanwhile is delivered now
         signal.pthread_sigmask(signal.SIG_SETMASK, held)
+
+
+def _link(source: Path, destination: Path) -> None:
+    """`source` (a file or a folder tree) at `destination` too, by hard links where the file
+    system has them (no copy of a large recording), else copied."""
+    if source.is_dir() and not source.is_symlink():
+        shutil.copytree(source, destination, symlinks=True, copy_function=_link_file)
+    else:
+        _link_file(source, destination)
+
+
+def _link_file(source: str | Path, destination: str | Path) -> None:
+    if Path(source).is_symlink():
+        os.symlink(os.readlink(source), destination)
+        return
+    try:
+        os.link(source, destination)
+    except OSError:
+        shutil.copy2(source, destination)
+
+
+def _move_entries(ready: Path, target: Path) -> None:
+    """The fallback of a target that cannot be renamed: every entry of `ready` replaces its
+    namesake in `target` (the folder's own entries that `ready` lacks are removed)."""
+    names = {entry.name for entry in ready.iterdir()}
+    for entry in target.iterdir():
+        if entry.name not in names and not entry.name.startswith(
+                (STAGING_PREFIX, READY_PREFIX, OLD_PREFIX)):
+            _remove(entry)
+    for entry in ready.iterdir():
+        destination = target / entry.name
+        if entry.is_dir() and destination.exists():
+            _remove(destination)
+        os.replace(entry, destination)
+    ready.rmdir()
+
+
+def recover(folder: Path) -> list[str]:
+    """Finish or undo the swaps of runs that died in `folder` and remove their staging
+    entries; what was done, one line each (also logged as warnings). An entry belongs to a
+    dead run when no process has its process id."""
+    done: list[str] = []
+    if not folder.is_dir():
+        return done
+    leftovers = [(entry, *_owner(entry.name)) for entry in folder.iterdir()]
+    dead = [(entry, prefix, name) for entry, prefix, pid, name in leftovers
+            if prefix and not _alive(pid)]
+    for entry, prefix, name in sorted(dead, key=lambda item: item[1] != READY_PREFIX):
+        target = folder / name
+        if prefix == READY_PREFIX and not target.exists():
+            entry.rename(target)
+            done.append(f"{target}: completed the commit of a run that was killed during it")
+        elif prefix == OLD_PREFIX and not target.exists():
+            entry.rename(target)
+            done.append(f"{target}: restored, a run was killed while replacing it")
+        else:
+            _remove(entry)
+            done.append(f"{entry}: removed, the unfinished output of a run that died")
+    for line in done:
+        _log.warning(line)
+    return done
+
+
+def _owner(name: str) -> tuple[str, int, str]:
+    """(prefix, process id, target's name) of a staging entry's name; ('', 0, '') for
+    anything else."""
+    for prefix in (STAGING_PREFIX, READY_PREFIX, OLD_PREFIX):
+        pid, dash, target = name.removeprefix(prefix).partition("-")
+        if name.startswith(prefix) and dash and pid.isdigit():
+            return prefix, int(pid), target
+    return "", 0, ""
+
+
+def _alive(pid: int) -> bool:
+    """Whether a process with this id runs (this one does: its other stagings are in use)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:   # another user's process
+        return True
+    return True
 
 
 def _remove(path: Path) -> None:
@@ -80,8 +177,9 @@ def _remove(path: Path) -> None:
 def staged_file(target: Path) -> Iterator[Path]:
     """A temporary sibling path to write `target`'s new content to: it replaces `target` (one
     atomic rename) when the block ends normally, and is removed when the block raises."""
-    staging = staging_path(target)
     target.parent.mkdir(parents=True, exist_ok=True)
+    recover(target.parent)
+    staging = staging_path(target)
     try:
         yield staging
     except BaseException:

@@ -15,7 +15,6 @@ from rclpy.subscription import RCLError
 from rclpy.time import Time
 from sds_camera.camera_imu import CameraImuError, imu_samples, read_camera_imu
 from sds_camera.frame_source import (
-    CHANNELS,
     Frame,
     FrameSourceError,
     Region,
@@ -27,6 +26,7 @@ from sds_model.camera import CameraModel as CameraModelBase
 from sds_model.camera import load_camera
 from sds_model.camera.files import read_yaml
 from sds_model.camera.rolling_shutter import RollingShutter, rolling_shutter
+from sds_model.errors import InputError
 from sds_ros.ack_credit import AckCredit
 from sds_ros.hosted_node import HostedNode
 from sds_ros.image_msg import image_to_msg
@@ -39,10 +39,13 @@ from sds_msgs.msg import CameraModel, SyncEvent
 
 BEHIND_REPORT_S = 0.5
 """A file played in real time this far behind its frames' times is said on the console [s]."""
-PACINGS = ("realtime", "flood")
+PARAMETER_CHOICES = {"channel": ("bgr", "red", "green", "blue", "gray"),
+                     "pacing": ("realtime", "flood"), "stamp": ("clock", "media")}
+"""The values a string parameter may take: a literal, which the launcher reads without
+importing this module (`graph_file.check_plugins`), so that a wrong one fails before any
+node starts; `channel`'s are the frame source's `CHANNELS`."""
 IMU_HISTORY = 2000
 """Camera IMU messages kept for late subscribers (about 3 s of a GoPro's 600 per second)."""
-STAMPS = ("clock", "media")
 EXIT_SOURCE_ERROR = 2
 PARAMETERS = {"source": "", "fps": 0.0, "roi": [0, 0, 0, 0], "channel": "bgr",
               "pacing": "realtime", "rate": 1.0, "stamp": "clock", "frame_id": "camera_optical",
@@ -151,14 +154,14 @@ class FrameSourceNode(HostedNode):
 
     def _checked(self, p: dict[str, Any]) -> dict[str, Any]:
         """The parameters, once their values are known to be usable."""
-        for name, allowed in (("channel", CHANNELS), ("pacing", PACINGS), ("stamp", STAMPS)):
+        for name, allowed in PARAMETER_CHOICES.items():
             if p[name] not in allowed:
-                raise ValueError(f"parameter {name}={p[name]!r} is not one of {allowed}")
+                raise InputError(f"parameter {name}={p[name]!r} is not one of {allowed}")
         if p["rate"] <= 0 or p["max_in_flight"] < 1 or p["linger_s"] < 0:
-            raise ValueError("parameters rate and max_in_flight must be positive, linger_s "
+            raise InputError("parameters rate and max_in_flight must be positive, linger_s "
                              "not negative")
         if not p["source"]:
-            raise ValueError("parameter source is empty: name a video file, folder or camera")
+            raise InputError("parameter source is empty: name a video file, folder or camera")
         self._p = p
         return p
 
@@ -177,7 +180,7 @@ class FrameSourceNode(HostedNode):
         camera = load_camera(path)
         size = (self._source.width, self._source.height)
         if (camera.width_px, camera.height_px) != size:
-            raise ValueError(f"camera model {path} is for {camera.width_px}x{camera.height_px} px "
+            raise InputError(f"camera model {path} is for {camera.width_px}x{camera.height_px} px "
                              f"frames, the source gives {size[0]}x{size[1]}")
         return camera
 

@@ -10,6 +10,7 @@ from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
 from rosgraph_msgs.msg import Clock
+from sds_model.errors import InputError
 from sds_record.mcap_files import header_stamp_ns, read_messages, recorded_topics
 from sds_ros.ack_credit import AckCredit
 from sds_ros.hosted_node import HostedNode
@@ -19,7 +20,8 @@ from std_msgs.msg import Header
 from sds_nodes.recorder import message_class
 
 EXIT_INPUT_ERROR = 2
-PACINGS = ("recorded", "flood")
+PARAMETER_CHOICES = {"pacing": ("recorded", "flood")}
+"""The values a string parameter may take (a literal the launcher checks before starting)."""
 DEPTH = 100
 """Messages kept per played topic, for readers that lag (3.3 s at 30 fps)."""
 IMAGE_TYPE = "sensor_msgs/msg/Image"
@@ -31,7 +33,7 @@ def parse_remaps(items: list[str]) -> dict[str, str]:
     for item in (i for i in items if i):
         source, separator, target = item.partition(":=")
         if not separator or not source or not target:
-            raise ValueError(f"remap {item!r}: give FROM:=TO")
+            raise InputError(f"remap {item!r}: give FROM:=TO")
         remaps[source] = target
     return remaps
 
@@ -74,11 +76,12 @@ class PlayerNode(HostedNode):
     def _check_parameters(self) -> None:
         p = self._p
         if not p["input"] or not Path(p["input"]).is_file():
-            raise ValueError(f"parameter input={p['input']!r}: no such recording")
-        if p["pacing"] not in PACINGS:
-            raise ValueError(f"parameter pacing={p['pacing']!r} is not one of {PACINGS}")
+            raise InputError(f"parameter input={p['input']!r}: no such recording")
+        if p["pacing"] not in PARAMETER_CHOICES["pacing"]:
+            raise InputError(f"parameter pacing={p['pacing']!r} is not one of "
+                             f"{PARAMETER_CHOICES['pacing']}")
         if p["rate"] <= 0:
-            raise ValueError("parameter rate must be positive")
+            raise InputError("parameter rate must be positive")
 
     def _fail(self, reason: str) -> None:
         self.get_logger().error(reason)

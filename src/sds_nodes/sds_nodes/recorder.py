@@ -133,9 +133,14 @@ class RecorderNode(HostedNode):
         return write
 
     def close(self) -> None:
-        """Finish the file (summary section) when the graph stops."""
+        """Finish the file (summary section) when the graph stops; a file without a message
+        is removed."""
         if hasattr(self, "_recorder"):
             self._recorder.close()
+            if self._recorder.message_count == 0:   # it would only block the retry
+                self.output.unlink(missing_ok=True)
+                self.get_logger().warning(f"no message came: {self.output} removed")
+                return
             self.get_logger().info(f"wrote {self._recorder.message_count} messages to "
                                    f"{self.output}")
             lost = {topic: gaps.missed_in_all for topic, gaps in self._gaps.items()

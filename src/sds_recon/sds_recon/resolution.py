@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike
 from sds_model.camera.model import CameraModel
+from sds_model.errors import InputError
 
 HEIGHT_STEP_MM = 0.01
 """Surface displacement of the central difference that gives d(pixel)/dZ."""
@@ -54,7 +55,7 @@ def vertical_resolution(camera: CameraModel, radii_mm: ArrayLike, height_mm: flo
     """
     radii = np.asarray(radii_mm, dtype=float)
     if not height_mm > 0 or np.any(radii < 0) or not abs(beam_tilt_rad) < np.pi / 2:
-        raise ValueError(f"camera height {height_mm:g} mm, beam tilt "
+        raise InputError(f"camera height {height_mm:g} mm, beam tilt "
                          f"{np.degrees(beam_tilt_rad):g}°, radii from {np.min(radii, initial=0):g}"
                          " mm: the height must be positive, the tilt below 90°, no radius "
                          "negative")

@@ -19,6 +19,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.csv as pa_csv
 from numpy.typing import ArrayLike
+from sds_model.errors import InputError
 
 FLAGS_DOC = ("bit flags: 1 lost, 2 saturated, 4 reflection suspected, 8 off its image path, "
              "16 replaced by the Hampel filter (its prediction, no measurement), "
@@ -159,7 +160,7 @@ def refuse_results(directory: Path) -> None:
     """FileExistsError when `directory` holds result files already."""
     earlier = [name for name in TABLE_FILES if (directory / name).exists()]
     if earlier:
-        raise FileExistsError(f"{directory} holds results already ({earlier[0]}, …): "
+        raise InputError(f"{directory} holds results already ({earlier[0]}, …): "
                               "another folder, or --overwrite")
 
 
@@ -277,7 +278,7 @@ def load_results(directory: str | Path) -> Results:
     pandas: `pandas.read_csv(folder / "points.csv")`)."""
     directory = Path(directory)
     if not directory.is_dir():
-        raise FileNotFoundError(f"{directory}: no such results folder")
+        raise InputError(f"{directory}: no such results folder")
     tables = {table: _read_table(directory / f"{table}.csv") for table in COLUMNS}
     analysis_path, columns_path = directory / "analysis.json", directory / "columns.json"
     analysis = json.loads(analysis_path.read_text()) if analysis_path.is_file() else None

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
+from sds_model.errors import InputError
 from sds_model.rig import Rig
 
 MIN_ANGLE_RAD = np.radians(0.5)
@@ -70,7 +71,7 @@ def triangulate_beams(rig: Rig, pixels: ArrayLike, laser_ids: ArrayLike,
 def triangulate_plane(rig: Rig, pixels: ArrayLike) -> np.ndarray:
     """Camera rays through the pixels against the line laser's plane (Eqs. 10–11), N×3 mm."""
     if rig.line_laser is None:
-        raise ValueError("the rig has no line laser")
+        raise InputError("the rig has no line laser")
     rays = rig.pixel_rays(np.atleast_2d(np.asarray(pixels, dtype=float)))
     centre, normal = rig.camera_position_mm, rig.line_laser.normal
     facing = rays @ normal
@@ -112,7 +113,7 @@ def beam_image_path(rig: Rig, laser_id: int, heights_mm: ArrayLike) -> np.ndarra
     diode = rig.diode(laser_id)
     heights = np.asarray(heights_mm, dtype=float)
     if abs(diode.direction[2]) < 1e-9:
-        raise ValueError(f"diode {laser_id}'s beam is horizontal: it has no height path")
+        raise InputError(f"diode {laser_id}'s beam is horizontal: it has no height path")
     distance = (heights - diode.emitter_mm[2]) / diode.direction[2]
     return rig.project(diode.point_at(distance))
 
@@ -120,11 +121,11 @@ def beam_image_path(rig: Rig, laser_id: int, heights_mm: ArrayLike) -> np.ndarra
 def line_image_path(rig: Rig, height_mm: float, samples: int = 400) -> np.ndarray:
     """The line laser's light on a flat surface at height Z [mm], across the container (N×2 px)."""
     if rig.line_laser is None:
-        raise ValueError("the rig has no line laser")
+        raise InputError("the rig has no line laser")
     normal, emitter = rig.line_laser.normal, rig.line_laser.emitter_mm
     along = np.cross(normal, [0.0, 0.0, 1.0])
     if np.linalg.norm(along) < 1e-9:
-        raise ValueError("the laser plane is horizontal: it draws no line on a level surface")
+        raise InputError("the laser plane is horizontal: it draws no line on a level surface")
     along /= np.linalg.norm(along)
     across = np.cross([0.0, 0.0, 1.0], along)   # horizontal, in the plane's normal direction
     # The point of the line nearest the axis: Z = height, on the plane, along `across`.

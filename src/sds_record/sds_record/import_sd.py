@@ -9,6 +9,7 @@ from pathlib import Path
 from builtin_interfaces.msg import Time
 from rclpy.serialization import serialize_message
 from sds_arduino.protocol import WRAP, read_log, unwrap_time_s
+from sds_model.errors import InputError
 from sds_model.staging import staged_file
 from sds_ros.arduino_msg import TOPICS, SensorSpec, record_message
 
@@ -35,14 +36,14 @@ def import_sd(log: str | Path, output: str | Path, namespace: str = "/arduino",
     only when complete."""
     records, rejected = read_log(log)
     if not records:
-        raise ValueError(f"{log}: no valid protocol-v1 record ({rejected} lines rejected)")
+        raise InputError(f"{log}: no valid protocol-v1 record ({rejected} lines rejected)")
     spec = spec or SensorSpec()
     device_times = unwrap_time_s([r.t_us for r in records])
     device_times -= device_times[0]
     missing = sum((b.seq - a.seq - 1) % WRAP for a, b in pairwise(records))
     output = Path(output)
     if output.exists() and not overwrite:
-        raise FileExistsError(f"{output} exists (not replaced: another name, or --overwrite)")
+        raise InputError(f"{output} exists (not replaced: another name, or --overwrite)")
     with staged_file(output) as staging:
         recorder = McapRecorder(staging)
         try:

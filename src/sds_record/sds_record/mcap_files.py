@@ -36,6 +36,7 @@ from rosbags.typesys import (
     get_types_from_msg,
     get_typestore,
 )
+from sds_model.errors import InputError
 from sds_model.staging import staged_file
 
 from sds_record.schemas import MESSAGE_ENCODING, SCHEMA_ENCODING, message_definition
@@ -84,14 +85,19 @@ class McapRecorder:
                  chunk_size: int = 4 * 1024 * 1024, flush_period_s: float = 0.5,
                  overwrite: bool = False) -> None:
         if compression not in COMPRESSIONS:
-            raise ValueError(f"compression {compression!r} is not one of {sorted(COMPRESSIONS)}")
+            raise InputError(f"compression {compression!r} is not one of {sorted(COMPRESSIONS)}")
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        try:   # never replaces a recording unless told to
+        if not overwrite and self.path.is_file() and not holds_messages(self.path):
+            # What a graph that never got going left: nothing to keep, nothing to block on.
+            _log.warning(f"{self.path}: replacing a recording without messages")
+            overwrite = True
+        try:   # never replaces a recording with messages unless told to
             self._stream = self.path.open("wb" if overwrite else "xb")
         except FileExistsError:
-            raise ValueError(f"{self.path} exists (not replaced: choose another name, or "
-                             "overwrite)") from None
+            raise InputError(f"{self.path} exists (not replaced: choose another name, or "
+                             "overwrite: --overwrite, or the recorder's overwrite=true)"
+                             ) from None
         self._writer = Writer(self._stream, chunk_size=chunk_size,
                               compression=COMPRESSIONS[compression])
         self._writer.start(profile=PROFILE, library="sds_record")
@@ -174,24 +180,41 @@ def _indexed_messages(path: Path, topics: Iterable[str] | None
         yield from make_reader(stream).iter_messages(topics=topics, log_time_order=True)
 
 
-def require_mcap(path: Path) -> None:
-    """ValueError unless `path` is a file that starts as an MCAP file does."""
-    if not path.is_file():
-        raise ValueError(f"{path}: no such recording")
+def holds_messages(path: Path) -> bool:
+    """Whether the file at `path` holds a message, or is no MCAP file (then it is someone's
+    data, not an empty recording): False only for an MCAP file without a message."""
     with path.open("rb") as stream:
         if stream.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
-            raise ValueError(f"{path} is not an MCAP file (no MCAP magic at its start)")
+            return True
+    summary = _summary(path)
+    if summary is not None and summary.statistics is not None:
+        return summary.statistics.message_count > 0
+    return next(_linear_messages(path), None) is not None
+
+
+def require_mcap(path: Path) -> None:
+    """InputError unless `path` is a file that starts as an MCAP file does."""
+    if not path.is_file():
+        raise InputError(f"{path}: no such recording")
+    with path.open("rb") as stream:
+        if stream.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
+            raise InputError(f"{path} is not an MCAP file (no MCAP magic at its start)")
 
 
 def _records(path: Path, topics: Iterable[str] | None
              ) -> Iterator[tuple[Schema | None, Channel, Message]]:
     """The wanted topics' messages: log-time order from the index, else (an unfinished file)
     file order up to the last complete chunk, with one warning per file and process once a
-    read that found some is done. ValueError if the file is not MCAP."""
+    read that found some is done. InputError if the file is not MCAP or a chunk is corrupt."""
     require_mcap(path)
     wanted = set(topics) if topics is not None else None
     if _summary(path) is not None:
-        yield from _indexed_messages(path, wanted)
+        try:
+            yield from _indexed_messages(path, wanted)
+        except McapError as error:
+            raise InputError(f"{path}: a corrupt chunk ({error}); `sds mcap-repair "
+                             f"{shlex.quote(str(path))} REPAIRED.mcap` keeps what is whole"
+                             ) from None
         return
     complete = found = 0
     for schema, channel, message in _linear_messages(path):
@@ -223,7 +246,7 @@ def decoded_messages(path: str | Path, topics: Iterable[str] | None = None,
     names; arrays of numbers as numpy arrays); only `types` ('pkg/msg/Type') if given, so that
     a reader of small messages does not decode the frames. Messages of a channel without a
     schema or not in CDR are skipped; a message or schema that does not decode raises
-    ValueError naming its topic."""
+    InputError naming its topic."""
     decoders: dict[int, Callable[[memoryview], Any]] = {}
     wanted_types = set(types) if types is not None else None
     for schema, channel, message in _records(Path(path), topics):
@@ -238,7 +261,7 @@ def decoded_messages(path: str | Path, topics: Iterable[str] | None = None,
         try:
             decoded = decoders[schema.id](memoryview(message.data))
         except SerdeError as error:
-            raise ValueError(f"{channel.topic}: the message logged at {message.log_time} ns "
+            raise InputError(f"{channel.topic}: the message logged at {message.log_time} ns "
                              f"does not decode ({error})") from None
         yield recorded, decoded
 
@@ -257,7 +280,7 @@ def _decoder(schema: Schema, topic: str) -> Callable[[memoryview], Any]:
             raise TypesysError(f"schema encoding {schema.encoding!r} is not ROS 2's")
         store.get_msgdef(schema.name)
     except (TypesysError, UnicodeDecodeError, KeyError) as error:
-        raise ValueError(f"{topic}: its schema {schema.name} does not parse ({error})") from None
+        raise InputError(f"{topic}: its schema {schema.name} does not parse ({error})") from None
     return partial(store.deserialize_cdr, typename=schema.name)
 
 
@@ -291,10 +314,10 @@ def repair(source: str | Path, target: str | Path, compression: str = "zstd",
     target appears only when complete)."""
     source, target = Path(source), Path(target)
     if source.resolve() == target.resolve():
-        raise ValueError("repair writes a new file: give a target other than the source")
+        raise InputError("repair writes a new file: give a target other than the source")
     require_mcap(source)
     if target.exists() and not overwrite:
-        raise ValueError(f"{target} exists (not replaced: choose another name, or --overwrite)")
+        raise InputError(f"{target} exists (not replaced: choose another name, or --overwrite)")
     had_summary = _summary(source) is not None
     schemas: dict[int, int] = {}
     channels: dict[int, int] = {}

@@ -14,12 +14,13 @@ from pathlib import Path
 
 from rosbags.typesys import Stores, get_types_from_msg
 from rosbags.typesys.store import Typestore
+from sds_model.errors import InputError
 
 SCHEMA_ENCODING = "ros2msg"
 MESSAGE_ENCODING = "cdr"
 
 
-class SchemaError(LookupError):
+class SchemaError(InputError, LookupError):
     """A message type whose definition is not installed; the message names it."""
 
 

@@ -10,9 +10,10 @@ from pathlib import Path
 from typing import Any
 
 import yaml
+from sds_model.errors import InputError
 
 
-class GraphFileError(ValueError):
+class GraphFileError(InputError):
     """A graph file or override that does not describe a valid graph."""
 
 
@@ -80,13 +81,32 @@ MOVED_PLUGINS = {
 
 
 def check_plugins(entries: list[NodeEntry]) -> None:
-    """GraphFileError naming the first node whose plugin names no node class, found without
-    importing a module: a launcher calls this before it starts any process (reading a graph
-    for its parameters does not need it)."""
+    """GraphFileError naming the first node whose plugin names no node class, or whose string
+    parameter is not one of the values its module's `PARAMETER_CHOICES` literal allows; found
+    without importing a module: a launcher calls this before it starts any process (reading a
+    graph for its parameters does not need it)."""
     for entry in entries:
         missing = _missing_plugin(entry.plugin)
         if missing:
             raise GraphFileError(f"node {entry.name!r}: plugin {entry.plugin!r}: {missing}")
+        values = entry_parameters(entry)
+        for name, allowed in _parameter_choices(entry.plugin).items():
+            if name in values and values[name] not in allowed:
+                raise GraphFileError(f"node {entry.name!r}: parameter {name}={values[name]!r} "
+                                     f"is not one of {', '.join(allowed)}")
+
+
+def _parameter_choices(plugin: str) -> dict[str, tuple[str, ...]]:
+    """The plugin module's `PARAMETER_CHOICES` (a dict literal at its top level), read from
+    its source; empty when it has none."""
+    spec = importlib.util.find_spec(plugin.partition(":")[0])
+    assert spec is not None and spec.origin is not None   # `_missing_plugin` found it
+    tree = ast.parse(Path(spec.origin).read_text(), spec.origin)
+    for node in tree.body:
+        if isinstance(node, ast.Assign) and any(
+                isinstance(t, ast.Name) and t.id == "PARAMETER_CHOICES" for t in node.targets):
+            return dict(ast.literal_eval(node.value))
+    return {}
 
 
 def _missing_plugin(plugin: str) -> str:
@@ -219,15 +239,20 @@ def composed(entries: list[NodeEntry]) -> list[NodeEntry]:
 
 
 def node_parameters(graph_file: str | Path, node_name: str) -> dict[str, Any]:
-    """The parameters a graph gives one node: its parameter files ('/**' and its own name's
-    section, in order), then the graph's `parameters`."""
+    """The parameters a graph gives one node (`entry_parameters`)."""
     entry = next((e for e in load_graph(graph_file) if e.name == node_name), None)
     if entry is None:
         raise GraphFileError(f"{graph_file}: no node named {node_name!r}")
+    return entry_parameters(entry)
+
+
+def entry_parameters(entry: NodeEntry) -> dict[str, Any]:
+    """The parameters a node gets: its parameter files ('/**' and its own name's section, in
+    order), then the graph's `parameters` (overrides included)."""
     values: dict[str, Any] = {}
     for file in entry.params_files:
         document = yaml.safe_load(file.read_text()) or {}
-        for section in ("/**", node_name, f"/{node_name}"):
+        for section in ("/**", entry.name, f"/{entry.name}"):
             values.update((document.get(section) or {}).get("ros__parameters", {}))
     values.update(entry.parameters)
     return values

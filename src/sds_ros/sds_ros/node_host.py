@@ -20,6 +20,7 @@ import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
+from sds_model.errors import InputError
 
 from sds_ros.hosted_node import HostedNode
 from sds_ros.node_process import arm_teardown_watchdog
@@ -32,7 +33,7 @@ def load_plugin(plugin: str) -> NodeFactory:
     """The node class named by 'package.module:Class'."""
     module_name, _, class_name = plugin.partition(":")
     if not class_name:
-        raise ValueError(f"node plugin {plugin!r} must look like 'package.module:Class'")
+        raise InputError(f"node plugin {plugin!r} must look like 'package.module:Class'")
     return getattr(importlib.import_module(module_name), class_name)
 
 

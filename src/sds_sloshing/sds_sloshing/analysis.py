@@ -6,9 +6,10 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
-from sds_model.mode_theory import TheoreticalMode, theoretical_modes
+from sds_model.errors import InputError
+from sds_model.mode_theory import TheoreticalMode, mode_name, theoretical_modes
 from sds_model.rig import Rig
-from sds_recon.surface_fit import fit_plane, radial_profile
+from sds_recon.surface_fit import DEFAULT_MODES, fit_plane, radial_profile
 
 from sds_sloshing.estimators import (
     DampedSinusoid,
@@ -28,6 +29,8 @@ from sds_sloshing.surface_series import SurfaceSeries
 
 MATCH_TOLERANCE = 0.15
 """A component matches an expected frequency within ±15 %."""
+ANALYSED_MODES = tuple(mode_name(order, index) for order, index in DEFAULT_MODES)
+"""The modes the analysis separates (the surface fit's), the names `expected_hz` may use."""
 TILT_STEP_DEG = 0.5
 """Frames whose tilt stays within this of a plateau's median belong to it."""
 MIN_PLATEAU_S = 0.5
@@ -61,6 +64,24 @@ class AnalysisOptions:
     max_components: int = 4
     min_snr: float = 8.0
     damping_caveat: str = ""
+
+    def __post_init__(self) -> None:
+        """InputError for a value the analysis cannot use, naming it (before any work)."""
+        for name in ("start_s", "end_s", "forcing_s", "gravity_m_s2"):
+            value = getattr(self, name)
+            if value is not None and not np.isfinite(value):
+                raise InputError(f"{name} {value} is not a finite number")
+        if self.gravity_m_s2 is not None and self.gravity_m_s2 < 0:
+            raise InputError(f"gravity {self.gravity_m_s2:g} m/s² is negative: give its "
+                             "magnitude (0 for weightlessness)")
+        if self.forcing_s is not None and self.forcing_s < 0:
+            raise InputError(f"forcing duration {self.forcing_s:g} s is negative")
+        for mode, hz in self.expected_hz.items():
+            if mode not in ANALYSED_MODES:
+                raise InputError(f"expected frequency of {mode!r}: the analysis separates "
+                                 f"{', '.join(ANALYSED_MODES)}")
+            if not (np.isfinite(hz) and hz > 0):
+                raise InputError(f"expected frequency of {mode} {hz:g} Hz: give one above 0")
 
 
 def with_gravity_regime(options: AnalysisOptions,
@@ -209,7 +230,7 @@ def analyze_series(name: str, time_s: np.ndarray, values: np.ndarray, unit: str,
 def check_window(start_s: float, end_s: float) -> None:
     """A one-line error (ValueError) for a window that ends before it starts."""
     if not end_s > start_s:
-        raise ValueError(f"the analysis window {start_s:.3f}–{end_s:.3f} s ends before it "
+        raise InputError(f"the analysis window {start_s:.3f}–{end_s:.3f} s ends before it "
                          "starts (times are seconds from the first frame)")
 
 

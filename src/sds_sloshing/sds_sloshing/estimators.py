@@ -15,6 +15,7 @@ from numpy.typing import ArrayLike
 from scipy import signal
 from scipy.fft import next_fast_len, rfft, rfftfreq
 from scipy.optimize import least_squares
+from sds_model.errors import InputError
 
 RESOLUTION_SIGMA = 1.0 / (2.0 * np.sqrt(3.0))
 """One-sigma error of a frequency read off a spectrum, in units of its resolution 1/T
@@ -28,7 +29,7 @@ the rest is mostly noise, which flattens the fitted decay."""
 MIN_SAMPLES = 16
 
 
-class DecayError(ValueError):
+class DecayError(InputError):
     """A record that cannot give the asked estimate; the message says why."""
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from sds_model.errors import InputError
 from sds_recon.surface_fit import DEFAULT_MODES, fit_modes
 
 
@@ -48,7 +49,7 @@ def modal_series(time_s: np.ndarray, points_mm: np.ndarray, radius_mm: float,
         amplitudes.append(fit.amplitudes_mm)
         rmse[frame] = fit.rmse_mm
     if not names:
-        raise ValueError("no frame has enough surface points for the modal fit")
+        raise InputError("no frame has enough surface points for the modal fit")
     table = np.array([a if a is not None else np.full(len(names), np.nan) for a in amplitudes])
     return ModalSeries(np.asarray(time_s, dtype=float), names, table, rmse)
 

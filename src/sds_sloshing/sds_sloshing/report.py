@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 import matplotlib
+from sds_model.errors import InputError
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
@@ -46,7 +47,7 @@ def truth_from_run(path: str | Path) -> Truth:
                                                       float(m["damping_ratio"]))
                 for m in run["modes"]}
     except (ValueError, KeyError, TypeError) as error:
-        raise ValueError(f"{path}: not a simulation's run.json ({error})") from None
+        raise InputError(f"{path}: not a simulation's run.json ({error})") from None
 
 
 def _errors_pct(estimate: dict[str, Any], truth: tuple[float, float] | None

@@ -12,12 +12,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from sds_model.errors import InputError
 from sds_recon.reconstruction import LINE_LASER_ID
 
 POINTS_COLUMNS = ("frame", "t_s", "laser_id", "X_mm", "Y_mm", "Z_mm")
 
 
-class RecordingError(ValueError):
+class RecordingError(InputError):
     """A recording or table the analysis cannot read; the message names the problem."""
 
 

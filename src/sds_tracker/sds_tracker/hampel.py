@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
+from sds_model.errors import InputError
 
 MAD_TO_SIGMA = 1.4826
 
@@ -41,7 +42,7 @@ class HampelBank:
 
     def __init__(self, window: int = 5, k: float = 3.0, floor_px: float = 0.5) -> None:
         if window < 5 or window % 2 == 0:
-            raise ValueError(f"the Hampel window must be odd and at least 5, got {window}")
+            raise InputError(f"the Hampel window must be odd and at least 5, got {window}")
         self.half, self.k, self.floor_px = window // 2, k, floor_px
         self._frames: deque[int] = deque(maxlen=window)
         self._values: deque[np.ndarray] = deque(maxlen=window)

@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation
+from sds_model.errors import InputError
 from sds_model.rig import Rig
 from sds_recon.calibration.rig_model import across_axes
 from sds_recon.triangulation import beam_image_path, line_image_path
@@ -83,7 +84,7 @@ def parse_seeds(values: list[float]) -> dict[int, tuple[float, float]]:
     if len(values) <= 1:
         return {}
     if len(values) % 3:
-        raise ValueError(f"seeds must be triples id, x, y; got {len(values)} numbers")
+        raise InputError(f"seeds must be triples id, x, y; got {len(values)} numbers")
     return {int(values[i]): (float(values[i + 1]), float(values[i + 2]))
             for i in range(0, len(values), 3)}
 
@@ -161,7 +162,7 @@ class FrameTracker:
         self.spots = SpotTracker(self.paths, self.config.spots, widened)
         for laser_id, position in (seeds or {}).items():
             if laser_id not in self.paths:
-                raise ValueError(f"seed for laser {laser_id}, which the rig does not have")
+                raise InputError(f"seed for laser {laser_id}, which the rig does not have")
             self.spots.previous[laser_id] = np.asarray(position, dtype=float)
         self.ids = list(self.paths)
         self.hampel = None if self.config.stills else HampelBank(

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import rerun as rr
 from mcap.exceptions import McapError
+from sds_model.errors import InputError
 from sds_model.rig import Rig
 from sds_model.staging import staged_file
 from sds_record.mcap_files import decoded_messages, require_mcap
@@ -26,10 +27,10 @@ class Conversion:
 def mcap_to_rrd(recording: str | Path, output: str | Path, rig: Rig | None = None,
                 image_scale: float = 0.25, image_every: int = 1) -> Conversion:
     """Log every message of `recording` to a new .rrd file, in log-time order (the file
-    appears only when complete). ValueError for an image scale outside (0, 1] or a step
-    below 1, and for a file that is not MCAP."""
+    appears only when complete). InputError for an image scale outside (0, 1] or a step
+    below 1, a file that is not MCAP and a recording without a message."""
     if not 0 < image_scale <= 1 or image_every < 1:
-        raise ValueError(f"image scale {image_scale:g} and step {image_every}: the scale is in "
+        raise InputError(f"image scale {image_scale:g} and step {image_every}: the scale is in "
                          "(0, 1] (e.g. 0.25), the step 1 or more")
     require_mcap(Path(recording))
     with staged_file(Path(output)) as staging:
@@ -50,7 +51,10 @@ def mcap_to_rrd(recording: str | Path, output: str | Path, rig: Rig | None = Non
                 else:
                     skipped += 1
         except McapError as error:
-            raise ValueError(f"{recording}: {error}") from None
+            raise InputError(f"{recording}: {error}") from None
+        else:
+            if shown + skipped == 0:   # an empty scene would look like a viewer's fault
+                raise InputError(f"{recording} holds no message: nothing to show")
         finally:
             stream.flush()
             stream.disconnect()

@@ -22,6 +22,7 @@ from sds_arduino.protocol import read_log, unwrap_time_s
 from sds_camera.camera_imu import read_camera_imu
 from sds_camera.frame_source import VideoFileSource
 from sds_camera.led import LedDetector, switch_sigma_s, switch_times_s
+from sds_model.errors import InputError
 from sds_model.rig import Rig
 
 STANDARD_GRAVITY = 9.80665
@@ -60,11 +61,11 @@ def read_arduino_log(path: Path) -> ArduinoLog:
     """The accelerometer and LED records of a protocol-v1 log; a one-line error without IMU."""
     records, _ = read_log(path)
     if not records:
-        raise ValueError(f"{path}: no valid protocol-v1 record")
+        raise InputError(f"{path}: no valid protocol-v1 record")
     device_s = unwrap_time_s([r.t_us for r in records])
     imu = [k for k, r in enumerate(records) if r.kind == "IMU"]
     if len(imu) < 10:
-        raise ValueError(f"{path}: {len(imu)} accelerometer records, too few to link clocks")
+        raise InputError(f"{path}: {len(imu)} accelerometer records, too few to link clocks")
     accel = np.array([records[k].values for k in imu], dtype=float) * STANDARD_GRAVITY / 1000
     led_on = [float(device_s[k]) for k, r in enumerate(records)
               if r.kind == "LED" and r.values[0]]

@@ -13,25 +13,29 @@ from __future__ import annotations
 
 import csv
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
+from sds_lateral.clock import LateralClock
+from sds_model.errors import InputError
 from sds_model.paths import CONFIG
 from sds_model.rig import Rig, load_rig
 from sds_model.staging import staged_folder
-from sds_recon.results import TABLE_FILES, ResultsWriter, load_results, refuse_results
+from sds_recon.results import ResultsWriter, load_results, refuse_results
 from sds_sim.scenario import load_scenario
 from sds_sim.simulate import simulate
 from sds_sloshing.analysis import AnalysisOptions
-from sds_sloshing.report import REPORT_FILES, summary_lines, truth_from_run
+from sds_sloshing.report import summary_lines, truth_from_run
 from sds_sloshing.surface_series import RecordingError
 from sds_viz.from_mcap import mcap_to_rrd
 
-from sds_workflows.errors import input_errors
 from sds_workflows.export import export_recording
 from sds_workflows.lateral import (
     LateralInput,
+    LateralRun,
+    LateralSetup,
     link_side_clock,
     place_lateral,
     process_lateral,
@@ -83,25 +87,57 @@ def height_errors(truth_spots: Path, points: np.ndarray) -> np.ndarray:
                      for p in points if (int(p["frame"]), int(p["laser_id"])) in truth])
 
 
+@dataclass(frozen=True)
+class SideCheck:
+    """The side camera's check of a run's top surface (`sds run --lateral`): its placed view,
+    the top video and the clock link measured before the run."""
+
+    setup: LateralSetup
+    top_video: Path
+    clock: LateralClock | None
+
+
+@dataclass(frozen=True)
+class AnalysedRun:
+    """What `analyse_run` gave: the analysis's results, and the side camera's check (None
+    without one) or why it failed."""
+
+    results: dict[str, Any]
+    side: LateralRun | None = None
+    side_failure: str = ""
+
+
 def analyse_run(recording: Path, rig: Rig, out: Path, options: AnalysisOptions,
-                truth_run: Path | None = None, overwrite: bool = True) -> dict[str, Any]:
-    """Result files, the Rerun file (from the recording: every frame), the analysis report
-    (`sds export`'s, in two reads of the recording); the results as a dictionary. The run's
-    own folder: an earlier run's results are replaced (the caller checked `overwrite`)."""
+                truth_run: Path | None = None, overwrite: bool = True,
+                side: SideCheck | None = None) -> AnalysedRun:
+    """Result files (out/results), the analysis report (out/analysis) and, with `side`, the
+    side camera's check of the top surface, from the recording (`sds export`'s, in two reads);
+    the Rerun file beside the recording (every frame). The run's own folder `out` gets them in
+    one commit (`staging.staged_folder`): a kill leaves the earlier run's whole, never a mix
+    (an earlier run's results are replaced: the caller checked `overwrite`)."""
     mcap_to_rrd(recording, recording.with_suffix(".rrd"), rig)
     if not overwrite:
         refuse_results(out / "results")
-    with (staged_folder(out / "results", TABLE_FILES) as results,
-          staged_folder(out / "analysis", REPORT_FILES) as report):
+    side_run, side_failure = None, ""
+    with staged_folder(out, ("results", "analysis")) as staging:
+        results, report = staging / "results", staging / "analysis"
+        results.mkdir()
+        report.mkdir()
         tables = RunTables(ResultsWriter(results), rig)
         export_recording(recording, rig, tables)
         truth = truth_from_run(truth_run) if truth_run else None
         analysis = finish_analysis(tables, str(recording), report, options, truth)
         if analysis.results is None:
             raise RecordingError(analysis.note)
+        if side is not None:
+            try:   # a side camera that fails costs the top camera's results nothing
+                side_run = process_lateral(side.setup, rig, side.top_video, results,
+                                           progress=False, report=report, clock=side.clock)
+            except InputError as error:
+                side_failure = str(error)
     if analysis.note:
         print(f"sds: {analysis.note}")
-    return analysis.results
+    return AnalysedRun(analysis.results, side_run, side_failure)
 
 
 def interrupted(command: str, outputs: ChainOutputs) -> int:
@@ -120,7 +156,7 @@ def run_demo(out: Path, seconds: float | None, run_chain: ChainRunner) -> int:
     overrides = {} if seconds is None else {"duration_s": seconds}
     scenario = load_scenario(DEMO_SCENARIO, overrides)
     print(f"simulating '{scenario.name}': {scenario.duration_s:g} s, {scenario.frame_count} "
-          f"frames at 3840x2160")
+          f"frames at {scenario.rig.camera.width_px}x{scenario.rig.camera.height_px}")
     simulation = simulate(scenario, out / "simulation")
     rig = scenario.rig
     led_x, led_y = (int(v) for v in scenario.events.led_position_px)
@@ -137,17 +173,17 @@ def run_demo(out: Path, seconds: float | None, run_chain: ChainRunner) -> int:
                          f"recon.rig={scenario.rig_file.resolve()}",
                          f"viewer.rig={scenario.rig_file.resolve()}",
                          f"arduino.port={port}"],
-                        out, scenario.frame_count, serial_lines, port)
+                        out, scenario.frame_count, serial_lines, port, graphs=("arduino.yaml",))
     if outputs.interrupted:
         return interrupted("sds demo", outputs)
     if outputs.failure or not outputs.recording.is_file():
         print(f"demo failed: {outputs.failure or 'no recording'} (see {outputs.log})",
               file=sys.stderr)
         return outputs.exit_code or 1
-    result = analyse_run(outputs.recording, rig, out, AnalysisOptions(
+    analysed = analyse_run(outputs.recording, rig, out, AnalysisOptions(
         gravity_m_s2=scenario.gravity, damping_caveat=damping_caveat(simulation.video)),
         simulation.run)
-    return print_summary(out, scenario, simulation, outputs, result)
+    return print_summary(out, scenario, simulation, outputs, analysed.results)
 
 
 def print_summary(out: Path, scenario, simulation, outputs: ChainOutputs, result: dict) -> int:
@@ -163,7 +199,8 @@ def print_summary(out: Path, scenario, simulation, outputs: ChainOutputs, result
     arduino = [line for line in log.splitlines() if "final: records" in line]
     offset = [line.split("LED offset ")[1] for line in log.splitlines() if "LED offset" in line]
     print(f"\nSDS demo: '{scenario.name}', {scenario.frame_count} frames "
-          f"({scenario.duration_s:g} s at {scenario.fps:g} fps, 3840x2160)")
+          f"({scenario.duration_s:g} s at {scenario.fps:g} fps, "
+          f"{scenario.rig.camera.width_px}x{scenario.rig.camera.height_px})")
     print(f"  recording (MCAP)   {outputs.recording}")
     print(f"  Rerun              {outputs.rerun}   (open: rerun {outputs.rerun.name})")
     print(f"  report             {out / 'analysis' / 'report.html'}")
@@ -192,45 +229,40 @@ def print_summary(out: Path, scenario, simulation, outputs: ChainOutputs, result
 def run_live(source: str, rig_file: Path, out: Path, port: str | None,
              gravity: float | None, run_chain: ChainRunner, overwrite: bool = False,
              lateral: LateralInput | None = None) -> int:
-    """`sds run`: a video file or a camera through the whole chain, then the analysis (the
-    caller checked `overwrite` against an earlier run in `out`). With `lateral`, the side
-    camera's video runs beside it (config/graphs/lateral.yaml: recorded, shown), and after
-    the run its wall profile checks the top surface (`sds process --lateral`'s files)."""
-    out.mkdir(parents=True, exist_ok=True)
+    """`sds run`: a video file or a camera through the whole chain (with the Arduino's bridge
+    at `port`, None: without it), then the analysis (the caller checked `overwrite` against
+    an earlier run in `out`). With `lateral`, the side camera's video runs beside it
+    (config/graphs/lateral.yaml: recorded, shown), and after the run its wall profile checks
+    the top surface (`sds process --lateral`'s files). Exit code 2 (INCOMPLETE) when a source
+    it was asked for gave nothing: the Arduino, the side camera's check."""
     rig = load_rig(rig_file)
+    is_file = Path(source).is_file()
+    frames = _video_frames(Path(source), rig) if is_file else None
     side = place_lateral(lateral, rig) if lateral is not None else None
+    out.mkdir(parents=True, exist_ok=True)
     overrides = [f"recorder.overwrite={str(overwrite).lower()}", f"camera.source={source}",
                  f"camera.roi={list(rig.container_region_px(rig.camera))}",
                  f"tracker.rig={rig_file.resolve()}", f"recon.rig={rig_file.resolve()}",
                  f"viewer.rig={rig_file.resolve()}"]
     if rig.camera_file is not None:   # the recorded camera_model then carries the intrinsics
         overrides.append(f"camera.camera_model={rig.camera_file}")
-    if port:
-        overrides.append(f"arduino.port={port}")
     graphs: tuple[str, ...] = ()
+    if port is not None:
+        graphs += ("arduino.yaml",)
+        overrides.append(f"arduino.port={port}")
     clock = None
-    is_file = Path(source).is_file()
     if side is not None:
-        graphs = ("lateral.yaml",)
+        graphs += ("lateral.yaml",)
         side_source = side.inputs.video
-        side_spec = side_source.resolve() if side_source.is_file() else side_source
-        overrides += [f"lateral.source={side_spec}",
+        overrides += [f"lateral.source={side_source.resolve()}",
                       f"lateral.camera_model={side.view.camera_file}",
                       f"lateral.led_roi={list(side.view.led_roi_px)}"]
         if side.inputs.top_led_roi is not None:
             overrides.append(f"camera.led_roi={list(side.inputs.top_led_roi)}")
-        if is_file and side_source.is_file():   # the side file plays on the top camera's clock
+        if is_file:   # the side file plays on the top camera's clock
             clock = link_side_clock(side, rig, Path(source))
             print(f"sds run: {clock.summary()}")
             overrides.append(f"lateral.stamp_offset_s={clock.offset_s}")
-    frames = None
-    if is_file:
-        from contextlib import closing
-
-        from sds_camera.frame_source import VideoFileSource
-
-        with closing(VideoFileSource(Path(source))) as video:
-            frames = video.announced_frames
     outputs = run_chain(overrides, out, frames, graphs=graphs)
     if outputs.interrupted and is_file:   # a live camera's run ends with Ctrl-C
         return interrupted("sds run", outputs)
@@ -238,21 +270,49 @@ def run_live(source: str, rig_file: Path, out: Path, port: str | None,
         print(f"sds run: {outputs.failure or 'no recording'} (see {outputs.log})",
               file=sys.stderr)
         return outputs.exit_code or 1
-    result = analyse_run(outputs.recording, rig, out, AnalysisOptions(
-        gravity_m_s2=gravity, damping_caveat=damping_caveat(Path(source)) if is_file else ""))
+    check = SideCheck(side, Path(source), clock) if side is not None and is_file else None
+    analysed = analyse_run(outputs.recording, rig, out, AnalysisOptions(
+        gravity_m_s2=gravity, damping_caveat=damping_caveat(Path(source)) if is_file else ""),
+        side=check)
     print(f"\nSDS run: {source}\n  recording {outputs.recording}\n  Rerun {outputs.rerun}\n"
           f"  report {out / 'analysis' / 'report.html'}\n  results {out / 'results'}/")
-    for line in summary_lines(result):
+    for line in summary_lines(analysed.results):
         print(f"    {line}")
-    if side is not None and is_file and side.inputs.video.is_file():
-        try:
-            run = process_lateral(side, rig, Path(source), out / "results", progress=False,
-                                  report=out / "analysis", clock=clock)
-        except input_errors() as error:   # the top camera's results stand
-            print(f"sds run: side camera not compared: {error}", file=sys.stderr)
-            return 2
-        print("\n".join(f"  {line}" for line in run.lines()))
+    missing = []
+    if port is not None and not _rows(out / "results" / "imu.csv"):
+        missing.append(f"the Arduino at {port} sent no record (no imu.csv, no ToF; see "
+                       f"{outputs.log})")
+    if analysed.side is not None:
+        print("\n".join(f"  {line}" for line in analysed.side.lines()))
+    elif analysed.side_failure:
+        missing.append(f"side camera not compared: {analysed.side_failure}")
     elif side is not None:
         print("  side camera: recorded (/lateral/image); its check of the top surface needs "
               "the two videos: sds process --video TOP --lateral SIDE ...")
-    return 0
+    for line in missing:
+        print(f"sds run: INCOMPLETE: {line}", file=sys.stderr)
+    return 2 if missing else 0
+
+
+def _video_frames(video: Path, rig: Rig) -> int:
+    """The frames a video announces, once its frame size is known to be the rig camera's
+    (before the graph: its processes take seconds to start and then fail on the same)."""
+    from contextlib import closing
+
+    from sds_camera.frame_source import VideoFileSource
+
+    with closing(VideoFileSource(video)) as source:
+        camera = rig.camera
+        if (source.width, source.height) != (camera.width_px, camera.height_px):
+            raise InputError(f"{video} is {source.width}x{source.height} px, the rig's camera "
+                             f"{camera.width_px}x{camera.height_px}: another rig file (--rig), "
+                             "or the video of this rig")
+        return source.announced_frames
+
+
+def _rows(table: Path) -> int:
+    """How many data rows a result table holds (0 when it is absent)."""
+    if not table.is_file():
+        return 0
+    with table.open() as file:
+        return max(sum(1 for _ in file) - 1, 0)

@@ -6,20 +6,26 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from sds_model.errors import InputError
 from sds_model.rig import Rig
 from sds_model.staging import staged_folder
 from sds_recon.instant import InstantFits
 from sds_recon.reconstruction import LINE_LASER_ID, SurfacePoints
-from sds_recon.results import TABLE_FILES, ResultsWriter, refuse_results
+from sds_recon.results import ResultsWriter, refuse_results
 from sds_record.mcap_files import decoded_messages
 from sds_record.recorded_series import recording_rig
 from sds_ros.point_cloud import CloudPoints, read_cloud, stamp_ns
 from sds_ros.static_tf import LATERAL_FRAME
 from sds_sloshing.analysis import AnalysisOptions
-from sds_sloshing.report import REPORT_FILES
 from sds_sloshing.surface_series import RecordingError
 
-from sds_workflows.run_tables import CAMERA_IMU_TOPIC, RunAnalysis, RunTables, finish_analysis
+from sds_workflows.run_tables import (
+    CAMERA_IMU_TOPIC,
+    RUN_FILES,
+    RunAnalysis,
+    RunTables,
+    finish_analysis,
+)
 
 
 def export_results(recording: Path, out: Path, rig_file: Path | None = None,
@@ -29,11 +35,11 @@ def export_results(recording: Path, out: Path, rig_file: Path | None = None,
     unless `overwrite`; written whole or not at all: `staging.staged_folder`); `rig_file`
     default: the rig the recording carries. Returns the number of frames and the analysis."""
     if not recording.is_file():
-        raise FileNotFoundError(f"{recording}: no such recording")
+        raise InputError(f"{recording}: no such recording")
     rig = recording_rig(recording, rig_file)
     if not overwrite:
         refuse_results(out)
-    with staged_folder(out, (*TABLE_FILES, *REPORT_FILES)) as staging:
+    with staged_folder(out, RUN_FILES) as staging:
         tables = RunTables(ResultsWriter(staging), rig)
         frames = export_recording(recording, rig, tables)
         analysis = finish_analysis(tables, str(recording), staging,

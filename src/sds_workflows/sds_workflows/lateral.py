@@ -26,6 +26,7 @@ from typing import Any
 
 import cv2
 import matplotlib
+from sds_model.errors import InputError
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
@@ -156,7 +157,7 @@ def place_lateral(inputs: LateralInput, rig: Rig) -> LateralSetup:
     for path in inputs.board_images:
         image = cv2.imread(str(path))
         if image is None:
-            raise ValueError(f"{path}: not a readable image (the side camera's checkerboard, "
+            raise InputError(f"{path}: not a readable image (the side camera's checkerboard, "
                              "--lateral-board)")
         images.append(image)
     try:
@@ -177,14 +178,14 @@ def process_lateral(setup: LateralSetup, rig: Rig, top_video: Path, out: Path,
     here."""
     inputs, view, board = setup.inputs, setup.view, setup.board
     if not inputs.video.is_file():
-        raise ValueError(f"{inputs.video}: no such video (the side camera's, --lateral)")
+        raise InputError(f"{inputs.video}: no such video (the side camera's, --lateral)")
     times, profiles, side_on, fps = _side_frames(inputs.video, setup.profiler, view.led_roi_px,
                                                  progress)
     if clock is None:
         clock = _clock(inputs, rig, top_video, side_on, 1.0 / (fps or view.fps))
     results = load_results(out)
     if results.fits is None or results.points is None:
-        raise ValueError(f"{out}: the top run has no fits or points to compare with")
+        raise InputError(f"{out}: the top run has no fits or points to compare with")
     top = top_surface_series(results.fits, results.points, rig.container.radius_mm)
     comparisons = []
     for time_s, profile in zip(times, profiles, strict=True):

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from sds_model.errors import InputError
 from sds_recon.calibration.board import Checkerboard
 from sds_recon.calibration.camera_calibration import CalibrationRun, calibrate_camera
 from sds_recon.calibration.lasers import (
@@ -67,7 +68,7 @@ def calibrate_line_plane(images: list[Path], board: Checkerboard, model: str = "
     for view in run.calibration.views:
         image = cv2.imread(str(by_name[view.name]), cv2.IMREAD_COLOR)
         if image is None:
-            raise ValueError(f"{by_name[view.name]}: not a readable image")
+            raise InputError(f"{by_name[view.name]}: not a readable image")
         line_pixels[view.name] = line_on_board(image, view.image_points)
     plane = calibrate_line_plane_on_boards(
         run.calibration.camera, run.calibration.poses,

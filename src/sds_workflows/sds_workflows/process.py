@@ -17,18 +17,17 @@ from pathlib import Path
 
 from sds_camera.camera_imu import read_camera_imu
 from sds_camera.frame_source import FrameSourceError
+from sds_model.errors import InputError
 from sds_model.rig import Rig, load_rig
 from sds_model.staging import staged_folder
 from sds_recon.calibration.rig_calibration import RigCalibration
-from sds_recon.results import TABLE_FILES, ResultsWriter, refuse_results
+from sds_recon.results import ResultsWriter, refuse_results
 from sds_record.recorded_series import read_accelerations, recording_rig
 from sds_sloshing.analysis import AnalysisOptions
-from sds_sloshing.report import REPORT_FILES
+from sds_sloshing.report import summary_lines
 from tqdm import tqdm
 
-from sds_workflows.errors import input_errors
 from sds_workflows.lateral import (
-    LATERAL_FILES,
     LateralInput,
     LateralRun,
     place_lateral,
@@ -42,11 +41,7 @@ from sds_workflows.pipeline import (
     video_frames,
 )
 from sds_workflows.rig_calibration import calibrate_rig
-from sds_workflows.run_tables import RunAnalysis, RunTables, finish_analysis
-
-RUN_FILES = (*TABLE_FILES, *REPORT_FILES, *LATERAL_FILES)
-"""What a run of `sds process` or `sds export` writes into its folder: all of it is replaced
-together (`staging.staged_folder`)."""
+from sds_workflows.run_tables import RUN_FILES, RunAnalysis, RunTables, finish_analysis
 
 
 @dataclass
@@ -101,9 +96,9 @@ class ProcessedRun:
 
     @property
     def incomplete(self) -> bool:
-        """Whether part of the input gave no results (a broken video, a side camera that
-        failed)."""
-        return bool(self.broken or self.lateral_failure)
+        """Whether part of the input gave no results (a broken video, no analysis, a side
+        camera that failed)."""
+        return bool(self.broken or self.lateral_failure or self.analysis.results is None)
 
     def summary(self) -> str:
         """The console's lines: the run, then the side camera's."""
@@ -116,6 +111,12 @@ class ProcessedRun:
                    if self.lateral_failure else "")
                 + "".join(f"\nsds process: {line}" for line in
                           (self.lateral.lines() if self.lateral else [])))
+
+    def result_lines(self) -> list[str]:
+        """The analysis's frequencies and damping ratios, as `sds run` and `sds analyze` print
+        them (none without an analysis)."""
+        return [f"    {line}" for line in summary_lines(self.analysis.results)] \
+            if self.analysis.results else []
 
 
 def process_video(video: Path, rig: Rig, out: Path, fps: float = 0.0,
@@ -134,7 +135,7 @@ def process_video(video: Path, rig: Rig, out: Path, fps: float = 0.0,
     side_setup = None
     if lateral is not None:
         if not lateral.video.is_file():
-            raise ValueError(f"{lateral.video}: no such video (the side camera's, --lateral)")
+            raise InputError(f"{lateral.video}: no such video (the side camera's, --lateral)")
         side_setup = place_lateral(lateral, rig)
     caveat = damping_caveat(video)
     with staged_folder(out, RUN_FILES) as staging:
@@ -151,7 +152,7 @@ def process_video(video: Path, rig: Rig, out: Path, fps: float = 0.0,
         if side_setup is not None:
             try:   # a side camera that fails costs the top camera's results nothing
                 side = process_lateral(side_setup, rig, video, staging, progress)
-            except input_errors() as error:
+            except InputError as error:
                 side_failure = str(error)
     return ProcessedRun(video, out, count, analysis, ending.broken, side, side_failure)
 
@@ -188,12 +189,12 @@ def process_input(source: Path, is_video: bool, rig_file: Path | None, out: Path
     frames)."""
     if is_video:
         if rig_file is None:
-            raise ValueError(f"{source}: a video needs a rig file (the rig it was taken with)")
+            raise InputError(f"{source}: a video needs a rig file (the rig it was taken with)")
         return process_video(source, load_rig(rig_file), out, fps, gravity_m_s2, overwrite,
                              progress, stills=source.is_dir() and not sequence,
                              lateral=lateral)
     if lateral is not None:
-        raise ValueError(f"{source}: the side camera is processed with a top video "
+        raise InputError(f"{source}: the side camera is processed with a top video "
                          "(--video), not a recording")
     return process_recording(source, out, recording_rig(source, rig_file), gravity_m_s2,
                              overwrite, progress)
@@ -208,9 +209,7 @@ def _process_in_worker(source: Path, is_video: bool, rig_file: Path | None, out:
         processed = process_input(source, is_video, rig_file, out, fps, gravity_m_s2,
                                   overwrite, False, sequence)
         return not processed.incomplete, processed.summary()
-    except Exception as error:
-        if not isinstance(error, input_errors()):
-            raise
+    except InputError as error:
         return False, f"sds process: {source}: {error}"
 
 
@@ -220,22 +219,29 @@ def process_inputs(inputs: list[Path], is_video: bool, rig_file: Path | None, ou
                    ) -> int:
     """The inputs in parallel (`jobs` worker processes), one result folder each under `out`
     (out/<name>), one progress bar; every failure is reported, the others finish. Returns how
-    many failed."""
+    many failed; a fault of the program (not of an input) is raised once all are done."""
     jobs = max(1, min(jobs, len(inputs)))
-    failed = 0
+    failed, faults = 0, []
     # spawn: a fresh interpreter per worker (no forked threads of this one)
     with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
-        futures = [pool.submit(_process_in_worker, source, is_video, rig_file,
-                               out / source.stem, fps, gravity_m_s2, overwrite, sequence)
-                   for source in inputs]
+        futures = {pool.submit(_process_in_worker, source, is_video, rig_file,
+                               out / source.stem, fps, gravity_m_s2, overwrite, sequence): source
+                   for source in inputs}
         with tqdm(total=len(inputs), desc="inputs", unit="file", disable=not progress) as bar:
             for future in as_completed(futures):
-                done, line = future.result()
+                try:
+                    done, line = future.result()
+                except Exception as error:   # the program's own fault: raised at the end
+                    faults.append(error)
+                    done, line = False, (f"sds process: {futures[future]}: internal error "
+                                         f"({type(error).__name__}: {error})")
                 failed += not done
                 bar.write(line, file=sys.stdout if done else sys.stderr)
                 bar.update()
     print(f"sds process: {len(inputs) - failed} of {len(inputs)} inputs processed into "
           f"{out}" + (f", {failed} failed (above)" if failed else ""))
+    if faults:
+        raise faults[0]
     return failed
 
 

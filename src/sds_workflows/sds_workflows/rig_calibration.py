@@ -16,6 +16,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 from sds_camera.frame_source import Region, VideoFileSource, open_source, select
+from sds_model.errors import InputError
 from sds_model.rig import Rig, save_rig
 from sds_recon.calibration.laser_files import read_surfaces
 from sds_recon.calibration.lasers import KnownSurface
@@ -64,7 +65,7 @@ def read_images(paths: list[Path]) -> list[np.ndarray]:
     for path in paths:
         image = cv2.imread(str(path), cv2.IMREAD_COLOR)
         if image is None:
-            raise ValueError(f"{path}: not a readable image")
+            raise InputError(f"{path}: not a readable image")
         images.append(image)
     return images
 
@@ -73,9 +74,9 @@ def known_surfaces(path: Path) -> list[KnownSurface]:
     """The surfaces CSV's surfaces in frame order; its frames must run 0, 1, … without gaps."""
     known = read_surfaces(path)
     if sorted(known) != list(range(len(known))):
-        raise ValueError(f"{path}: frames must run 0, 1, 2, … (got {sorted(known)[:8]})")
+        raise InputError(f"{path}: frames must run 0, 1, 2, … (got {sorted(known)[:8]})")
     if not known:
-        raise ValueError(f"{path}: no known surface")
+        raise InputError(f"{path}: no known surface")
     return [known[k] for k in range(len(known))]
 
 
@@ -87,7 +88,7 @@ def calibration_frames(paths: list[Path], rig: Rig, count: int
     if len(paths) == 1 and paths[0].suffix.lower() in VIDEO_SUFFIXES:
         return read_video_plateaus(paths[0], rig, count)
     if len(paths) != count:
-        raise ValueError(f"{len(paths)} images but {count} known surfaces")
+        raise InputError(f"{len(paths)} images but {count} known surfaces")
     return read_images(paths), [str(p) for p in paths], None
 
 
@@ -107,7 +108,7 @@ def read_video_plateaus(path: Path, rig: Rig, count: int, min_still_s: float = S
     try:
         fps = source.nominal_fps if isinstance(source, VideoFileSource) else 0.0
         if not fps > 0:
-            raise ValueError(f"{path}: a video file with a frame rate is needed")
+            raise InputError(f"{path}: a video file with a frame rate is needed")
         changes, previous = [], None
         region.check_inside(source.width, source.height)
         for frame in source.frames(region, "red"):
@@ -120,7 +121,7 @@ def read_video_plateaus(path: Path, rig: Rig, count: int, min_still_s: float = S
                              STILL_PX)
     if len(plateaus) != count:
         found = ", ".join(f"{p.first / fps:.1f}–{p.last / fps:.1f} s" for p in plateaus[:12])
-        raise ValueError(f"{path}: {len(plateaus)} still stretches of {min_still_s:g} s or more "
+        raise InputError(f"{path}: {len(plateaus)} still stretches of {min_still_s:g} s or more "
                          f"({found or 'none'}), but {count} known surfaces")
     wanted = {p.middle: p for p in plateaus}
     around = {index: k for k, p in enumerate(plateaus) for index in _around_middle(p)}
@@ -194,7 +195,7 @@ def calibrate_images(rig: Rig, images: list[np.ndarray], surfaces: list[KnownSur
     """Self-calibrate the rig from images of the known surfaces (one surface per image; with
     `repeats`, more frames of each, whose spots are averaged with its own)."""
     if len(images) != len(surfaces):
-        raise ValueError(f"{len(images)} images but {len(surfaces)} known surfaces")
+        raise InputError(f"{len(images)} images but {len(surfaces)} known surfaces")
     found = observe(rig, images, repeats)
     line = found.line if len(found.line.frame) else None
     result = fit_rig(rig, surfaces, [s.pixels for s in found.spots],

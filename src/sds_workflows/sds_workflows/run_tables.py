@@ -14,13 +14,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 from sds_camera.camera_imu import CameraImu, imu_samples
+from sds_model.errors import InputError
 from sds_model.rig import Rig
 from sds_recon.instant import sample_offsets_s
 from sds_recon.reconstruction import LINE_LASER_ID, SurfaceFits, SurfacePoints
-from sds_recon.results import ResultsWriter
+from sds_recon.results import TABLE_FILES, ResultsWriter
 from sds_sloshing.analysis import AnalysisOptions, analyze, with_gravity_regime
-from sds_sloshing.estimators import DecayError
-from sds_sloshing.report import Truth, write_report
+from sds_sloshing.report import REPORT_FILES, Truth, write_report
 from sds_sloshing.surface_series import (
     RecordingError,
     SurfaceSeries,
@@ -28,6 +28,7 @@ from sds_sloshing.surface_series import (
 )
 from sds_tracker.spots import is_measured
 
+from sds_workflows.lateral import LATERAL_FILES
 from sds_workflows.pipeline import PipelineStep
 
 CAMERA_IMU_TOPIC = "/camera/imu"
@@ -36,6 +37,11 @@ LINE_FRAME_STEP = 10
 """The analysis keeps the line's points of the first LINE_FRAMES_IN_FULL frames (a minute at
 30 fps), then of every LINE_FRAME_STEP-th: they serve only the meniscus, a mean radial profile,
 and all of a 10-minute 4K run's would hold 0.8 GB (the result files keep every one)."""
+
+RUN_FILES = (*TABLE_FILES, *REPORT_FILES, *LATERAL_FILES)
+"""What a run of `sds process` or `sds export` writes into its folder: all of it is replaced
+together (`staging.staged_folder`), so that no earlier run's file (a side camera's) is left
+beside the new results."""
 
 
 def _camera_imu_row(time_s: float, accel, gyro) -> tuple:
@@ -138,12 +144,13 @@ class RunTables:
             self._tof.append((time_s, range_mm))
 
     def add_camera_imu(self, imu: CameraImu) -> None:
-        """The camera's own IMU samples in time order, one row each (the other sensor's cells
-        empty)."""
+        """The camera's own IMU samples in time order from the first frame on, one row each
+        (the other sensor's cells empty): the span the graph's frame source publishes, so
+        that `sds process` and `sds export` of its recording give the same table."""
         self.writer.add("camera_imu", [
             _camera_imu_row(t, value if sensor == "accel" else None,
                             value if sensor == "gyro" else None)
-            for t, sensor, value in imu_samples(imu)])
+            for t, sensor, value in imu_samples(imu) if t >= 0])
         self.add_accelerations("camera IMU", imu.accel_time_s, imu.accel_m_s2)
 
     def add_camera_imu_message(self, msg, time_s: float) -> None:
@@ -187,14 +194,17 @@ class RunAnalysis:
 def finish_analysis(tables: RunTables, source: str, out: Path, options: AnalysisOptions,
                     truth: Truth | None = None) -> RunAnalysis:
     """The analysis of the run's points and ToF ranges (report, analysis.json), the tables
-    closed. Without a gravity in `options`, a free fall in any accelerometer the run holds
-    means microgravity (`sds process`, `sds export`, `sds run` and the demo alike)."""
+    closed; data that give no analysis leave `results` None and say why in `note` (no report
+    is written), anything else that fails is raised. Without a gravity in `options`, a free
+    fall in any accelerometer the run holds means microgravity (`sds process`, `sds export`,
+    `sds run` and the demo alike)."""
     options, regime = with_gravity_regime(options, tables.accelerations())
     results, note = None, ""
-    try:
+    try:   # data that give no analysis (no point, no oscillation); a fault is raised
         analysis = analyze(tables.surface_series(source), tables.rig, options)
+    except InputError as error:
+        note = f"NO ANALYSIS: {error}"
+    else:
         results = write_report(analysis, out, truth).results
-    except (RecordingError, DecayError, ValueError) as error:
-        note = f"no analysis: {error}"
     tables.writer.close()
     return RunAnalysis(results, "; ".join(n for n in (regime, note) if n))

@@ -5,7 +5,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from sds_cli.commands import CommandError, add_overwrite, refuse_existing
+from sds_cli.commands import (
+    CommandError,
+    add_overwrite,
+    existing_file,
+    non_negative_float,
+    output_folder,
+    refuse_existing,
+)
 
 
 def add_parser(commands: argparse._SubParsersAction) -> None:
@@ -17,22 +24,22 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
                     "column per series, e.g. one spot's pixel position) or an Arduino log "
                     "(serial capture or SD card: the ToF quick estimate). Writes analysis.json, "
                     "report.html and figures.")
-    parser.add_argument("recording", type=Path,
+    parser.add_argument("recording", type=existing_file,
                         help="MCAP, points CSV, time-series CSV or Arduino log")
-    parser.add_argument("--rig", type=Path,
+    parser.add_argument("--rig", type=existing_file,
                         help="the rig file: container, liquid, gravity for the theory (default: "
                              "an MCAP's own rig; for tables and logs config/rigs/stelium.yaml)")
-    parser.add_argument("--out", type=Path, default=Path("analysis"),
+    parser.add_argument("--out", type=output_folder, default=Path("analysis"),
                         help="folder for analysis.json, report.html and figures")
     parser.add_argument("--start-s", type=float, help="free decay starts here [s]")
     parser.add_argument("--end-s", type=float, help="analysis window ends here [s]")
     parser.add_argument("--forcing-s", type=float,
                         help="the free decay starts this long after the excitation's onset [s]")
-    parser.add_argument("--gravity", type=float, help="gravity for the theory [m/s²] "
+    parser.add_argument("--gravity", type=non_negative_float, help="gravity for the theory [m/s²] "
                         "(default: the rig's; 0 for a drop: capillary theory, see README)")
     parser.add_argument("--expected", action="append", default=[], metavar="MODE=HZ",
                         help="expected frequency of a mode, e.g. lateral_1=1.9 (repeatable)")
-    parser.add_argument("--truth", type=Path,
+    parser.add_argument("--truth", type=existing_file,
                         help="a simulation's truth/run.json: the report gives each error")
     add_overwrite(parser, "replace the report of an earlier analysis in --out")
     parser.set_defaults(run=run, command="analyze")

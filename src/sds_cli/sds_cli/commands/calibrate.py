@@ -6,14 +6,21 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from sds_cli.commands import CommandError, add_overwrite, refuse_existing
+from sds_cli.commands import (
+    CommandError,
+    add_overwrite,
+    existing_file,
+    output_file,
+    positive_float,
+    refuse_existing,
+)
 
 
 def add_board_arguments(parser: argparse.ArgumentParser) -> None:
     """--board and --square: the checkerboard (sds_recon.calibration.board.Checkerboard)."""
     parser.add_argument("--board", required=True, metavar="COLSxROWS",
                         help="inner corners per row x per column, e.g. 9x6")
-    parser.add_argument("--square", type=float, required=True, metavar="MM",
+    parser.add_argument("--square", type=positive_float, required=True, metavar="MM",
                         help="checkerboard square size [mm]")
 
 
@@ -29,10 +36,10 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
     )
     camera.add_argument("--model", choices=["pinhole", "scaramuzza"], required=True,
                         help="pinhole + Brown-Conrady, or Scaramuzza's omnidirectional model")
-    camera.add_argument("--images", nargs="+", type=Path, required=True,
+    camera.add_argument("--images", nargs="+", type=existing_file, required=True,
                         help="image files (all the same size)")
     add_board_arguments(camera)
-    camera.add_argument("--out", type=Path, default=Path("camera.yaml"),
+    camera.add_argument("--out", type=output_file, default=Path("camera.yaml"),
                         help="camera file to write; the report goes beside it")
     add_overwrite(camera)
     camera.set_defaults(run=run_camera, command="calibrate camera")
@@ -41,15 +48,16 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
         description="Each spot seen on a known flat surface (level or tilted) is a point of its "
                     "beam; every beam (and the line laser's plane) is fitted to its points by "
                     "least squares, and an updated rig file is written with a report.")
-    lasers.add_argument("--rig", type=Path, required=True, help="the rig file as designed")
-    lasers.add_argument("--spots", type=Path, required=True,
+    lasers.add_argument("--rig", type=existing_file, required=True, help="the rig file as designed")
+    lasers.add_argument("--spots", type=existing_file, required=True,
                         help="CSV: frame, laser_id, x_px, y_px[, visible] (full-frame pixels)")
-    lasers.add_argument("--surfaces", type=Path, required=True,
+    lasers.add_argument("--surfaces", type=existing_file, required=True,
                         help="CSV: frame, tilt_x_deg, tilt_y_deg[, offset_mm]")
-    lasers.add_argument("--line", type=Path, help="NPZ with line_x_px (frames x image rows)")
+    lasers.add_argument("--line", type=existing_file,
+                        help="NPZ with line_x_px (frames x image rows)")
     lasers.add_argument("--fit-emitters", action="store_true",
                         help="also move each emitter onto its fitted beam")
-    lasers.add_argument("--out", type=Path, required=True, help="rig file to write")
+    lasers.add_argument("--out", type=output_file, required=True, help="rig file to write")
     add_overwrite(lasers)
     lasers.set_defaults(run=run_lasers, command="calibrate lasers")
     rig = targets.add_parser(
@@ -60,19 +68,19 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
                     "fit camera pose and beams jointly, then the line laser's plane through "
                     "the fitted camera; write the calibrated rig with uncertainties, a report "
                     "and one overlay per image.")
-    rig.add_argument("--rig", type=Path, required=True, help="the rig file as designed")
+    rig.add_argument("--rig", type=existing_file, required=True, help="the rig file as designed")
     source = rig.add_mutually_exclusive_group(required=True)
-    source.add_argument("--images", type=Path, nargs="+",
+    source.add_argument("--images", type=existing_file, nargs="+",
                         help="images of known surfaces (image k is frame k of --surfaces)")
-    source.add_argument("--video", type=Path,
+    source.add_argument("--video", type=existing_file,
                         help="video of the tilt table: its still stretches (0.5 s or more), "
                              "in order, are the frames of --surfaces")
-    rig.add_argument("--surfaces", type=Path, required=True,
+    rig.add_argument("--surfaces", type=existing_file, required=True,
                      help="CSV: frame, tilt_x_deg, tilt_y_deg[, offset_mm]")
-    rig.add_argument("--out", type=Path, required=True, help="calibrated rig file to write")
-    rig.add_argument("--cone-deg", type=float, default=3.0,
+    rig.add_argument("--out", type=output_file, required=True, help="calibrated rig file to write")
+    rig.add_argument("--cone-deg", type=positive_float, default=3.0,
                      help="farthest a beam may lean from the rig file's direction [deg]")
-    rig.add_argument("--camera-turn-deg", type=float, default=2.0,
+    rig.add_argument("--camera-turn-deg", type=positive_float, default=2.0,
                      help="farthest the camera may be turned from the rig file [deg]")
     rig.add_argument("--fit-emitters", action="store_true",
                      help="also fit each emitter's position across its beam")
@@ -85,23 +93,23 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
                     "is read, predict every parameter's σ and the tilt and height σ of unseen "
                     "surfaces for the seed's tilt series, then add the candidate surfaces "
                     "(tilts about Y, other fill levels) that bring an unmet goal closest.")
-    planned.add_argument("--rig", type=Path, required=True,
+    planned.add_argument("--rig", type=existing_file, required=True,
                          help="the rig file as designed, with its tolerances")
-    planned.add_argument("--candidates", type=Path,
+    planned.add_argument("--candidates", type=existing_file,
                          help="surfaces CSV of candidate surfaces (default: tilts about Y of "
                               "12.5, 22.5, 32.5 deg and fill levels every 10 mm up to where "
                               "a 35 deg tilt reaches the wall, inside the container)")
-    planned.add_argument("--table-sigma-deg", type=float, default=0.5 / 3**0.5,
+    planned.add_argument("--table-sigma-deg", type=positive_float, default=0.5 / 3**0.5,
                          help="σ of a tilted frame's angle about the table's axis [deg] "
                               "(default: ±0.5 deg, uniform)")
-    planned.add_argument("--table-across-sigma-deg", type=float,
+    planned.add_argument("--table-across-sigma-deg", type=positive_float,
                          help="σ of its other angle, across the table's axis [deg] (default: "
                               "--table-sigma-deg)")
-    planned.add_argument("--level-sigma-deg", type=float, default=0.05,
+    planned.add_argument("--level-sigma-deg", type=positive_float, default=0.05,
                          help="σ of a level frame's angles [deg] (a spirit level)")
-    planned.add_argument("--fill-sigma-mm", type=float, default=0.05,
+    planned.add_argument("--fill-sigma-mm", type=positive_float, default=0.05,
                          help="σ of a fill level [mm] (a measured volume)")
-    planned.add_argument("--out", type=Path,
+    planned.add_argument("--out", type=output_file,
                          help="write the planned protocol as a surfaces CSV")
     add_overwrite(planned)
     planned.set_defaults(run=run_plan, command="calibrate plan")
@@ -110,12 +118,12 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
         description="Calibrate the camera on the board, find the red line's centre per row "
                     "inside each board, put it on that board's plane and fit one plane to all "
                     "(camera frame, n.X + d = 0, mm); write it as JSON with its residuals.")
-    plane.add_argument("--images", nargs="+", type=Path, required=True,
+    plane.add_argument("--images", nargs="+", type=existing_file, required=True,
                        help="colour images, one board pose each, the line crossing the board")
     add_board_arguments(plane)
     plane.add_argument("--model", choices=["pinhole", "scaramuzza"], default="pinhole",
                        help="camera model calibrated on the board (default pinhole)")
-    plane.add_argument("--out", type=Path, required=True, help="JSON file to write")
+    plane.add_argument("--out", type=output_file, required=True, help="JSON file to write")
     add_overwrite(plane)
     plane.set_defaults(run=run_line_plane, command="calibrate line-plane")
 

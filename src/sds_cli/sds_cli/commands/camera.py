@@ -4,9 +4,15 @@ and the rolling shutter's readout measured."""
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-from sds_cli.commands import CommandError, add_overwrite, refuse_existing
+from sds_cli.commands import (
+    CommandError,
+    add_overwrite,
+    existing_file,
+    output_file,
+    positive_float,
+    refuse_existing,
+)
 
 IMPORTERS = {"ocamcalib": "read_ocamcalib_results", "matlab": "read_matlab_fisheye",
              "camera-info": "read_camera_info"}
@@ -24,14 +30,16 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
                     "properties in YAML/JSON; camera-info: a ROS camera_info YAML (plumb_bob).")
     importing.add_argument("format", choices=sorted(IMPORTERS),
                            help="the other tool's file format")
-    importing.add_argument("source", type=Path, help="the other tool's calibration file")
-    importing.add_argument("--out", type=Path, required=True, help="SDS camera file to write")
+    importing.add_argument("source", type=existing_file,
+                           help="the other tool's calibration file")
+    importing.add_argument("--out", type=output_file, required=True,
+                           help="SDS camera file to write")
     add_overwrite(importing)
     importing.set_defaults(run=run_import, command="camera import")
     exporting = actions.add_parser(
         "camera-info", help="write a ROS camera_info YAML from a pinhole SDS camera file")
-    exporting.add_argument("camera", type=Path, help="SDS camera file (pinhole)")
-    exporting.add_argument("--out", type=Path, required=True,
+    exporting.add_argument("camera", type=existing_file, help="SDS camera file (pinhole)")
+    exporting.add_argument("--out", type=output_file, required=True,
                            help="camera_info YAML to write")
     exporting.add_argument("--name", default="sds_camera", help="camera_name in the file")
     add_overwrite(exporting)
@@ -44,11 +52,11 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
                     "that the flicker is not a multiple of (120 Hz at 30 fps stands still). The "
                     "bands' slope gives the time the camera takes to read its rows: the "
                     "camera file's readout_s.")
-    readout.add_argument("video", type=Path, help="the flicker clip, at the camera's own "
+    readout.add_argument("video", type=existing_file, help="the flicker clip, at the camera's own "
                                                   "resolution and mode")
-    readout.add_argument("--flicker-hz", type=float, required=True,
+    readout.add_argument("--flicker-hz", type=positive_float, required=True,
                          help="the light's flicker frequency [Hz] (twice the mains frequency)")
-    readout.add_argument("--camera", type=Path,
+    readout.add_argument("--camera", type=existing_file,
                          help="camera file: compare with the readout_s it states")
     readout.set_defaults(run=run_readout, command="camera readout")
 

@@ -3,9 +3,8 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-from sds_cli.commands import CommandError
+from sds_cli.commands import CommandError, existing_file
 
 
 def add_parser(commands: argparse._SubParsersAction) -> None:
@@ -17,11 +16,11 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
                     "and by the sync LED where --led-roi is given; print both with their σ, "
                     "their disagreement, and the --start-s that puts the log on the video's "
                     "clock in `sds import-sd`.")
-    parser.add_argument("--video", type=Path, required=True,
+    parser.add_argument("--video", type=existing_file, required=True,
                         help="the video (its own IMU: GoPro GPMF or a sidecar CSV)")
-    parser.add_argument("--arduino", type=Path, required=True,
+    parser.add_argument("--arduino", type=existing_file, required=True,
                         help="the SD-card log or a serial capture (protocol v1)")
-    parser.add_argument("--rig", type=Path, required=True,
+    parser.add_argument("--rig", type=existing_file, required=True,
                         help="rig file: the camera's pose turns its IMU into the rig's frame")
     parser.add_argument("--led-roi", type=int, nargs=4, metavar=("X", "Y", "W", "H"),
                         help="the sync LED's region in the full frame [px]")

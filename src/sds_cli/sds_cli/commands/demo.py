@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from sds_cli.commands import output_folder, positive_float
+
 
 def add_parser(commands: argparse._SubParsersAction) -> None:
     """Register `sds demo`."""
@@ -15,9 +17,10 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
                     "bridge on a pseudo-terminal, recorder, Rerun), analyse the recording and "
                     "print the results next to the simulator's truth.",
     )
-    parser.add_argument("--out", type=Path, default=Path("demo_output"),
+    parser.add_argument("--out", type=output_folder, default=Path("demo_output"),
                         help="the demo's own folder (rewritten on each run)")
-    parser.add_argument("--seconds", type=float, help="simulated duration [s] (default 4.7)")
+    parser.add_argument("--seconds", type=positive_float,
+                        help="simulated duration [s] (default: the scenario's)")
     parser.set_defaults(run=run, command="demo")
 
 

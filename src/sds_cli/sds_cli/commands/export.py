@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
+import sys
 
-from sds_cli.commands import add_overwrite
+from sds_cli.commands import add_overwrite, existing_file, non_negative_float, output_folder
 
 
 def add_parser(commands: argparse._SubParsersAction) -> None:
@@ -14,23 +14,24 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
         "export", help="a recording's spots, points, line, fits, IMU, ToF and analysis as files",
         description="Write the result files of a recording of the graph (see README, "
                     "'Result files').")
-    parser.add_argument("recording", type=Path, help="a recording of the graph (MCAP)")
-    parser.add_argument("--rig", type=Path,
+    parser.add_argument("recording", type=existing_file, help="a recording of the graph (MCAP)")
+    parser.add_argument("--rig", type=existing_file,
                         help="the rig file (default: the one the recording carries)")
-    parser.add_argument("--out", type=Path, required=True,
+    parser.add_argument("--out", type=output_folder, required=True,
                         help="folder for the result files (refused if it holds results)")
     add_overwrite(parser, "replace the results of an earlier export in --out")
-    parser.add_argument("--gravity", type=float, help="gravity for the theory [m/s²]")
+    parser.add_argument("--gravity", type=non_negative_float, help="gravity for the theory [m/s²]")
     parser.set_defaults(run=run, command="export")
 
 
 def run(args: argparse.Namespace) -> int:
-    """Result files and the analysis report of one recording."""
+    """Result files and the analysis report of one recording; exit code 2 when the data gave
+    no analysis (the result files are written)."""
     from sds_workflows.export import export_results
 
     frames, analysis = export_results(args.recording, args.out, args.rig, args.gravity,
                                       args.overwrite)
     note = analysis.note
     print(f"sds export: {frames} frames of {args.recording} -> {args.out}" + (
-        f" ({note})" if note else ""))
-    return 0
+        f" ({note})" if note else ""), file=sys.stdout if analysis.results else sys.stderr)
+    return 0 if analysis.results else 2

@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
+import signal
+import sys
+
+from sds_cli.commands import CommandError, existing_file
 
 
 def add_parser(commands: argparse._SubParsersAction) -> None:
@@ -13,7 +16,7 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
         description="Start a graph (config/graphs/*.yaml; several files make one graph, e.g. "
                     "drop.yaml lateral.yaml); Ctrl-C or SIGTERM stops every node.",
     )
-    parser.add_argument("graph_files", type=Path, nargs="+", metavar="graph_file",
+    parser.add_argument("graph_files", type=existing_file, nargs="+", metavar="graph_file",
                         help="graph files, e.g. config/graphs/drop.yaml (and "
                              "config/graphs/lateral.yaml for the side camera)")
     parser.add_argument("--set", dest="overrides", action="append", default=[],
@@ -30,13 +33,11 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run the graph until it ends; its exit code."""
+    """Run the graph until it ends; its exit code (128 + the signal when Ctrl-C or SIGTERM
+    stopped it, as a shell reports a process a signal ended)."""
     from sds_bringup.launcher import Launcher
     from sds_bringup.ros_env import graph_domain_id, graph_environment
-    from sds_ros.graph_file import apply_overrides, composed, load_graph
-
-    from sds_cli.commands import CommandError
-
+    from sds_ros.graph_file import apply_overrides, check_plugins, composed, load_graph
     entries = [entry for path in args.graph_files for entry in load_graph(path)]
     names = [entry.name for entry in entries]
     twice = sorted({name for name in names if names.count(name) > 1})
@@ -46,6 +47,7 @@ def run(args: argparse.Namespace) -> int:
     entries = apply_overrides(entries, args.overrides)
     if args.compose:
         entries = composed(entries)
+    check_plugins(entries)   # before the banner: a refused graph says one line
     domain_id = graph_domain_id(args.domain_id, args.network)
     environment = graph_environment(domain_id, network=args.network)
     peers = environment.get("ROS_STATIC_PEERS", "")
@@ -53,4 +55,10 @@ def run(args: argparse.Namespace) -> int:
           f"ROS_DOMAIN_ID={domain_id}, discovery "
           f"{environment['ROS_AUTOMATIC_DISCOVERY_RANGE']}" + (f" + peers {peers}" if peers
                                                               else ""))
-    return Launcher(entries, environment).run()
+    launcher = Launcher(entries, environment)
+    code = launcher.run()
+    if launcher.signal_received is not None:   # stopped by Ctrl-C or SIGTERM: the shell's code
+        print(f"sds graph: stopped by {signal.Signals(launcher.signal_received).name}",
+              file=sys.stderr)
+        return 128 + launcher.signal_received
+    return code

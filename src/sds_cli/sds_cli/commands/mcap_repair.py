@@ -3,9 +3,8 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-from sds_cli.commands import add_overwrite
+from sds_cli.commands import add_overwrite, existing_file, output_file
 
 
 def add_parser(commands: argparse._SubParsersAction) -> None:
@@ -14,8 +13,8 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
         "mcap-repair", help="rewrite an MCAP left without its summary (e.g. after a crash)",
         description="Copy every complete message of an MCAP file (one whose recorder was killed "
                     "keeps all flushed chunks) into a new file with a summary section.")
-    parser.add_argument("source", type=Path, help="the recording without a summary")
-    parser.add_argument("target", type=Path, help="the new, indexed recording to write")
+    parser.add_argument("source", type=existing_file, help="the recording without a summary")
+    parser.add_argument("target", type=output_file, help="the new, indexed recording to write")
     add_overwrite(parser, "replace an existing target")
     parser.set_defaults(run=run, command="mcap-repair")
 

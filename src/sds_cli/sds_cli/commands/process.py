@@ -12,7 +12,18 @@ import os
 import sys
 from pathlib import Path
 
-from sds_cli.commands import CommandError, add_lateral_options, add_overwrite, lateral_input
+from sds_cli.commands import (
+    CommandError,
+    add_lateral_options,
+    add_overwrite,
+    existing_file,
+    existing_path,
+    lateral_input,
+    non_negative_float,
+    output_folder,
+    positive_float,
+    positive_int,
+)
 
 VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv", ".m4v")
 
@@ -26,34 +37,34 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
                     "Several inputs (or a folder of them) run in parallel, one result folder "
                     "each (--out/<name>).")
     inputs = parser.add_mutually_exclusive_group(required=True)
-    inputs.add_argument("--video", type=Path, nargs="+",
+    inputs.add_argument("--video", type=existing_path, nargs="+",
                         help="video files, a folder of videos, or one image folder (with --fps)")
-    inputs.add_argument("--mcap", type=Path, nargs="+",
+    inputs.add_argument("--mcap", type=existing_path, nargs="+",
                         help="recordings with camera frames, or a folder of them")
-    parser.add_argument("--rig", type=Path,
+    parser.add_argument("--rig", type=existing_file,
                         help="the rig file (needed with --video; with --mcap, default: the one "
                              "each recording carries)")
-    parser.add_argument("--out", type=Path, required=True,
+    parser.add_argument("--out", type=output_folder, required=True,
                         help="folder for the result files (refused if it holds results); with "
                              "several inputs, one subfolder each")
     add_overwrite(parser, "replace the results of an earlier run in --out")
-    parser.add_argument("--fps", type=float, default=0.0,
+    parser.add_argument("--fps", type=positive_float, default=0.0,
                         help="frame rate of an image folder [1/s]")
     parser.add_argument("--sequence", action="store_true",
                         help="an image folder is a video's frames (motion prior and Hampel "
                              "filter across them); default: still images, each on its own")
-    parser.add_argument("--gravity", type=float, help="gravity for the theory [m/s²]")
-    parser.add_argument("--calibrate-lasers", type=Path, nargs="+", metavar="IMAGE",
+    parser.add_argument("--gravity", type=non_negative_float, help="gravity for the theory [m/s²]")
+    parser.add_argument("--calibrate-lasers", type=existing_file, nargs="+", metavar="IMAGE",
                         help="images of known surfaces, or one video of the tilt table (its "
                              "still stretches in order): self-calibrate the rig first (needs "
                              "--surfaces) and process with the calibrated rig")
-    parser.add_argument("--surfaces", type=Path,
+    parser.add_argument("--surfaces", type=existing_file,
                         help="known surface per image: frame, tilt_x_deg, tilt_y_deg"
                              "[, offset_mm] (frame k = k-th image)")
     add_lateral_options(parser, "a second, lateral camera of the same drop (one --video): its "
                         "wall profile and the top surface checked against it (lateral.csv, "
                         "the report)")
-    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
+    parser.add_argument("--jobs", type=positive_int, default=os.cpu_count() or 1,
                         help="inputs processed at once (default: one per core)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.set_defaults(run=run, command="process")
@@ -110,6 +121,8 @@ def run(args: argparse.Namespace) -> int:
                                   args.gravity, args.overwrite, not args.no_progress,
                                   args.sequence, lateral)
         print(processed.summary(), file=sys.stderr if processed.incomplete else sys.stdout)
+        for line in processed.result_lines():
+            print(line)
         return 2 if processed.incomplete else 0
     failed = process_inputs(inputs, is_video, rig_file, args.out, args.jobs, args.fps,
                             args.gravity, args.overwrite, not args.no_progress, args.sequence)

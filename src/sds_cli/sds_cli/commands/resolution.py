@@ -7,7 +7,13 @@ from pathlib import Path
 
 from sds_model.paths import CONFIG
 
-from sds_cli.commands import add_overwrite, refuse_existing
+from sds_cli.commands import (
+    add_overwrite,
+    existing_file,
+    output_folder,
+    positive_float,
+    refuse_existing,
+)
 
 
 def add_parser(commands: argparse._SubParsersAction) -> None:
@@ -17,9 +23,9 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
         description="Camera looking straight down at a flat surface: how many mm of surface "
                     "height one pixel of spot motion means, for each radial spot position.",
     )
-    parser.add_argument("--camera", type=Path, help="camera file (default: the GoPro's)",
+    parser.add_argument("--camera", type=existing_file, help="camera file (default: the GoPro's)",
                         default=CONFIG / "cameras" / "gopro_hero5_session.yaml")
-    parser.add_argument("--height-mm", type=float, default=170.0,
+    parser.add_argument("--height-mm", type=positive_float, default=170.0,
                         help="camera above the flat surface [mm] (default 170)")
     parser.add_argument("--beam-tilt-deg", type=float, default=0.0,
                         help="beam tilt from the vertical, outwards [deg] (default 0)")
@@ -27,7 +33,7 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
                         metavar=("START", "STOP", "STEP"), help="radii of the table [mm]")
     parser.add_argument("--rings-mm", type=float, nargs="*", default=[],
                         help="radii of the diode rings, drawn dashed")
-    parser.add_argument("--out", type=Path, default=Path("resolution"),
+    parser.add_argument("--out", type=output_folder, default=Path("resolution"),
                         help="directory for resolution.csv and resolution.png")
     add_overwrite(parser, "replace an earlier table and plot in --out")
     parser.set_defaults(run=run, command="resolution")

@@ -5,7 +5,13 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from sds_cli.commands import add_overwrite, refuse_existing
+from sds_cli.commands import (
+    add_overwrite,
+    existing_file,
+    output_folder,
+    positive_float,
+    refuse_existing,
+)
 
 
 def add_parser(commands: argparse._SubParsersAction) -> None:
@@ -14,13 +20,14 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
         "simulate", help="render a simulated run: video, Arduino streams, ground truth",
         description="Render a scenario (config/scenarios/*.yaml) as the rig's camera and Arduino "
                     "would record it, with the exact truth beside it (format: sds_sim.simulate).")
-    parser.add_argument("scenario", type=Path,
+    parser.add_argument("scenario", type=existing_file,
                         help="scenario file (config/scenarios/*.yaml)")
-    parser.add_argument("--out", type=Path, default=Path("simulation"),
+    parser.add_argument("--out", type=output_folder, default=Path("simulation"),
                         help="folder for the video, the Arduino streams and the truth "
                              "(default: simulation)")
-    parser.add_argument("--seconds", type=float, help="override the scenario's duration [s]")
-    parser.add_argument("--scale", type=float, help="image scale, e.g. 0.25 for 960x540")
+    parser.add_argument("--seconds", type=positive_float,
+                        help="override the scenario's duration [s]")
+    parser.add_argument("--scale", type=positive_float, help="image scale, e.g. 0.25 for 960x540")
     parser.add_argument("--seed", type=int, help="override the scenario's random seed")
     parser.add_argument("--codec", choices=["h264", "lossless", "png"], default="h264",
                         help="h264 as the camera writes (default), lossless H.264, or PNG "
@@ -47,6 +54,10 @@ def run(args: argparse.Namespace) -> int:
     seconds = time.perf_counter() - start
     print(f"{scenario.name}: {scenario.frame_count} frames "
           f"{output.run.parent.parent.name}/ in {seconds:.1f} s")
-    for key in ("video", "serial", "sd_log", "run", "spots", "frames", "line"):
-        print(f"  {key:<7} {getattr(output, key)}")
+    for key in ("video", "serial", "sd_log", "run", "spots", "frames", "line", "camera_imu",
+                "surfaces", "lateral_video"):
+        if getattr(output, key) is not None:
+            print(f"  {key:<13} {getattr(output, key)}")
+    for board in output.lateral_boards:
+        print(f"  {'lateral_board':<13} {board}")
     return 0

@@ -3,9 +3,16 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-from sds_cli.commands import CommandError, add_overwrite, refuse_existing
+from sds_cli.commands import (
+    CommandError,
+    add_overwrite,
+    existing_file,
+    output_file,
+    positive_float,
+    positive_int,
+    refuse_existing,
+)
 
 
 def add_parser(commands: argparse._SubParsersAction) -> None:
@@ -15,15 +22,15 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
         description="Log a recording's camera frames, spots, beam paths, line, surface points, "
                     "fitted plane, container and time series to a Rerun .rrd file (open it "
                     "with `rerun FILE.rrd`).")
-    parser.add_argument("recording", type=Path, help="a recording (MCAP)")
-    parser.add_argument("--out", type=Path, help="the .rrd file (default: beside the MCAP)")
-    parser.add_argument("--rig", type=Path,
+    parser.add_argument("recording", type=existing_file, help="a recording (MCAP)")
+    parser.add_argument("--out", type=output_file, help="the .rrd file (default: beside the MCAP)")
+    parser.add_argument("--rig", type=existing_file,
                         help="rig file for the container, beams and beam paths (default: the "
                              "one the recording carries)")
-    parser.add_argument("--image-scale", type=float, default=0.25,
+    parser.add_argument("--image-scale", type=positive_float, default=0.25,
                         help="size of the logged images against the frames, in (0, 1] "
                              "(default 0.25)")
-    parser.add_argument("--image-every", type=int, default=1, help="log every Nth frame")
+    parser.add_argument("--image-every", type=positive_int, default=1, help="log every Nth frame")
     add_overwrite(parser, "replace an existing .rrd file")
     parser.set_defaults(run=run, command="view")
 

@@ -9,8 +9,10 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import ArrayLike
 
+from sds_model.errors import InputError
 
-class CameraModelError(ValueError):
+
+class CameraModelError(InputError):
     """A camera file or parameter set that does not describe a usable camera."""
 
 

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from sds_model.errors import InputError
 
 SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 30, 0.1)
 """cornerSubPix stop rule of OpenCV's own calibration regression test."""
@@ -28,9 +29,9 @@ class Checkerboard:
         try:
             columns, rows = (int(v) for v in size.lower().split("x"))
         except ValueError as error:
-            raise ValueError(f"board size must look like 9x6 (inner corners): {size!r}") from error
+            raise InputError(f"board size must look like 9x6 (inner corners): {size!r}") from error
         if columns < 2 or rows < 2 or square_mm <= 0:
-            raise ValueError(f"need 2x2 inner corners or more, square > 0: {size}, {square_mm}")
+            raise InputError(f"need 2x2 inner corners or more, square > 0: {size}, {square_mm}")
         return cls(columns, rows, float(square_mm))
 
     @property
@@ -107,10 +108,10 @@ def detect_views(paths: list[Path], board: Checkerboard
     for path in paths:
         image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
         if image is None:
-            raise ValueError(f"cannot read image {path}")
+            raise InputError(f"cannot read image {path}")
         this_size = (image.shape[1], image.shape[0])
         if size is not None and this_size != size:
-            raise ValueError(f"{path} is {this_size} px (width, height), the others {size}")
+            raise InputError(f"{path} is {this_size} px (width, height), the others {size}")
         size = this_size
         corners = detect_corners(image, board)
         if corners is None:
@@ -118,5 +119,5 @@ def detect_views(paths: list[Path], board: Checkerboard
         else:
             views.append(BoardView(path.name, corners, board.object_points()))
     if size is None:
-        raise ValueError("no images given")
+        raise InputError("no images given")
     return views, rejected, size

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from sds_model.errors import InputError
 
 from sds_recon.calibration.board import (
     BoardView,
@@ -66,7 +67,7 @@ def correct_outliers(calibration: Calibration, images: dict[str, Path], board: C
             continue
         gray = cv2.imread(str(images[view.name]), cv2.IMREAD_GRAYSCALE)
         if gray is None:
-            raise ValueError(f"{images[view.name]}: cannot be read again")
+            raise InputError(f"{images[view.name]}: cannot be read again")
         predicted = calibration.camera.project(pose.apply(view.object_points[bad]))
         redetected = refine_corners(gray, predicted,
                                     subpix_half_windows(view.image_points, board)[bad])
@@ -87,7 +88,7 @@ def correct_outliers(calibration: Calibration, images: dict[str, Path], board: C
 def calibrate_camera(paths: list[Path], board: Checkerboard, model: str) -> CalibrationRun:
     """Detect the board in every image, fit `model`, re-detect outlying corners once, refit."""
     if model not in FITS:
-        raise ValueError(f"model must be one of {sorted(FITS)}, got {model!r}")
+        raise InputError(f"model must be one of {sorted(FITS)}, got {model!r}")
     views, rejected, (width, height) = detect_views(paths, board)
     calibration = FITS[model](views, width, height)
     views, corrections = correct_outliers(calibration, {p.name: p for p in paths}, board)

@@ -11,6 +11,7 @@ from scipy.sparse import lil_matrix
 from sds_model.camera.model import CameraModel
 from sds_model.camera.pinhole import PinholeCamera
 from sds_model.camera.scaramuzza import ScaramuzzaCamera
+from sds_model.errors import InputError
 from sds_model.geometry import RigidTransform
 
 from sds_recon.calibration.board import BoardView
@@ -71,7 +72,7 @@ def reprojection_errors(camera: CameraModel, poses: list[RigidTransform],
 def calibrate_pinhole(views: list[BoardView], width_px: int, height_px: int) -> Calibration:
     """OpenCV's calibrateCamera (k1, k2, p1, p2, k3; no skew), errors recomputed by our model."""
     if len(views) < 3:
-        raise ValueError(f"need at least 3 board views, got {len(views)}")
+        raise InputError(f"need at least 3 board views, got {len(views)}")
     object_points = [v.object_points.astype(np.float32) for v in views]
     image_points = [v.image_points.astype(np.float32).reshape(-1, 1, 2) for v in views]
     _, k, dist, rvecs, tvecs = cv2.calibrateCamera(object_points, image_points,
@@ -199,7 +200,7 @@ def calibrate_scaramuzza(views: list[BoardView], width_px: int, height_px: int) 
     pose, so c, e, m together are not observable (see ScaramuzzaCamera.with_symmetric_stretch).
     """
     if len(views) < 3:
-        raise ValueError(f"need at least 3 board views, got {len(views)}")
+        raise InputError(f"need at least 3 board views, got {len(views)}")
     radius_scale = float(np.hypot(width_px, height_px) / 2)
     centre = np.array([(width_px - 1) / 2, (height_px - 1) / 2])
     polynomial, poses = _initial_scaramuzza(views, centre, radius_scale)

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from sds_model.errors import InputError
 from sds_model.rig import LaserDiode, LineLaser, Rig
 
 from sds_recon.calibration.lasers import KnownSurface, calibrate_beams, calibrate_line_plane
@@ -38,11 +39,11 @@ def read_surfaces(path: Path) -> dict[int, KnownSurface]:
                     np.radians(float(row["tilt_y_deg"])), np.radians(tilt_sigma_deg[0]),
                     np.radians(tilt_sigma_deg[1]), sigma["offset_sigma_mm"])
             except (KeyError, TypeError, ValueError) as error:
-                raise ValueError(f"{path}: line {line} needs frame, tilt_x_deg, tilt_y_deg "
+                raise InputError(f"{path}: line {line} needs frame, tilt_x_deg, tilt_y_deg "
                                  f"(and any offset or σ column) as numbers: {error!r}"
                                  ) from error
             if not all(value >= 0 for value in sigma.values()):
-                raise ValueError(f"{path}: line {line}: {', '.join(SIGMA_COLUMNS)} must not be "
+                raise InputError(f"{path}: line {line}: {', '.join(SIGMA_COLUMNS)} must not be "
                                  "negative")
             surfaces[frame] = surface
     return surfaces
@@ -63,7 +64,7 @@ def read_spots(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
                     ids.append(int(row["laser_id"]))
                     pixels.append((x, y))
             except (KeyError, ValueError) as error:
-                raise ValueError(f"{path}: needs frame, laser_id, x_px, y_px: {error!r}") from error
+                raise InputError(f"{path}: needs frame, laser_id, x_px, y_px: {error!r}") from error
     return np.array(frames), np.array(ids), np.array(pixels).reshape(-1, 2)
 
 
@@ -81,7 +82,7 @@ def calibrate_lasers(rig: Rig, spots: Path, surfaces: Path, line: Path | None = 
     frames, ids, pixels = read_spots(spots)
     missing = sorted(set(frames.tolist()) - set(known))
     if missing:
-        raise ValueError(f"no known surface for frames {missing[:10]} of {spots}")
+        raise InputError(f"no known surface for frames {missing[:10]} of {spots}")
     line_observations = read_line(line) if line is not None else None
     return calibrate_from_observations(rig, known, frames, ids, pixels, line_observations,
                                        fit_emitters)

@@ -7,6 +7,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import ArrayLike
 from sds_model.camera.model import CameraModel
+from sds_model.errors import InputError
 from sds_model.geometry import RigidTransform, ray_plane_points
 from sds_model.rig import Rig
 
@@ -130,7 +131,7 @@ def fit_beam(laser_id: int, points_mm: np.ndarray, emitter_mm: np.ndarray,
     """
     points = points_mm[np.isfinite(points_mm).all(axis=1)]
     if len(points) < 2:
-        raise ValueError(f"beam {laser_id}: needs 2 or more points on known surfaces, "
+        raise InputError(f"beam {laser_id}: needs 2 or more points on known surfaces, "
                          f"got {len(points)}")
     origin = points.mean(axis=0) if fit_emitter else emitter_mm
     offsets = points - origin
@@ -180,7 +181,7 @@ def consensus_plane(points_mm: np.ndarray, tolerance_mm: float = OUTLIER_MM,
         usable = np.abs(normals @ near) >= np.cos(np.radians(cone_deg))
         normals, a = normals[usable], a[usable]
     if not len(normals):
-        raise ValueError("no three of the points span a plane"
+        raise InputError("no three of the points span a plane"
                          + ("" if near is None else f" within {cone_deg}° of the expected one"))
     scored = points_mm[rng.permutation(len(points_mm))[:CONSENSUS_POINTS]]
     distances = np.abs((scored[None] - a[:, None]) @ normals[..., None])[..., 0]
@@ -195,7 +196,7 @@ def fit_plane_robust(points_mm: np.ndarray, iterations: int = 20, near: np.ndarr
     weights) over the points within OUTLIER_MM of it."""
     points = points_mm[np.isfinite(points_mm).all(axis=1)]
     if len(points) < 3:
-        raise ValueError(f"a plane needs 3 or more points, got {len(points)}")
+        raise InputError(f"a plane needs 3 or more points, got {len(points)}")
     normal, centre = consensus_plane(points, near=near, cone_deg=cone_deg)
     for _ in range(iterations):
         residual = np.abs((points - centre) @ normal)
@@ -249,9 +250,9 @@ def calibrate_line_plane_on_boards(camera: CameraModel, poses: list[RigidTransfo
     each board pose (from the camera calibration) puts the line's pixels in 3-D.
     """
     if len(poses) != len(pixels):
-        raise ValueError(f"{len(poses)} board poses but {len(pixels)} line pixel sets")
+        raise InputError(f"{len(poses)} board poses but {len(pixels)} line pixel sets")
     if len(poses) < 2:
-        raise ValueError("a line plane needs the line on 2 or more board poses")
+        raise InputError("a line plane needs the line on 2 or more board poses")
     points = np.vstack([board_points(camera, pose, p) for pose, p in zip(poses, pixels,
                                                                           strict=True)])
     return fit_plane_robust(points)

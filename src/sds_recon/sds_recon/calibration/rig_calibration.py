@@ -25,6 +25,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+from sds_model.errors import InputError
 from sds_model.rig import Rig
 
 from sds_recon.calibration.identification import (
@@ -143,7 +144,7 @@ def _fit_without_outliers(rig: Rig, surfaces: list[KnownSurface], spots: _Spots,
     alike, the model is wrong, not an identity, and the model check says so."""
     while True:
         if not spots.ids:
-            raise ValueError("no diode's spots fit its beam on these surfaces: "
+            raise InputError("no diode's spots fit its beam on these surfaces: "
                              + "; ".join(f"{i}: {why}" for i, why in
                                          sorted(unidentified.items())[:3]))
         fit = self_calibrate(rig, spots.ids, surfaces, spots.diode, spots.frame, spots.pixels,
@@ -204,7 +205,7 @@ def calibrate_rig(rig: Rig, surfaces: list[KnownSurface], blobs: list[np.ndarray
     wide = IdentificationSettings(cone_deg=s.cone_deg + s.camera_turn_deg, gate_mm=s.gate_mm)
     identification = identify_spots(rig, surfaces, blobs, wide)
     if not identification.assigned:
-        raise ValueError("no diode could be identified on these surfaces: "
+        raise InputError("no diode could be identified on these surfaces: "
                          + "; ".join(f"{i}: {why}" for i, why in
                                      sorted(identification.unidentified.items())[:3]))
     spots = _observations(identification.assigned, blobs, blob_covariance_px2)

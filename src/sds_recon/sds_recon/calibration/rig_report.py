@@ -33,8 +33,12 @@ def _sigma(value: float, in_degrees: bool) -> float | None:
     return _deg(value) if in_degrees else _mm(value)
 
 
-def _plus_minus(sigma: float | None, digits: int = 3) -> str:
-    return "(kept from the rig file)" if sigma is None else f"± {sigma:.{digits}f}"
+def _plus_minus(sigma: float | None, digits: int = 3, unit: str = "") -> str:
+    """"± σ unit", or "(kept from the rig file)" for a parameter that was not fitted (no
+    unit: no number)."""
+    if sigma is None:
+        return "(kept from the rig file)"
+    return f"± {sigma:.{digits}f}" + (f" {unit}" if unit else "")
 
 
 def beam_sigma_deg(result: RigCalibration, laser_id: int) -> float:
@@ -209,8 +213,8 @@ def report_text(report: dict[str, Any]) -> str:
         line = report["line_laser"]
         lines.append(f"line laser plane: {line['points']} points ({line['left_out']} left out), "
                      f"RMS {line['rms_px']} px / {line['rms_mm']} mm, normal "
-                     f"{_plus_minus(line['normal_sigma_deg'], 4)} deg, offset "
-                     f"{_plus_minus(line['offset_sigma_mm'])} mm")
+                     f"{_plus_minus(line['normal_sigma_deg'], 4, 'deg')}, offset "
+                     f"{_plus_minus(line['offset_sigma_mm'], 3, 'mm')}")
     fitted_surfaces = [row for row in report["surfaces"]
                        if any(row["declared_tilt_sigma_deg"]) or row["declared_offset_sigma_mm"]]
     if fitted_surfaces:
