@@ -21,6 +21,7 @@ import numpy as np
 from scipy.special import ndtr
 from sds_lateral.view import BoardPlacement, LateralView, load_lateral_view
 from sds_model.camera.model import CameraModel
+from sds_model.errors import InputError
 from sds_model.geometry import RigidTransform
 
 from sds_sim.scenario import LateralSpec, Scenario
@@ -79,7 +80,7 @@ class LateralRenderer:
 
     def __init__(self, scenario: Scenario) -> None:
         if scenario.lateral is None:
-            raise ValueError("the scenario has no side camera (its `lateral:` section)")
+            raise InputError("the scenario has no side camera (its `lateral:` section)")
         self.scenario, self.spec = scenario, scenario.lateral
         self.view = load_lateral_view(self.spec.view_file)
         self.camera = true_camera(self.view, self.spec, scenario.seed + 7919)

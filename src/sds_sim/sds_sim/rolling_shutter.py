@@ -11,6 +11,7 @@ from pathlib import Path
 
 import yaml
 from sds_model.camera.files import read_yaml
+from sds_model.errors import InputError
 from sds_model.rig import load_rig
 
 
@@ -20,7 +21,7 @@ def rolling_rig(rig_file: Path, readout_s: float, folder: Path) -> Path:
     folder.mkdir(parents=True, exist_ok=True)
     camera_file = load_rig(rig_file).camera_file
     if camera_file is None:
-        raise ValueError(f"{rig_file}: its camera comes inline, not from a camera file")
+        raise InputError(f"{rig_file}: its camera comes inline, not from a camera file")
     camera = read_yaml(camera_file)
     camera["readout_s"] = readout_s
     (folder / "camera.yaml").write_text(yaml.safe_dump(camera))

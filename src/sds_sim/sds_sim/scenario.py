@@ -10,13 +10,14 @@ import numpy as np
 import yaml
 from sds_model.camera.model import CameraModelError
 from sds_model.camera.rolling_shutter import rolling_shutter
+from sds_model.errors import InputError
 from sds_model.mode_theory import ModeShape, mode_root, natural_frequency_hz
 from sds_model.rig import Rig, load_rig
 
 from sds_sim.surface import ModeMotion, Surface
 
 
-class ScenarioError(ValueError):
+class ScenarioError(InputError):
     """A scenario file that cannot be simulated; the message names the bad field."""
 
 
@@ -260,7 +261,11 @@ def load_scenario(path: str | Path, overrides: dict[str, Any] | None = None) -> 
     lateral = content.pop("lateral", None)
     if lateral is not None:
         spec = _build(LateralSpec, lateral, "lateral")
-        parts["lateral"] = replace(spec, view_file=str((path.parent / spec.view_file).resolve()))
+        view_file = (path.parent / spec.view_file).resolve()
+        if not view_file.is_file():   # before any frame is rendered
+            raise ScenarioError(f"{path}: lateral.view_file {spec.view_file}: no such file "
+                                f"({view_file}; a relative path is from the scenario's folder)")
+        parts["lateral"] = replace(spec, view_file=str(view_file))
     modes = content.pop("modes", []) or []
     if not isinstance(modes, list):
         raise ScenarioError(f"{path}: modes must be a list")

@@ -35,6 +35,7 @@ import numpy as np
 from sds_arduino.protocol import format_record
 from sds_camera.camera_imu import sidecar_path, write_sidecar
 from sds_camera.video_writer import VideoWriter
+from sds_model.errors import InputError
 from tqdm import tqdm
 
 from sds_sim.arduino import arduino_records
@@ -62,6 +63,8 @@ class SimulationOutput:
     line: Path
     lateral_video: Path | None = None
     lateral_boards: tuple[Path, ...] = ()
+    camera_imu: Path | None = None   # the camera's own IMU (a sidecar CSV beside the video)
+    surfaces: Path | None = None   # a tilt-table series: its surfaces CSV, one still each
 
 
 class _FrameSink:
@@ -111,7 +114,7 @@ def simulate(scenario: Scenario, directory: Path, codec: str = "h264",
              progress: bool = True) -> SimulationOutput:
     """Render every frame, write the streams and the truth; return where they are."""
     if codec not in CODECS:
-        raise ValueError(f"codec must be one of {CODECS}, got {codec!r}")
+        raise InputError(f"codec must be one of {CODECS}, got {codec!r}")
     directory = Path(directory)
     (directory / "truth").mkdir(parents=True, exist_ok=True)
     (directory / "arduino").mkdir(parents=True, exist_ok=True)
@@ -140,7 +143,13 @@ def simulate(scenario: Scenario, directory: Path, codec: str = "h264",
     _write_line(renderer, truths, output.line)
     imu = camera_imu(scenario)
     if imu is not None:
-        write_sidecar(imu, sidecar_path(output.video))
+        sidecar = sidecar_path(output.video)
+        write_sidecar(imu, sidecar)
+        output = replace(output, camera_imu=sidecar)
+    if scenario.tilt_series_deg:
+        surfaces = directory / "surfaces.csv"
+        _write_surfaces(scenario, surfaces)
+        output = replace(output, surfaces=surfaces)
     description = _run_description(scenario, renderer, output)
     if lateral is not None:
         description["lateral"] = lateral
@@ -187,6 +196,19 @@ def _simulate_lateral(scenario: Scenario, output: SimulationOutput, codec: str, 
                   "truth": "truth/lateral.csv", "edges": "truth/lateral_edges.npz"},
     }
     return replace(output, lateral_video=sink.path, lateral_boards=boards), description
+
+
+def _write_surfaces(scenario: Scenario, path: Path) -> None:
+    """The tilt table's known surfaces as `sds calibrate rig --video` reads them: frame k is
+    the video's k-th still stretch, its tilts [deg] as the table's scale reads them (the
+    scenario's angles) and the level offset 0 mm."""
+    with path.open("w", newline="") as file:
+        writer = csv.writer(file)
+        writer.writerow(["frame", "tilt_x_deg", "tilt_y_deg", "offset_mm"])
+        for index, angle_deg in enumerate(scenario.tilt_series_deg):
+            tilt_x, tilt_y = (angle_deg, 0.0) if scenario.tilt_series_axis == "x" else \
+                (0.0, angle_deg)
+            writer.writerow([index, f"{tilt_x:g}", f"{tilt_y:g}", "0"])
 
 
 def _write_spots(scenario: Scenario, truths: list[FrameTruth], path: Path) -> None:
