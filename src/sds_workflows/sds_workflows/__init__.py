@@ -56,7 +56,7 @@ __all__ = sorted(_MODULE_OF)
 
 def __getattr__(name: str) -> object:
     """An entry point, imported when first asked for (PEP 562): importing one light module of
-    the package, such as `errors`, then loads none of the others (seconds of SciPy, Numba and
+    the package, such as `clock_link`, then loads none of the others (seconds of SciPy, Numba and
     Matplotlib for every `sds` command)."""
     if name not in _MODULE_OF:
         raise AttributeError(f"module 'sds_workflows' has no attribute {name!r}")
