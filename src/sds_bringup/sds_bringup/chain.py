@@ -72,13 +72,14 @@ def run_chain(overrides: list[str], out: Path, expected_frames: int | None,
     domain_id = graph_domain_id(None)
     environment = graph_environment(domain_id)
     os.environ.update(environment)
-    # The camera waits for tracker and recorder; the tracker for reconstruction, recorder and
+    # The camera waits for the tracker on its frames and for the recorder on its packets
+    # (drop.yaml); the tracker for reconstruction, recorder and
     # the progress bar; the reconstruction and the running sloshing estimates for the
     # recorder (the fits also for the sloshing node); each for the live viewer too if any.
     viewer = live_view()
     extra = int(viewer)
     entries = graph_entries([*overrides, f"recorder.output={outputs.recording.resolve()}",
-                             "viewer.spawn=true", f"camera.wait_for_subscribers={2 + extra}",
+                             "viewer.spawn=true", f"camera.wait_for_subscribers={1 + extra}",
                              f"tracker.wait_for_consumers={3 + extra}",
                              f"recon.wait_for_consumers={1 + extra}",
                              f"recon.wait_for_fit_consumers={2 + extra}",

@@ -11,6 +11,7 @@ import threading
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
+from fractions import Fraction
 from itertools import pairwise
 from pathlib import Path
 from typing import Protocol, TypeVar
@@ -151,7 +152,11 @@ class VideoFileSource:
         so that the chroma samples and the result equal a whole-frame conversion's)."""
         region = region or Region.full(self.width, self.height)
         region.check_inside(self.width, self.height)
-        converter = _RegionConverter(self._stream, region)
+        context = self._stream.codec_context
+        if context.format is None:
+            raise FrameSourceError(f"video {self.path} does not say its pixel format")
+        converter = RegionConverter(context.width, context.height, context.format,
+                                    self._stream.time_base or Fraction(1, 10**9), region)
         start, time_base = self._stream.start_time, self._stream.time_base
         index = 0
         try:
@@ -177,24 +182,33 @@ class VideoFileSource:
         self._container.close()
 
 
-class _RegionConverter:
-    """FFmpeg's crop and BGR conversion of one region of each decoded frame."""
+class RegionConverter:
+    """FFmpeg's crop and BGR conversion of one region of each decoded frame of a given size
+    and pixel format."""
 
-    def __init__(self, stream: av.video.stream.VideoStream, region: Region) -> None:
+    def __init__(self, width: int, height: int, pixel_format: av.VideoFormat, time_base: Fraction,
+                 region: Region) -> None:
         # Chroma is subsampled 2x2 at most: an even corner and size keep the samples aligned.
         x0, y0 = region.x - region.x % 2, region.y - region.y % 2
-        width, height = region.x + region.width - x0, region.y + region.height - y0
-        width = min(width + width % 2, stream.codec_context.width - x0)
-        height = min(height + height % 2, stream.codec_context.height - y0)
+        crop_width, crop_height = region.x + region.width - x0, region.y + region.height - y0
+        crop_width = min(crop_width + crop_width % 2, width - x0)
+        crop_height = min(crop_height + crop_height % 2, height - y0)
         self.inner = Region(region.x - x0, region.y - y0, region.width, region.height)
         self._graph = av.filter.Graph()
-        chain = [self._graph.add_buffer(template=stream),
-                 self._graph.add("crop", f"{width}:{height}:{x0}:{y0}:exact=1"),
+        chain = [self._graph.add_buffer(width=width, height=height, format=pixel_format,
+                                        time_base=time_base),
+                 self._graph.add("crop", f"{crop_width}:{crop_height}:{x0}:{y0}:exact=1"),
                  self._graph.add("format", "bgr24"),
                  self._graph.add("buffersink")]
         for upstream, downstream in pairwise(chain):
             upstream.link_to(downstream)
         self._graph.configure()
+
+    @classmethod
+    def for_frame(cls, decoded: av.VideoFrame, region: Region) -> RegionConverter:
+        """A converter for frames like `decoded`."""
+        return cls(decoded.width, decoded.height, decoded.format,
+                   decoded.time_base or Fraction(1, 10**9), region)
 
     def convert(self, decoded: av.VideoFrame) -> tuple[np.ndarray, Region]:
         """The superset's BGR pixels (a view) and where the region lies in them."""

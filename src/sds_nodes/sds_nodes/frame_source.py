@@ -1,4 +1,12 @@
-"""ROS 2 node publishing the frames of a video file, live camera or image folder."""
+"""ROS 2 node publishing the frames of a video file, live camera or image folder, and a
+video file's own compressed packets.
+
+A file whose stream is H.264 or H.265 is read as packets: each is published as it is
+(foxglove_msgs/CompressedVideo on `video`, for the recorder), then decoded for the measuring
+chain (sensor_msgs/Image on `image`). Played in real time, a decoder that falls behind the
+camera sheds (packets up to the next keyframe are not decoded, counted and said on the
+console); the packets themselves are published whatever the CPU, so the recording holds every
+frame and `sds process --mcap` measures them all."""
 
 from __future__ import annotations
 
@@ -6,18 +14,28 @@ import queue
 import threading
 import time
 from collections import deque
+from collections.abc import Callable, Iterator
+from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
+from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.subscription import RCLError
 from rclpy.time import Time
 from sds_camera.camera_imu import CameraImuError, imu_samples, read_camera_imu
+from sds_camera.compressed_video import (
+    PacketDecoder,
+    VideoFilePackets,
+    VideoPacket,
+    packet_format,
+)
 from sds_camera.frame_source import (
     Frame,
     FrameSourceError,
     Region,
+    VideoFileSource,
     open_source,
     select,
 )
@@ -29,12 +47,13 @@ from sds_model.camera.rolling_shutter import RollingShutter, rolling_shutter
 from sds_model.errors import InputError
 from sds_ros.ack_credit import AckCredit
 from sds_ros.hosted_node import HostedNode
-from sds_ros.image_msg import image_to_msg
+from sds_ros.image_msg import image_to_msg, video_packet_msg
 from sds_ros.imu_msg import imu_message
 from sds_ros.qos import wait_for_acks
 from sensor_msgs.msg import Image, Imu
 from std_msgs.msg import Header
 
+from foxglove_msgs.msg import CompressedVideo
 from sds_msgs.msg import CameraModel, SyncEvent
 
 BEHIND_REPORT_S = 0.5
@@ -44,6 +63,12 @@ PARAMETER_CHOICES = {"channel": ("bgr", "red", "green", "blue", "gray"),
 """The values a string parameter may take: a literal, which the launcher reads without
 importing this module (`graph_file.check_plugins`), so that a wrong one fails before any
 node starts; `channel`'s are the frame source's `CHANNELS`."""
+DECODE_BACKLOG = 15
+"""Packets waiting for the decoder (half a second at 30 fps): played in real time, a packet
+that finds this many waiting is shed, with every packet up to the next keyframe."""
+VIDEO_HISTORY = 150
+"""The packet publisher's history (5 s at 30 fps): what a reliable reader that falls behind
+for a while (the recorder writing a chunk) still gets. Packets are small (a few 100 kB)."""
 IMU_HISTORY = 2000
 """Camera IMU messages kept for late subscribers (about 3 s of a GoPro's 600 per second)."""
 EXIT_SOURCE_ERROR = 2
@@ -51,8 +76,12 @@ PARAMETERS = {"source": "", "fps": 0.0, "roi": [0, 0, 0, 0], "channel": "bgr",
               "pacing": "realtime", "rate": 1.0, "stamp": "clock", "frame_id": "camera_optical",
               "camera_model": "", "wait_for_subscribers": 1, "ack_consumers": 1,
               "max_in_flight": 2, "led_roi": [0, 0, 0, 0], "repeat": 1, "linger_s": 3.0,
-              "follow": False, "stamp_offset_s": 0.0}
+              "follow": False, "stamp_offset_s": 0.0, "video": True,
+              "packet_ack_consumers": 0, "wait_for_packet_subscribers": 0}
 """The node's parameters and defaults (config/params/frame_source.yaml documents each)."""
+
+
+T = TypeVar("T", Frame, VideoPacket)
 
 
 class _EndOfStream:
@@ -68,13 +97,23 @@ class FrameSourceNode(HostedNode):
     def __init__(self, node_name: str = "frame_source", **node_kwargs) -> None:
         super().__init__(node_name, **node_kwargs)
         self.published = 0
+        self.packets_published = 0
+        self.shed = 0         # frames whose packets were published but not decoded
         self.behind_s = 0.0   # the furthest a file played in real time fell behind [s]
         values = self.declare_parameter_table(PARAMETERS)
         self._stop = threading.Event()
         self._queue: queue.Queue[Frame | _EndOfStream] = queue.Queue(maxsize=3)
+        self._decode_queue: queue.Queue[VideoPacket | _EndOfStream] = queue.Queue(
+            maxsize=DECODE_BACKLOG)
+        self._clock_started = threading.Event()
+        self._origin_ns, self._start_s = 0, 0.0
+        self._packets: VideoFilePackets | None = None
         try:
             p = self._checked(values)
             self._source = open_source(p["source"], fps=p["fps"])
+            if p["video"] and isinstance(self._source, VideoFileSource) \
+                    and packet_format(self._source.codec):
+                self._packets = VideoFilePackets(p["source"])
             self._region = self._region_from(p["roi"])
             self._camera = self._camera_from(p["camera_model"])
             self._shutter = rolling_shutter(read_yaml(p["camera_model"])) \
@@ -90,6 +129,13 @@ class FrameSourceNode(HostedNode):
         )
         reliable = QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE)
         self._image_pub = self.create_publisher(Image, "image", reliable)
+        if self._packets is not None:
+            self._video_pub = self.create_publisher(CompressedVideo, "video", QoSProfile(
+                depth=VIDEO_HISTORY, reliability=ReliabilityPolicy.RELIABLE))
+            self._packet_credit = AckCredit(p["packet_ack_consumers"],
+                                            self.resolve_topic_name("packet_ack"),
+                                            self.get_logger().warning)
+            self.create_subscription(Header, "packet_ack", self._packet_credit.on_ack, reliable)
         self._model_pub = self.create_publisher(CameraModel, "camera_model", latched)
         # Kept for late subscribers (the bridge, a recorder): the blink comes at the start.
         self._sync_pub = self.create_publisher(SyncEvent, "sync", QoSProfile(
@@ -119,12 +165,12 @@ class FrameSourceNode(HostedNode):
             self._leader_sub = self.create_subscription(Header, "leader_origin",
                                                         self._on_leader_origin, latched)
         self._publish_camera_model(p)
-        self._decode_thread = threading.Thread(target=self._read_frames, name="decode", daemon=True)
-        self._publish_thread = threading.Thread(
-            target=self._publish_frames, name="publish", daemon=True
-        )
-        self._decode_thread.start()
-        self._publish_thread.start()
+        readers: list[Callable[[], None]] = [self._read_frames] if self._packets is None \
+            else [self._read_packets, self._decode_packets]
+        self._threads = [threading.Thread(target=target, name=target.__name__, daemon=True)
+                         for target in (*readers, self._publish_frames)]
+        for thread in self._threads:
+            thread.start()
 
     def _camera_imu_samples(self, source: str) -> deque[tuple[float, str, np.ndarray]]:
         """The source's own IMU samples (GPMF track or sidecar CSV), each published once the
@@ -204,61 +250,151 @@ class FrameSourceNode(HostedNode):
         self.exit_code = EXIT_SOURCE_ERROR
         self.finished.set()
 
-    def _repeated_frames(self):
-        """The source's frames, played `repeat` times (0: forever) with increasing index and
-        time: one continuous stream (long runs from a short file)."""
-        repeat, played, index, offset_ns, period_ns = int(self._p["repeat"]), 0, 0, 0, 0
-        # The LED's corner lies outside the region: with an LED, whole frames are decoded.
-        selection = (None, "bgr") if self._led is not None else (self._region, self._p["channel"])
+    def _repeated(self, play: Callable[[], Iterator[T]], reopen: Callable[[], None]
+                  ) -> Iterator[T]:
+        """The items (frames or packets) of `play()`, played `repeat` times (0: forever) with
+        increasing index and time, `reopen()` between plays: one continuous stream (long runs
+        from a short file). The next play starts a frame period (the mean of this one's)
+        after the last frame."""
+        repeat, played, index, offset_ns = int(self._p["repeat"]), 0, 0, 0
         while True:
-            last_ns = 0
-            for frame in self._source.frames(*selection):
-                yield Frame(index, offset_ns + frame.time_ns, frame.image)
-                period_ns = frame.time_ns - last_ns if frame.time_ns > last_ns else period_ns
-                last_ns, index = frame.time_ns, index + 1
+            last_ns, count = 0, 0
+            for item in play():
+                yield replace(item, index=index, time_ns=offset_ns + item.time_ns) \
+                    if isinstance(item, Frame) else replace(
+                        item, index=index, time_ns=offset_ns + item.time_ns,
+                        due_ns=offset_ns + item.due_ns)
+                last_ns, count, index = max(last_ns, item.time_ns), count + 1, index + 1
             played += 1
             if (repeat and played >= repeat) or self._stop.is_set() or index == 0:
                 return
-            offset_ns += last_ns + period_ns
-            self._source.close()
-            self._source = open_source(self._p["source"], fps=self._p["fps"])
+            offset_ns += last_ns + (last_ns // (count - 1) if count > 1 else 0)
+            reopen()
+
+    def _selection(self) -> tuple[Region | None, str]:
+        """What is decoded: the LED's corner lies outside the region, so with an LED whole
+        frames (in BGR, cut to the region after the LED is read)."""
+        return (None, "bgr") if self._led is not None else (self._region, self._p["channel"])
+
+    def _reopen_source(self) -> None:
+        self._source.close()
+        self._source = open_source(self._p["source"], fps=self._p["fps"])
+
+    def _hand_on(self, frame: Frame) -> bool:
+        """Read the LED of a decoded frame, cut it to the region, queue it for publishing;
+        False once stopping."""
+        if self._led is None:
+            return self._put(self._queue, frame)
+        switch = self._led.update(frame.index, frame.image)
+        if switch is not None:
+            self._led_switches[frame.index] = switch.on
+        image = select(frame.image, self._region, self._p["channel"])
+        return self._put(self._queue, Frame(frame.index, frame.time_ns, image))
 
     def _read_frames(self) -> None:
-        """Decode thread: select region and channel, hand frames to the publish thread."""
+        """Decode thread (a source without packets): frames to the publish thread."""
         end = _EndOfStream()
         try:
-            for frame in self._repeated_frames():
-                if self._led is not None:
-                    switch = self._led.update(frame.index, frame.image)
-                    if switch is not None:
-                        self._led_switches[frame.index] = switch.on
-                    image = select(frame.image, self._region, self._p["channel"])
-                else:
-                    image = frame.image
-                if not self._put(Frame(frame.index, frame.time_ns, image)):
+            for frame in self._repeated(lambda: self._source.frames(*self._selection()),
+                                        self._reopen_source):
+                if not self._hand_on(frame):
                     return
         except FrameSourceError as error:
             end = _EndOfStream(error)
         finally:
             self._source.close()
-        self._put(end)
+        self._put(self._queue, end)
 
-    def _put(self, item: Frame | _EndOfStream) -> bool:
+    def _read_packets(self) -> None:
+        """Packet thread: pace and publish every packet, hand it to the decode thread; played
+        in real time, a packet the decoder has no room for is shed, with the packets up to
+        the next keyframe (decoding can only start again there)."""
+        assert self._packets is not None
+        p, end = self._p, _EndOfStream()
+        if not self._start_clock():
+            return
+        flow_control = p["pacing"] == "flood" and p["packet_ack_consumers"] > 0
+        shedding = False
+        try:
+            for packet in self._repeated(lambda: self._packets.packets(),  # type: ignore[union-attr]
+                                         lambda: None):
+                if p["pacing"] == "realtime":
+                    self._wait_until(packet.due_ns)
+                stamp_ns = self._origin_ns + packet.time_ns
+                if flow_control:
+                    self._packet_credit.wait(p["max_in_flight"] - 1)
+                    self._packet_credit.register(stamp_ns)
+                if not self._publish(self._video_pub, video_packet_msg(
+                        packet.data, Time(nanoseconds=stamp_ns).to_msg(), p["frame_id"],
+                        self._packets.format)):
+                    return
+                self.packets_published += 1
+                shedding = shedding and not packet.keyframe
+                if p["pacing"] == "flood":
+                    if not self._put(self._decode_queue, packet):
+                        return
+                    continue
+                try:
+                    if not shedding:
+                        self._decode_queue.put_nowait(packet)
+                        continue
+                except queue.Full:
+                    shedding = True
+                self.shed += 1
+                self.get_logger().warning(
+                    f"decoding falls behind the camera: {self.shed} frame(s) shed so far (not "
+                    "measured live; their packets are published, so the recording holds them)",
+                    throttle_duration_sec=10.0)
+        except FrameSourceError as error:
+            end = _EndOfStream(error)
+        finally:
+            self._packets.close()
+        self._put(self._decode_queue, end)
+
+    def _decode_packets(self) -> None:
+        """Decode thread (a source with packets): the packets' frames to the publish thread."""
+        decoder = PacketDecoder(self._packets.format, *self._selection())  # type: ignore[union-attr]
         while not self._stop.is_set():
             try:
-                self._queue.put(item, timeout=0.1)
+                item = self._decode_queue.get(timeout=0.1)
+            except queue.Empty:
+                continue
+            try:
+                frames = decoder.flush() if isinstance(item, _EndOfStream) \
+                    else decoder.decode(item)
+            except FrameSourceError as error:
+                self._put(self._queue, _EndOfStream(error))
+                return
+            for frame in frames:
+                if not self._hand_on(frame):
+                    return
+            if isinstance(item, _EndOfStream):
+                self._put(self._queue, item)
+                return
+
+    def _put(self, destination: queue.Queue, item: Any) -> bool:
+        """Queue an item, waiting for room; False once stopping."""
+        while not self._stop.is_set():
+            try:
+                destination.put(item, timeout=0.1)
                 return True
             except queue.Full:
                 continue
         return False
 
     def _wait_for_subscribers(self) -> bool:
-        wanted = self._p["wait_for_subscribers"]
+        """Wait for the image (and packet) subscribers and the camera model's readers; False
+        once stopping."""
+        wanted = [(self._image_pub, self._p["wait_for_subscribers"])]
+        if self._packets is not None:
+            wanted.append((self._video_pub, self._p["wait_for_packet_subscribers"]))
         last_log = 0.0
-        while self._image_pub.get_subscription_count() < wanted and not self._stop.is_set():
+        while any(publisher.get_subscription_count() < count for publisher, count in wanted) \
+                and not self._stop.is_set():
             if time.monotonic() - last_log > 5.0:
-                topic = self._image_pub.topic_name
-                self.get_logger().info(f"waiting for {wanted} subscriber(s) on {topic}")
+                self.get_logger().info("waiting for " + " and ".join(
+                    f"{count} subscriber(s) on {publisher.topic_name}"
+                    for publisher, count in wanted if count))
                 last_log = time.monotonic()
             time.sleep(0.02)
         # The model first, where its readers have matched (not a guarantee: a reader that
@@ -294,18 +430,48 @@ class FrameSourceNode(HostedNode):
         origin_ns = self.get_clock().now().nanoseconds if p["stamp"] == "clock" else 0
         return origin_ns + offset_ns, time.monotonic()
 
-    def _publish_frames(self) -> None:
-        """Publish thread: pace, stamp and publish frames until the stream ends."""
-        p = self._p
-        flow_control = p["pacing"] == "flood" and p["ack_consumers"] > 0
+    def _start_clock(self) -> bool:
+        """Wait for the subscribers (a file), fix the origin and publish it; False once
+        stopping. The thread that paces does it: the packet thread, else the publish thread."""
         if not self._source.is_live and not self._wait_for_subscribers():
-            return
+            return False
         origin = self._origin()
         if origin is None:
+            return False
+        self._origin_ns, self._start_s = origin
+        self._origin_pub.publish(Header(stamp=Time(nanoseconds=self._origin_ns).to_msg(),
+                                        frame_id=self._p["frame_id"]))
+        self._clock_started.set()
+        return True
+
+    def _wait_until(self, time_ns: int) -> None:
+        """Sleep until media time `time_ns` is due in real time (a file; a live source's
+        frames come when they come); say so when it is long past."""
+        if self._source.is_live:
             return
-        origin_ns, start = origin
-        self._origin_pub.publish(Header(stamp=Time(nanoseconds=origin_ns).to_msg(),
-                                        frame_id=p["frame_id"]))
+        delay = self._start_s + time_ns * 1e-9 / self._p["rate"] - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)
+        elif -delay > BEHIND_REPORT_S:
+            self.behind_s = max(self.behind_s, -delay)
+            self.get_logger().warning(
+                f"playing {-delay:.1f} s behind real time (reading and the graph need more CPU "
+                "than there is): frames come late, none is skipped",
+                throttle_duration_sec=10.0)
+
+    def _publish_frames(self) -> None:
+        """Publish thread: pace (without packets), stamp and publish frames until the stream
+        ends."""
+        p = self._p
+        flow_control = p["pacing"] == "flood" and p["ack_consumers"] > 0
+        if self._packets is None:
+            if not self._start_clock():
+                return
+        else:
+            while not self._clock_started.wait(0.1):
+                if self._stop.is_set():
+                    return
+        origin_ns = self._origin_ns
         while not self._stop.is_set():
             try:
                 item = self._queue.get(timeout=0.1)
@@ -314,22 +480,14 @@ class FrameSourceNode(HostedNode):
             if isinstance(item, _EndOfStream):
                 self._finish(item.error, flow_control)
                 return
-            if p["pacing"] == "realtime" and not self._source.is_live:
-                delay = start + item.time_ns * 1e-9 / p["rate"] - time.monotonic()
-                if delay > 0:
-                    time.sleep(delay)
-                elif -delay > BEHIND_REPORT_S:
-                    self.behind_s = max(self.behind_s, -delay)
-                    self.get_logger().warning(
-                        f"playing {-delay:.1f} s behind real time (decoding and the graph need "
-                        "more CPU than there is): frames come late, none is skipped",
-                        throttle_duration_sec=10.0)
+            if p["pacing"] == "realtime" and self._packets is None:
+                self._wait_until(item.time_ns)
             stamp_ns = origin_ns + item.time_ns
             if flow_control:
                 self._credit.wait(p["max_in_flight"] - 1)
                 self._credit.register(stamp_ns)
             stamp = Time(nanoseconds=stamp_ns).to_msg()
-            if not self._publish(image_to_msg(item.image, stamp, p["frame_id"])):
+            if not self._publish(self._image_pub, image_to_msg(item.image, stamp, p["frame_id"])):
                 return
             self.published += 1
             self._publish_imu_until(item.time_ns * 1e-9, origin_ns)
@@ -340,12 +498,12 @@ class FrameSourceNode(HostedNode):
                     header=Header(stamp=led_stamp, frame_id=p["frame_id"]), source=p["frame_id"],
                     kind=SyncEvent.KIND_LED_ON if led_on else SyncEvent.KIND_LED_OFF))
 
-    def _publish(self, msg: Image) -> bool:
+    def _publish(self, publisher: Publisher, msg: Image | CompressedVideo) -> bool:
         """Publish unless the node is stopping; False once the graph shuts down."""
         if self._stop.is_set():
             return False
         try:
-            self._image_pub.publish(msg)
+            publisher.publish(msg)
         except RCLError:
             if self.context.ok():
                 raise
@@ -355,30 +513,40 @@ class FrameSourceNode(HostedNode):
     def _finish(self, error: FrameSourceError | None, flow_control: bool) -> None:
         if flow_control:
             self._credit.wait(0)
+        if self._packets is not None:
+            self._packet_credit.wait(0)
         if self._stop.is_set():
             return
-        wait_for_acks(self._image_pub, 5.0, self._stop)
-        wait_for_acks(self._imu_pub, 5.0, self._stop)
+        for publisher in (self._image_pub, self._imu_pub,
+                          *([self._video_pub] if self._packets is not None else [])):
+            wait_for_acks(publisher, 5.0, self._stop)
         if error is not None:
             self._fail(f"{error}; the {self.published} frames published before stay valid")
             return
-        behind = f", up to {self.behind_s:.1f} s behind real time" if self.behind_s else ""
-        self.get_logger().info(f"end of {self._p['source']}: published {self.published} "
-                               f"frames{behind}")
+        self.get_logger().info(f"end of {self._p['source']}: {self._published_line()}")
         # The consumers' last outputs: the tracker publishes the frames its Hampel window held
         # back once the stream has been idle for 1 s, the chain behind it follows.
         self._stop.wait(self._p["linger_s"])
         self.finished.set()
 
+    def _published_line(self) -> str:
+        """What was published: packets, frames, frames shed, how far behind real time."""
+        behind = f", up to {self.behind_s:.1f} s behind real time" if self.behind_s else ""
+        if self._packets is None:
+            return f"published {self.published} frames{behind}"
+        shed = (f" ({self.shed} shed while decoding fell behind: in the recording, not "
+                "measured live)") if self.shed else ""
+        return (f"published {self.packets_published} video packets and {self.published} "
+                f"frames{shed}{behind}")
+
     def close(self) -> None:
-        """Stop the decode and publish threads and wait for them."""
+        """Stop the reading, decoding and publish threads and wait for them."""
         self._stop.set()
-        if hasattr(self, "_credit"):
-            self._credit.release()
-        for name in ("_decode_thread", "_publish_thread"):
-            thread = getattr(self, name, None)
-            if thread is not None:
-                thread.join(timeout=2.0)
+        for name in ("_credit", "_packet_credit"):
+            if hasattr(self, name):
+                getattr(self, name).release()
+        for thread in getattr(self, "_threads", []):
+            thread.join(timeout=2.0)
 
 
 def main(args: list[str] | None = None) -> None:

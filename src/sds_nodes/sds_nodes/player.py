@@ -1,22 +1,36 @@
-"""ROS 2 node: play an MCAP recording into the graph, with /clock, at a rate or as fast as acked."""
+"""ROS 2 node: play an MCAP recording into the graph, with /clock, at a rate or as fast as
+acked; a camera's recorded packets decoded into frames for the measuring chain."""
 
 from __future__ import annotations
 
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
 from rclpy.time import Time
 from rosgraph_msgs.msg import Clock
+from sds_camera.compressed_video import PacketDecoder, VideoPacket
+from sds_camera.frame_source import Frame, FrameSourceError, Region
 from sds_model.errors import InputError
-from sds_record.mcap_files import header_stamp_ns, read_messages, recorded_topics
+from sds_record.mcap_files import (
+    RecordedMessage,
+    decoded_messages,
+    header_stamp_ns,
+    read_messages,
+    recorded_topics,
+)
 from sds_ros.ack_credit import AckCredit
 from sds_ros.hosted_node import HostedNode
+from sds_ros.image_msg import image_to_msg
 from sds_ros.qos import stream_qos, wait_for_acks
+from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 
+from foxglove_msgs.msg import CompressedVideo
 from sds_nodes.recorder import message_class
 
 EXIT_INPUT_ERROR = 2
@@ -25,6 +39,19 @@ PARAMETER_CHOICES = {"pacing": ("recorded", "flood")}
 DEPTH = 100
 """Messages kept per played topic, for readers that lag (3.3 s at 30 fps)."""
 IMAGE_TYPE = "sensor_msgs/msg/Image"
+VIDEO_TYPE = "foxglove_msgs/msg/CompressedVideo"
+MODEL_TYPE = "sds_msgs/msg/CameraModel"
+
+
+@dataclass
+class _Decoding:
+    """A recorded packet topic played as frames: where they go, how they are cut."""
+
+    target: str
+    decoder: PacketDecoder | None = None   # made at the first packet, from its format
+    region: Region | None = None
+    channel: str = "bgr"
+    frame_id: str = ""
 
 
 def parse_remaps(items: list[str]) -> dict[str, str]:
@@ -40,7 +67,8 @@ def parse_remaps(items: list[str]) -> dict[str, str]:
 
 PARAMETERS = {"input": "", "topics": [""], "remap": [""], "rate": 1.0, "pacing": "recorded",
               "start_s": 0.0, "stop_s": 0.0, "clock": True, "wait_for_subscribers": 1,
-              "ack_topic_for": "", "ack_consumers": 1, "max_in_flight": 2, "linger_s": 2.0}
+              "ack_topic_for": "", "ack_consumers": 1, "max_in_flight": 2, "linger_s": 2.0,
+              "decode": [""]}
 """The node's parameters and defaults (config/params/player.yaml documents each)."""
 
 
@@ -49,21 +77,27 @@ class PlayerNode(HostedNode):
 
     `pacing: recorded` keeps the recorded intervals divided by `rate`; `pacing: flood` goes as
     fast as the consumers of `ack_topic_for` acknowledge (the frame source's frame_ack
-    protocol), so nothing is dropped. /clock follows the recording's log time.
+    protocol), so nothing is dropped. /clock follows the recording's log time. A `decode`
+    pair FROM:=TO plays the camera packets recorded on FROM also as frames on TO (decoded, cut
+    to the region and channel of the recording's camera model of their frame_id), unless the
+    recording has frames on TO itself.
     """
 
     def __init__(self, node_name: str = "player", **node_kwargs) -> None:
         super().__init__(node_name, **node_kwargs)
         self.published = 0
+        self.decoded = 0     # frames decoded from recorded packets and published
         self._p = self.declare_parameter_table(PARAMETERS)
         self._stop = threading.Event()
         self._credit = AckCredit(self._p["ack_consumers"], self.resolve_topic_name("frame_ack"),
                                  self.get_logger().warning)
         self._outputs: dict[str, Publisher] = {}
+        self._decodings: dict[str, _Decoding] = {}
         try:
             self._remaps = parse_remaps(self._p["remap"])
             self._check_parameters()
             self._create_publishers()
+            self._create_decodings()
         except (ValueError, OSError, ImportError, AttributeError) as error:
             self._fail(str(error))
             return
@@ -102,6 +136,38 @@ class PlayerNode(HostedNode):
                 if type_name == IMAGE_TYPE else stream_qos(DEPTH)
             self._outputs[topic] = self.create_publisher(
                 message_class(type_name), self._remaps.get(topic, topic), qos)
+
+    def _create_decodings(self) -> None:
+        """An Image publisher for each `decode` pair whose packets are in the recording and
+        whose frames are not."""
+        recorded = recorded_topics(self._p["input"])
+        for source, target in parse_remaps(self._p["decode"]).items():
+            if recorded.get(source, ("",))[0] != VIDEO_TYPE or target in recorded:
+                continue
+            self._decodings[source] = _Decoding(target)
+            self._outputs[target] = self.create_publisher(
+                Image, self._remaps.get(target, target),
+                QoSProfile(depth=DEPTH, reliability=ReliabilityPolicy.RELIABLE))
+            self.get_logger().info(f"the packets of {source} are decoded and played as frames "
+                                   f"on {target}")
+        if self._decodings:
+            self._models = {msg.header.frame_id: msg for _, msg in decoded_messages(
+                self._p["input"], types=[MODEL_TYPE])}
+
+    def _decoded_frames(self, message: RecordedMessage) -> list[Frame]:
+        """The frames a recorded packet completes, stamped [ns] as their packets."""
+        decoding = self._decodings[message.topic]
+        packet = deserialize_message(message.data, CompressedVideo)
+        if decoding.decoder is None:
+            decoding.frame_id = packet.frame_id
+            model = self._models.get(packet.frame_id)
+            if model is not None and model.roi.width > 0:
+                decoding.region = Region(int(model.roi.x_offset), int(model.roi.y_offset),
+                                         int(model.roi.width), int(model.roi.height))
+                decoding.channel = model.channel or "bgr"
+            decoding.decoder = PacketDecoder(packet.format, decoding.region, decoding.channel)
+        return decoding.decoder.decode(VideoPacket(0, header_stamp_ns(message.data), False,
+                                                   bytes(packet.data)))
 
     def _wait_for_subscribers(self) -> bool:
         """Wait until every played topic has `wait_for_subscribers` subscribers."""
@@ -147,16 +213,34 @@ class PlayerNode(HostedNode):
                         nanoseconds=message.log_time_ns).to_msg()))
                 publisher.publish(message.data)
                 self.published += 1
-        except (OSError, ValueError, ImportError, AttributeError) as error:
+                if message.topic in self._decodings:
+                    self._play_frames(message.topic, self._decoded_frames(message), flow_topic)
+            for topic, decoding in self._decodings.items():
+                if decoding.decoder is not None:
+                    self._play_frames(topic, decoding.decoder.flush(), flow_topic)
+        except (OSError, ValueError, ImportError, AttributeError, FrameSourceError) as error:
             self._fail(f"cannot play {p['input']}: {error}")
             return
         if flow_topic:
             self._credit.drain(timeout_s=10.0)
         for publisher in self._outputs.values():
             wait_for_acks(publisher, 5.0, self._stop)
-        self.get_logger().info(f"played {self.published} messages from {p['input']}")
+        decoded = f" and {self.decoded} frames decoded from its packets" if self._decodings else ""
+        self.get_logger().info(f"played {self.published} messages from {p['input']}{decoded}")
         self._stop.wait(p["linger_s"])   # the consumers' last outputs (e.g. the Hampel window)
         self.finished.set()
+
+    def _play_frames(self, source: str, frames: list[Frame], flow_topic: str) -> None:
+        """Publish decoded frames (their time: the stamp [ns]) on the decoding's target."""
+        decoding = self._decodings[source]
+        for frame in frames:
+            if decoding.target == flow_topic:
+                self._credit.wait(self._p["max_in_flight"] - 1)
+                self._credit.register(frame.time_ns)
+            self._outputs[decoding.target].publish(image_to_msg(
+                frame.image, Time(nanoseconds=frame.time_ns).to_msg(),
+                decoding.frame_id))
+            self.decoded += 1
 
     def close(self) -> None:
         """Stop publishing (the graph is shutting down) and wait for the publish thread."""

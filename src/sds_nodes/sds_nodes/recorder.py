@@ -17,7 +17,8 @@ from std_msgs.msg import Header
 
 EXIT_CONFIG_ERROR = 2
 SKIPPED_TOPICS = ("/rosout", "/parameter_events")
-IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
+IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage",
+               "foxglove_msgs/msg/CompressedVideo")
 SMALL_MESSAGE_DEPTH = 5000
 """Queue depth of the topics that are not images (small messages, high rates)."""
 
@@ -30,15 +31,16 @@ def message_class(type_name: str) -> type:
 
 PARAMETERS = {"output": "", "topics": [""], "exclude": [""], "compression": "zstd",
               "flush_period_s": 0.5, "discovery_period_s": 0.5, "queue_depth": 100,
-              "ack_for": [""], "overwrite": False}
+              "ack_for": [""], "packet_ack_for": [""], "overwrite": False}
 """The node's parameters and defaults (config/params/recorder.yaml documents each)."""
 
 
 class RecorderNode(HostedNode):
     """Subscribe (reliably, serialized) to every topic it discovers, or to `topics`; write MCAP.
 
-    Messages of the `ack_for` topics are acknowledged on frame_ack once written (the frame
-    source's flood pacing then waits for the recorder too, so no frame is dropped).
+    Messages of the `ack_for` topics are acknowledged on frame_ack once written, those of the
+    `packet_ack_for` topics (the camera's packets) on packet_ack (the frame source's flood
+    pacing then waits for the recorder too, so no frame or packet is dropped).
     Latched topics (all publishers transient-local, e.g. the camera model) are subscribed
     transient-local so their last message is recorded even if it was sent before the recorder
     started. The log time is the recorder's ROS clock at reception (simulated time with
@@ -53,6 +55,7 @@ class RecorderNode(HostedNode):
         self._excluded = {t for t in p["exclude"] if t}
         self._depth = int(p["queue_depth"])
         self._ack_for = {t for t in p["ack_for"] if t}
+        self._packet_ack_for = {t for t in p["packet_ack_for"] if t}
         try:
             self._recorder = McapRecorder(output, p["compression"],
                                           flush_period_s=p["flush_period_s"],
@@ -64,8 +67,9 @@ class RecorderNode(HostedNode):
             return
         self._recorded: dict[str, object] = {}
         self._gaps: dict[str, PublisherGaps] = {}
-        self._ack_pub = self.create_publisher(
-            Header, "frame_ack", QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        acks = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        self._ack_pubs = {"frame_ack": self.create_publisher(Header, "frame_ack", acks),
+                          "packet_ack": self.create_publisher(Header, "packet_ack", acks)}
         self._failed: set[str] = set()
         self.output = Path(output)
         self.get_logger().info(f"recording to {self.output}")
@@ -116,7 +120,8 @@ class RecorderNode(HostedNode):
             durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
 
     def _writer_for(self, topic: str):
-        acks = topic in self._ack_for
+        acks = self._ack_pubs["frame_ack"] if topic in self._ack_for else \
+            self._ack_pubs["packet_ack"] if topic in self._packet_ack_for else None
         gaps = self._gaps.setdefault(topic, PublisherGaps())
 
         def write(data: bytes, info: MessageInfo) -> None:
@@ -127,9 +132,8 @@ class RecorderNode(HostedNode):
                     "(it fell behind their publisher): they are not in the recording",
                     throttle_duration_sec=5.0)
             self._recorder.write(topic, data, now_ns, int(info["source_timestamp"]))
-            if acks:
-                stamp = Time(nanoseconds=header_stamp_ns(data)).to_msg()
-                self._ack_pub.publish(Header(stamp=stamp))
+            if acks is not None:
+                acks.publish(Header(stamp=Time(nanoseconds=header_stamp_ns(data)).to_msg()))
         return write
 
     def close(self) -> None:

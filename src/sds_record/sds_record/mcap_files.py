@@ -64,7 +64,8 @@ class RecordedMessage:
 
 
 def header_stamp_ns(cdr: bytes) -> int:
-    """Stamp [ns] of a serialized message whose first field is std_msgs/Header.
+    """Stamp [ns] of a serialized message whose first field is std_msgs/Header (or a
+    builtin_interfaces/Time: foxglove_msgs/CompressedVideo's timestamp).
 
     CDR: a 4-byte encapsulation (byte 1 odd = little-endian), then int32 sec, uint32 nanosec.
     """

@@ -1,4 +1,5 @@
-"""Conversion between numpy frames and sensor_msgs/Image without per-element copies."""
+"""Conversion between numpy frames and sensor_msgs/Image, and of a video's packets to
+foxglove_msgs/CompressedVideo, without per-element copies."""
 
 from __future__ import annotations
 
@@ -7,6 +8,8 @@ import array
 import numpy as np
 from builtin_interfaces.msg import Time
 from sensor_msgs.msg import Image
+
+from foxglove_msgs.msg import CompressedVideo
 
 _ENCODING_CHANNELS = {"mono8": 1, "bgr8": 3, "rgb8": 3}
 
@@ -52,3 +55,16 @@ def msg_to_image(msg: Image) -> np.ndarray:
     if channels == 1:
         return rows
     return rows.reshape(msg.height, msg.width, channels)
+
+
+def video_packet_msg(data: bytes, stamp: Time, frame_id: str, packet_format: str
+                     ) -> CompressedVideo:
+    """CompressedVideo message holding one copy of a packet's bytes."""
+    msg = CompressedVideo()
+    msg.timestamp = stamp
+    msg.frame_id = frame_id
+    msg.format = packet_format
+    packet = array.array("B")
+    packet.frombytes(data)
+    msg.data = packet
+    return msg

@@ -1,4 +1,8 @@
-"""A recording (MCAP) into a Rerun .rrd file: the same scene the viewer node shows live."""
+"""A recording (MCAP) into a Rerun .rrd file: the same scene the viewer node shows live.
+
+The camera's recorded packets (foxglove_msgs/CompressedVideo) are decoded here and shown as
+the frames are, the region downscaled under the spots: Rerun's VideoStream cannot play a
+stream with B-frames (rerun-io/rerun#10090), which GoPro's and x264's have."""
 
 from __future__ import annotations
 
@@ -7,6 +11,8 @@ from pathlib import Path
 
 import rerun as rr
 from mcap.exceptions import McapError
+from sds_camera.compressed_video import PacketDecoder, VideoPacket
+from sds_camera.frame_source import Frame, Region
 from sds_model.errors import InputError
 from sds_model.rig import Rig
 from sds_model.staging import staged_file
@@ -39,9 +45,19 @@ def mcap_to_rrd(recording: str | Path, output: str | Path, rig: Rig | None = Non
         scene = RerunScene(stream, rig, image_scale)
         shown = skipped = 0
         images: dict[str, int] = {}   # per camera (frame_id): each is thinned on its own
+        decoders: dict[str, PacketDecoder] = {}
         try:
             for recorded, msg in decoded_messages(recording):
                 type_name = recorded.type_name
+                if type_name == VIDEO_TYPE:
+                    frames = _decoded(decoders, scene, msg)
+                    for frame in frames:
+                        count = images[msg.frame_id] = images.get(msg.frame_id, 0) + 1
+                        if not (count - 1) % image_every:
+                            scene.set_time(frame.time_ns * 1e-9)
+                            scene.log_image(frame.image, tuple(scene.roi_offset.astype(int)))
+                    shown += 1
+                    continue
                 if type_name == "sensor_msgs/msg/Image":
                     count = images[msg.header.frame_id] = images.get(msg.header.frame_id, 0) + 1
                     if (count - 1) % image_every:
@@ -50,6 +66,10 @@ def mcap_to_rrd(recording: str | Path, output: str | Path, rig: Rig | None = Non
                     shown += 1
                 else:
                     skipped += 1
+            for decoder in decoders.values():
+                for frame in decoder.flush():
+                    scene.set_time(frame.time_ns * 1e-9)
+                    scene.log_image(frame.image, tuple(scene.roi_offset.astype(int)))
         except McapError as error:
             raise InputError(f"{recording}: {error}") from None
         else:
@@ -59,3 +79,18 @@ def mcap_to_rrd(recording: str | Path, output: str | Path, rig: Rig | None = Non
             stream.flush()
             stream.disconnect()
     return Conversion(shown, skipped)
+
+
+VIDEO_TYPE = "foxglove_msgs/msg/CompressedVideo"
+
+
+def _decoded(decoders: dict[str, PacketDecoder], scene: RerunScene, msg) -> list[Frame]:
+    """The frames (time: stamp [ns]) a recorded packet completes; each camera's decoder is
+    made at its first packet, cut to the camera model's region known then (else whole)."""
+    if msg.frame_id not in decoders:
+        width, height = scene.roi_size
+        region = Region(int(scene.roi_offset[0]), int(scene.roi_offset[1]), width, height) \
+            if width > 0 else None
+        decoders[msg.frame_id] = PacketDecoder(msg.format, region)
+    stamp_ns = int(msg.timestamp.sec) * 10**9 + int(msg.timestamp.nanosec)
+    return decoders[msg.frame_id].decode(VideoPacket(0, stamp_ns, False, msg.data.tobytes()))

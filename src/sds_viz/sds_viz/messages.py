@@ -18,6 +18,7 @@ def log_message(scene: RerunScene, type_name: str, msg) -> bool:
         if msg.header.frame_id == LATERAL_FRAME:   # the side camera's: no region, no beams
             return True
         scene.roi_offset = np.array([msg.roi.x_offset, msg.roi.y_offset], dtype=float)
+        scene.roi_size = (int(msg.roi.width), int(msg.roi.height))
         scene.log_beam_paths()
         return True
     handler = HANDLERS.get(type_name)

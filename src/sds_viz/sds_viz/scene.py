@@ -40,6 +40,7 @@ class RerunScene:
         self.rig = rig
         self.image_scale = image_scale
         self.roi_offset = np.zeros(2)
+        self.roi_size = (0, 0)   # the region's width and height [px]; (0, 0): not known
         self._ring = {d.laser_id: d.ring for d in rig.diodes} if rig else {}
         if rig is not None:
             self._log_rig(rig)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import csv
 import sys
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
@@ -24,6 +25,7 @@ from sds_model.paths import CONFIG
 from sds_model.rig import Rig, load_rig
 from sds_model.staging import staged_folder
 from sds_recon.results import ResultsWriter, load_results, refuse_results
+from sds_record.mcap_files import read_messages
 from sds_sim.scenario import load_scenario
 from sds_sim.simulate import simulate
 from sds_sloshing.analysis import AnalysisOptions
@@ -42,6 +44,10 @@ from sds_workflows.lateral import (
 )
 from sds_workflows.pipeline import damping_caveat
 from sds_workflows.run_tables import RunTables, finish_analysis
+
+VIDEO_TOPIC = "/camera/video"
+"""The camera's packets in a recording of the drop graph (config/graphs/drop.yaml)."""
+SPOTS_TOPIC = "/tracker/spots"
 
 DEMO_SCENARIO = CONFIG / "scenarios" / "drop_4p7s.yaml"
 LED_ROI_HALF_PX = 12
@@ -205,7 +211,8 @@ def print_summary(out: Path, scenario, simulation, outputs: ChainOutputs, result
     print(f"  Rerun              {outputs.rerun}   (open: rerun {outputs.rerun.name})")
     print(f"  report             {out / 'analysis' / 'report.html'}")
     print(f"  result files       {out / 'results'}/ (spots, points, line, fits, imu, tof .csv)")
-    print(f"  frames processed   {frames} of {scenario.frame_count}")
+    print(f"  frames processed   {frames} of {scenario.frame_count}; "
+          f"{live_coverage(outputs.recording)}")
     print(f"  heights            RMSE {np.sqrt(np.mean(errors**2)):.3f} mm against the truth "
           f"({len(errors)} points)")
     flags = {name: int(np.sum(spots["flags"] & bit != 0)) for name, bit in (
@@ -275,7 +282,8 @@ def run_live(source: str, rig_file: Path, out: Path, port: str | None,
         gravity_m_s2=gravity, damping_caveat=damping_caveat(Path(source)) if is_file else ""),
         side=check)
     print(f"\nSDS run: {source}\n  recording {outputs.recording}\n  Rerun {outputs.rerun}\n"
-          f"  report {out / 'analysis' / 'report.html'}\n  results {out / 'results'}/")
+          f"  report {out / 'analysis' / 'report.html'}\n  results {out / 'results'}/\n"
+          f"  frames {live_coverage(outputs.recording)}")
     for line in summary_lines(analysed.results):
         print(f"    {line}")
     missing = []
@@ -292,6 +300,21 @@ def run_live(source: str, rig_file: Path, out: Path, port: str | None,
     for line in missing:
         print(f"sds run: INCOMPLETE: {line}", file=sys.stderr)
     return 2 if missing else 0
+
+
+def live_coverage(recording: Path) -> str:
+    """How many of the frames the camera sent were measured live and whether the recording
+    holds them all (its packets): one line for a run's summary."""
+    counts = Counter(message.topic for message in read_messages(
+        recording, (VIDEO_TOPIC, SPOTS_TOPIC)))
+    measured, sent = counts[SPOTS_TOPIC], counts[VIDEO_TOPIC]
+    if not sent:
+        return f"{measured} measured live (the recording holds the frames it measured)"
+    if measured >= sent:
+        return f"all {sent} measured live; the recording holds every one (its packets)"
+    return (f"{measured} of {sent} measured live (the others were shed: the machine could not "
+            f"decode and measure them in time); the recording holds all {sent}: "
+            f"`sds process --mcap {recording} --rig RIG --out DIR` measures them all")
 
 
 def _video_frames(video: Path, rig: Rig) -> int:

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from sds_camera.compressed_video import PacketDecoder, VideoPacket
 from sds_camera.frame_source import (
     FrameSource,
     FrameSourceError,
@@ -108,13 +109,69 @@ def _red_frames(source: FrameSource, region: Region) -> Iterator[RedFrame]:
         source.close()
 
 
+VIDEO_TYPE = "foxglove_msgs/msg/CompressedVideo"
+IMAGE_TYPE = "sensor_msgs/msg/Image"
+
+
 def mcap_frames(path: Path) -> Iterator[RedFrame]:
-    """A recording's camera frames (sensor_msgs/Image) and the region its camera model gives;
-    a recording without frames is refused here, before the first frame is asked for."""
+    """A recording's camera frames and the region its camera model gives: decoded from the
+    camera's packets (foxglove_msgs/CompressedVideo) when it has them, all that the camera sent
+    (also those the live chain shed), else its frames (sensor_msgs/Image); a recording with
+    neither is refused here, before the first frame is asked for."""
     types = {type_name for type_name, _ in recorded_topics(path).values()}
-    if "sensor_msgs/msg/Image" not in types:
-        raise RecordingError(f"{path}: the recording has no camera frames (sensor_msgs/Image)")
+    if VIDEO_TYPE in types:
+        return read_ahead(_decoded_packets(path))
+    if IMAGE_TYPE not in types:
+        raise RecordingError(f"{path}: the recording has no camera frames (sensor_msgs/Image) "
+                             "or packets (foxglove_msgs/CompressedVideo)")
     return read_ahead(_recorded_frames(path))
+
+
+def _top_camera_messages(path: Path, frame_type: str) -> Iterator[tuple[Any, Any]]:
+    """The top camera's models and messages of `frame_type` in recorded order, as (model, None)
+    or (None, message) (the side camera's, frame_id LATERAL_FRAME, left out)."""
+    for recorded, msg in decoded_messages(path, types=("sds_msgs/msg/CameraModel", frame_type)):
+        frame_id = msg.frame_id if recorded.type_name == VIDEO_TYPE else msg.header.frame_id
+        if frame_id == LATERAL_FRAME:
+            continue
+        yield (msg, None) if recorded.type_name == "sds_msgs/msg/CameraModel" else (None, msg)
+
+
+def _decoded_packets(path: Path) -> Iterator[RedFrame]:
+    """The frames of the recorded packets, in presentation order, the region of the camera
+    model that precedes them in red (packets before any model wait for it, at most
+    FRAMES_BEFORE_MODEL of them)."""
+    decoder: PacketDecoder | None = None
+    model: Any = None
+    waiting: list[Any] = []
+    first: int | None = None
+    for new_model, packet in _top_camera_messages(path, VIDEO_TYPE):
+        model = new_model if new_model is not None else model
+        if packet is not None:
+            waiting.append(packet)
+            if model is None and len(waiting) > FRAMES_BEFORE_MODEL:
+                raise RecordingError(f"{path}: {len(waiting)} camera packets before any camera "
+                                     "model (the region is unknown)")
+        if model is None:
+            continue
+        region = Region(int(model.roi.x_offset), int(model.roi.y_offset),
+                        int(model.roi.width), int(model.roi.height))
+        for packet in waiting:
+            if decoder is None:
+                decoder = PacketDecoder(packet.format, region, "red")
+            stamp = int(packet.timestamp.sec) * 10**9 + int(packet.timestamp.nanosec)
+            for frame in decoder.decode(VideoPacket(0, stamp, False, packet.data.tobytes())):
+                first = frame.time_ns if first is None else first
+                yield RedFrame(frame.index, (frame.time_ns - first) * 1e-9, frame.image,
+                               (region.x, region.y))
+        waiting.clear()
+    if waiting:
+        raise RecordingError(f"{path}: camera packets but no camera model (the region is "
+                             "unknown)")
+    for frame in decoder.flush() if decoder is not None else []:
+        first = frame.time_ns if first is None else first
+        yield RedFrame(frame.index, (frame.time_ns - first) * 1e-9, frame.image,
+                       (int(model.roi.x_offset), int(model.roi.y_offset)))
 
 
 def _recorded_frames(path: Path) -> Iterator[RedFrame]:
@@ -125,13 +182,10 @@ def _recorded_frames(path: Path) -> Iterator[RedFrame]:
     waiting: list[tuple[int, np.ndarray]] = []   # (stamp [ns], red image) before any model
     first: int | None = None
     index = 0
-    for recorded, msg in decoded_messages(path):
-        name = recorded.type_name
-        if getattr(msg, "header", None) is not None and msg.header.frame_id == LATERAL_FRAME:
-            continue    # the side camera's frames and model are not the top camera's
-        if name == "sds_msgs/msg/CameraModel":
-            offset = (int(msg.roi.x_offset), int(msg.roi.y_offset))
-        elif name == "sensor_msgs/msg/Image":
+    for model, msg in _top_camera_messages(path, IMAGE_TYPE):
+        if model is not None:
+            offset = (int(model.roi.x_offset), int(model.roi.y_offset))
+        else:
             image = msg_to_image(msg)
             waiting.append((stamp_ns(msg), image[..., 2] if image.ndim == 3 else image))
             if offset is None and len(waiting) > FRAMES_BEFORE_MODEL:
@@ -146,8 +200,6 @@ def _recorded_frames(path: Path) -> Iterator[RedFrame]:
     if waiting:
         raise RecordingError(f"{path}: camera frames but no camera model (the region offset "
                              "is unknown)")
-
-
 
 
 @dataclass(frozen=True)

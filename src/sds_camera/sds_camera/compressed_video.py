@@ -1,0 +1,163 @@
+"""A video's compressed stream: its packets as the camera wrote them, and their decoding.
+
+Pure module: PyAV (FFmpeg) and numpy only. The packets of an H.264 or H.265 file are given in
+Annex B (start codes; the parameter sets before each keyframe, by FFmpeg's *_mp4toannexb
+filters), as Foxglove's CompressedVideo carries them and as a decoder takes them without the
+container; `PacketDecoder` makes of them the frames `VideoFileSource.frames` gives, bit for
+bit. Times are nanoseconds since the stream's first frame (presentation times: a stream with
+B-frames gives its packets in decode order, their times out of order).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from fractions import Fraction
+from pathlib import Path
+from typing import Any
+
+import av
+import av.bitstream
+
+from sds_camera.frame_source import (
+    CHANNELS,
+    Frame,
+    FrameSourceError,
+    Region,
+    RegionConverter,
+    select,
+)
+
+PACKET_FORMATS = {"h264": ("h264", "h264_mp4toannexb"), "hevc": ("h265", "hevc_mp4toannexb")}
+"""FFmpeg's codec name → the packets' format (CompressedVideo.format) and the bitstream filter
+that gives them in Annex B."""
+DECODERS = {"h264": "h264", "h265": "hevc"}
+"""A packet format → FFmpeg's decoder."""
+NANOSECOND = Fraction(1, 10**9)
+
+
+@dataclass(frozen=True)
+class VideoPacket:
+    """One packet, in decode order: its index in the stream, the presentation time of the frame
+    it holds since the stream's first frame [ns], whether it is a keyframe (decoding may start
+    there), its bytes, and when it is due [ns] on the same clock: its decode time, which grows
+    packet by packet (the presentation times of B-frames do not), moved so that the first
+    packet is due at the first frame's time."""
+
+    index: int
+    time_ns: int
+    keyframe: bool
+    data: bytes
+    due_ns: int = 0
+
+
+def packet_format(codec: str) -> str | None:
+    """The packets' format of a stream of FFmpeg's codec `codec` ("h264" → "h264", "hevc" →
+    "h265"); None when its packets are not carried (another codec: the frames are)."""
+    known = PACKET_FORMATS.get(codec)
+    return known[0] if known else None
+
+
+class VideoFilePackets:
+    """The packets of a video file's first video stream, read without decoding."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        try:
+            self._container = av.open(str(self.path))
+        except (av.FFmpegError, OSError) as error:
+            raise FrameSourceError(f"cannot open video {self.path} ({error})") from None
+        if not self._container.streams.video:
+            self._container.close()
+            raise FrameSourceError(f"video {self.path} has no readable video stream")
+        self._stream = self._container.streams.video[0]
+        codec = self._stream.codec_context.name
+        if codec not in PACKET_FORMATS:
+            self._container.close()
+            raise FrameSourceError(f"video {self.path} is {codec}: only the packets of "
+                                   f"{', '.join(PACKET_FORMATS)} are carried")
+        self.format, self._filter_name = PACKET_FORMATS[codec]
+        self._played = False
+
+    def packets(self) -> Iterator[VideoPacket]:
+        """Every packet in file (decode) order, in Annex B, from the start of the file (a
+        second call plays it again); FrameSourceError if the file is corrupt or has no
+        packet."""
+        if self._played:
+            self._container.seek(0, stream=self._stream)
+        self._played = True
+        annex_b = av.bitstream.BitStreamFilterContext(self._filter_name, self._stream)
+        start, time_base = self._stream.start_time, self._stream.time_base
+        first_decode: int | None = None
+        index = 0
+        try:
+            for demuxed in self._container.demux(self._stream):
+                for packet in annex_b.filter(demuxed if demuxed.size else None):
+                    if packet.pts is None or time_base is None:
+                        raise FrameSourceError(f"video {self.path}: packet {index} has no "
+                                               "presentation time")
+                    start = packet.pts if start is None else start
+                    decode = packet.dts if packet.dts is not None else packet.pts
+                    first_decode = decode if first_decode is None else first_decode
+                    yield VideoPacket(index, round((packet.pts - start) * time_base * 10**9),
+                                      packet.is_keyframe, bytes(packet),
+                                      round((decode - first_decode) * time_base * 10**9))
+                    index += 1
+        except av.FFmpegError as error:
+            raise FrameSourceError(f"video {self.path} failed after {index} packets "
+                                   f"(corrupt: {error.strerror})") from None
+        if index == 0:
+            raise FrameSourceError(f"video {self.path} has no video packet")
+
+    def close(self) -> None:
+        """Release the file."""
+        self._container.close()
+
+
+class PacketDecoder:
+    """Frames from a stream of packets of one format: each frame the region (None: whole) in
+    the channel, its time the presentation time its packet carried, its index its place in
+    presentation order. The decoder holds a few packets back (B-frames, frame threads):
+    `flush` gives the frames it still holds at the end."""
+
+    def __init__(self, packet_format: str, region: Region | None = None,
+                 channel: str = "bgr") -> None:
+        if packet_format not in DECODERS:
+            raise FrameSourceError(f"packet format {packet_format!r} is not one of "
+                                   f"{', '.join(DECODERS)}")
+        if channel not in CHANNELS:
+            raise FrameSourceError(f"channel {channel!r} is not one of {', '.join(CHANNELS)}")
+        codec = av.CodecContext.create(DECODERS[packet_format], "r")
+        assert isinstance(codec, av.VideoCodecContext)
+        self._codec = codec
+        self._codec.thread_type = "AUTO"      # frame and slice threads, as many as cores
+        self._region, self._channel = region, channel
+        self._converter: RegionConverter | None = None
+        self.frames_out = 0
+
+    def decode(self, packet: VideoPacket) -> list[Frame]:
+        """The frames that this packet completes (none, one, or more after a reordering)."""
+        encoded = av.Packet(packet.data)
+        encoded.pts, encoded.time_base = packet.time_ns, NANOSECOND
+        return self._frames(encoded)
+
+    def flush(self) -> list[Frame]:
+        """The frames the decoder still holds; the decoder is done afterwards."""
+        return self._frames(None)
+
+    def _frames(self, encoded: av.Packet[Any] | None) -> list[Frame]:
+        try:
+            decoded = self._codec.decode(encoded)
+        except av.FFmpegError as error:
+            raise FrameSourceError(f"a packet does not decode ({error.strerror})") from None
+        frames = []
+        for picture in decoded:
+            if self._converter is None:
+                region = self._region or Region.full(picture.width, picture.height)
+                region.check_inside(picture.width, picture.height)
+                self._converter = RegionConverter.for_frame(picture, region)
+            pixels, inner = self._converter.convert(picture)
+            time_ns = int(picture.pts) if picture.pts is not None else 0
+            frames.append(Frame(self.frames_out, time_ns, select(pixels, inner, self._channel)))
+            self.frames_out += 1
+        return frames

@@ -1,0 +1,173 @@
+"""The camera's compressed stream: packets read from a file, recorded, and decoded again.
+
+The references are FFmpeg's own reading of the file (PyAV's container decode, no packet of
+ours) and an independent MCAP reader (mcap_ros2): the packets' frames must be the file's
+frames bit for bit, and what `sds process --mcap` reads from a recording of them the same
+frames `sds process --video` reads from the file.
+"""
+
+from __future__ import annotations
+
+from contextlib import closing
+from fractions import Fraction
+from pathlib import Path
+
+import av
+import numpy as np
+import pytest
+from builtin_interfaces.msg import Time
+from mcap_ros2.reader import read_ros2_messages
+from rclpy.serialization import serialize_message
+from sds_camera.compressed_video import PacketDecoder, VideoFilePackets, packet_format
+from sds_camera.frame_source import FrameSourceError, Region, VideoFileSource
+from sds_camera.video_writer import VideoWriter
+from sds_record.mcap_files import McapRecorder
+from sds_ros.image_msg import video_packet_msg
+from sds_workflows.pipeline import mcap_frames
+from sensor_msgs.msg import RegionOfInterest
+
+from sds_msgs.msg import CameraModel
+
+WIDTH, HEIGHT, FRAMES = 320, 240, 24
+REGION = Region(41, 23, 201, 151)     # odd corner and size: the chroma alignment matters
+
+
+def moving_frames() -> list[np.ndarray]:
+    """Frames with texture that moves (so that the encoder uses B-frames and motion)."""
+    rng = np.random.default_rng(5)
+    texture = rng.integers(0, 255, (HEIGHT, WIDTH * 2, 3), dtype=np.uint8)
+    return [np.ascontiguousarray(texture[:, 4 * i: 4 * i + WIDTH]) for i in range(FRAMES)]
+
+
+@pytest.fixture(scope="module")
+def h264_video(tmp_path_factory) -> Path:
+    """An H.264 file as x264 writes it for a camera (B-frames, in MP4)."""
+    path = tmp_path_factory.mktemp("video") / "clip.mp4"
+    with VideoWriter(path, WIDTH, HEIGHT, Fraction(30)) as writer:
+        for frame in moving_frames():
+            writer.write(frame)
+    return path
+
+
+@pytest.fixture(scope="module")
+def hevc_video(tmp_path_factory) -> Path:
+    """An H.265 file (libx265, in MP4), as newer GoPros record."""
+    path = tmp_path_factory.mktemp("video") / "clip_hevc.mp4"
+    with av.open(str(path), "w") as container:
+        stream = container.add_stream("libx265", rate=30)
+        stream.width, stream.height, stream.pix_fmt = WIDTH, HEIGHT, "yuv420p"
+        stream.options = {"x265-params": "log-level=error"}
+        for image in moving_frames():
+            for packet in stream.encode(av.VideoFrame.from_ndarray(image, format="bgr24")):
+                container.mux(packet)
+        for packet in stream.encode(None):
+            container.mux(packet)
+    return path
+
+
+def ffmpeg_frames(path: Path) -> list[tuple[int, np.ndarray]]:
+    """The file's frames as FFmpeg decodes the container (times [ns] from the first, BGR)."""
+    with av.open(str(path)) as container:
+        stream = container.streams.video[0]
+        frames = [(frame.pts, frame.to_ndarray(format="bgr24"))
+                  for frame in container.decode(stream)]
+        time_base = stream.time_base
+    first = frames[0][0]
+    return [(round((pts - first) * time_base * 10**9), image) for pts, image in frames]
+
+
+@pytest.mark.parametrize("video", ["h264_video", "hevc_video"])
+def test_the_packets_decode_to_the_files_frames_bit_for_bit(video: str, request) -> None:
+    path = request.getfixturevalue(video)
+    packets_of_file = VideoFilePackets(path)
+    packets = list(packets_of_file.packets())
+    again = list(packets_of_file.packets())        # a second play starts at the beginning
+    packets_of_file.close()
+    assert [p.data for p in again] == [p.data for p in packets]
+    assert len(packets) == FRAMES and packets[0].keyframe
+    # Annex B: a start code first; a keyframe carries its parameter sets.
+    assert all(p.data.startswith((b"\x00\x00\x01", b"\x00\x00\x00\x01")) for p in packets)
+    # Decode order: the frames' times jump about (B-frames), the packets are due in order.
+    times = [p.time_ns for p in packets]
+    assert sorted(times) == [t for t, _ in ffmpeg_frames(path)]
+    assert times != sorted(times)
+    assert np.all(np.diff([p.due_ns for p in packets]) > 0) and packets[0].due_ns == 0
+
+    decoder = PacketDecoder(packets_of_file.format)
+    decoded = [frame for p in packets for frame in decoder.decode(p)] + decoder.flush()
+    reference = ffmpeg_frames(path)
+    assert [f.index for f in decoded] == list(range(FRAMES))
+    assert [f.time_ns for f in decoded] == [t for t, _ in reference]
+    for frame, (_, image) in zip(decoded, reference, strict=True):
+        np.testing.assert_array_equal(frame.image, image)
+
+    # A region in one channel: what the frame source decodes for the chain.
+    cut = PacketDecoder(packets_of_file.format, REGION, "red")
+    regions = [frame for p in packets for frame in cut.decode(p)] + cut.flush()
+    source = VideoFileSource(path)
+    for frame, expected in zip(regions, source.frames(REGION, "red"), strict=True):
+        np.testing.assert_array_equal(frame.image, expected.image)
+    source.close()
+
+
+def test_a_codec_whose_packets_are_not_carried_is_said(tmp_path: Path) -> None:
+    """Motion JPEG in a file: its frames are read, its packets are refused by name."""
+    path = tmp_path / "clip.avi"
+    with av.open(str(path), "w") as container:
+        stream = container.add_stream("mjpeg", rate=30)
+        stream.width, stream.height, stream.pix_fmt = WIDTH, HEIGHT, "yuvj420p"
+        for image in moving_frames()[:3]:
+            for packet in stream.encode(av.VideoFrame.from_ndarray(image, format="bgr24")):
+                container.mux(packet)
+        for packet in stream.encode(None):
+            container.mux(packet)
+    with closing(VideoFileSource(path)) as source:
+        assert packet_format(source.codec) is None and len(list(source.frames())) == 3
+    with pytest.raises(FrameSourceError, match="is mjpeg: only the packets of h264, hevc"):
+        VideoFilePackets(path)
+    with pytest.raises(FrameSourceError, match="packet format 'mjpeg'"):
+        PacketDecoder("mjpeg")
+
+
+def record_packets(path: Path, video: Path) -> int:
+    """A recording as the drop graph makes it: the camera model (the region, red) and the
+    file's packets on /camera/video, stamped 1000 s + their frames' times."""
+    recorder = McapRecorder(path)
+    recorder.add_topic("/camera/camera_model", "sds_msgs/msg/CameraModel", latched=True)
+    recorder.add_topic("/camera/video", "foxglove_msgs/msg/CompressedVideo")
+    model = CameraModel(channel="red", full_width=WIDTH, full_height=HEIGHT,
+                        roi=RegionOfInterest(x_offset=REGION.x, y_offset=REGION.y,
+                                             width=REGION.width, height=REGION.height))
+    recorder.write("/camera/camera_model", serialize_message(model), 1, 1)
+    packets = VideoFilePackets(video)
+    count = 0
+    for packet in packets.packets():
+        stamp_ns = 1000 * 10**9 + packet.time_ns
+        msg = video_packet_msg(packet.data, Time(sec=stamp_ns // 10**9,
+                                                 nanosec=stamp_ns % 10**9),
+                               "camera_optical", packets.format)
+        recorder.write("/camera/video", serialize_message(msg), 2 + count, 2 + count)
+        count += 1
+    packets.close()
+    recorder.close()
+    return count
+
+
+def test_a_recording_of_packets_gives_the_files_frames(tmp_path: Path, h264_video: Path) -> None:
+    recording = tmp_path / "packets.mcap"
+    assert record_packets(recording, h264_video) == FRAMES
+    # An independent reader finds each packet, as Foxglove's schema names it.
+    read = [m for m in read_ros2_messages(str(recording), topics=["/camera/video"])]
+    assert [m.schema.name for m in read] == ["foxglove_msgs/msg/CompressedVideo"] * FRAMES
+    with closing(VideoFilePackets(h264_video)) as packets:
+        assert [bytes(m.ros_msg.data) for m in read] == [p.data for p in packets.packets()]
+    assert {m.ros_msg.format for m in read} == {"h264"}
+
+    frames = list(mcap_frames(recording))
+    with closing(VideoFileSource(h264_video)) as source:
+        expected = list(source.frames(REGION, "red"))
+    assert [f.index for f in frames] == list(range(FRAMES))
+    assert [f.offset for f in frames] == [(REGION.x, REGION.y)] * FRAMES
+    assert [round(f.time_s * 1e9) for f in frames] == [f.time_ns for f in expected]
+    for frame, reference in zip(frames, expected, strict=True):
+        np.testing.assert_array_equal(frame.red, reference.image)
