@@ -14,7 +14,14 @@ Prints, measured in one run on the same file:
   PointCloud2 of that frame (/recon/points_live, from the spots as measured), what a live
   view receives, with the frames it never received;
 - peak memory per process, and resident memory over a `--minutes` real-time run
-  (frame source `repeat: 0`; the recorder leaves the images out there to spare the disk);
+  (frame source `repeat: 0`), with the camera's packets recorded (drop.yaml) and counted
+  against those it sent, and the frames it shed while its decoder fell behind;
+- `--fps` sets the camera's frame rate of the real-time runs (`camera.rate` = fps / the
+  video's): a number, or `half-decode`, half the decode-only rate measured in the same run,
+  so that live latency is measured where the machine can hold the rate;
+- with `--check-process`, one real-time play of the file beside the last `--hogs` count, then
+  `sds process --mcap` on its recording against `sds process --video` on the file (the same
+  spots and points: every frame the camera sent, those shed live included);
 - with `--busy`, each real-time run again beside a CPU-bound process (one core's worth);
   `--hogs 1 2` runs each beside 1, then 2 of them instead (2: the chain gets less than a
   frame period of CPU per frame); the console's shedding lines come from each run's log;
@@ -27,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import statistics
 import subprocess
 import sys
@@ -272,8 +280,14 @@ def main() -> None:
     parser.add_argument("--busy", action="store_true",
                         help="also run each real-time measurement beside a CPU-bound process")
     parser.add_argument("--record-images", action="store_true",
-                        help="the real-time runs record the frames too, as drop.yaml does, "
-                             "and count them against the camera's")
+                        help="the real-time runs record the decoded frames too, and count "
+                             "them against the camera's")
+    parser.add_argument("--fps", default="",
+                        help="the camera's frame rate in the real-time runs [fps], or "
+                             "half-decode (default: the video's)")
+    parser.add_argument("--check-process", action="store_true",
+                        help="also compare sds process --mcap on a real-time recording with "
+                             "sds process --video on the file")
     parser.add_argument("--no-flood", action="store_true",
                         help="measure the real-time runs only")
     parser.add_argument("--lateral", action="store_true",
@@ -307,6 +321,9 @@ def main() -> None:
     print(f"decode-only: {decode:.1f} fps, {decode_cpu_ms:.1f} ms CPU per frame "
           f"({decode * decode_cpu_ms / 1e3:.2f} cores busy)")
     print("stages [ms/frame, mean]: " + ", ".join(f"{k} {v:.2f}" for k, v in stages.items()))
+    camera_fps = decode / 2 if args.fps == "half-decode" else float(args.fps or scenario.fps)
+    pace = [f"camera.rate={camera_fps / scenario.fps:.6f}"]
+    print(f"real-time runs: the camera at {camera_fps:.1f} fps")
     for index, layout in enumerate([] if args.no_flood else args.layouts):
         processes = LAYOUTS[layout]
         recording = scratch / f"flood_{index}.mcap"
@@ -316,7 +333,7 @@ def main() -> None:
             frames, None, processes=processes)
         recording.unlink(missing_ok=True)
         graph = (len(receipts) - 1) / (receipts[-1][0] - receipts[0][0])
-        print(f"{layout}, flood ({args.in_flight} in flight, images recorded): {graph:.1f} fps, "
+        print(f"{layout}, flood ({args.in_flight} in flight, packets recorded): {graph:.1f} fps, "
               f"ratio {graph / decode:.2f}, {len(receipts)}/{frames} frames")
         print("  CPU per frame [ms]: " + ", ".join(f"{k} {v:.1f}" for k, v in cpu.items())
               + f"; total {sum(cpu.values()):.1f} (2 cores give {2e3 / graph:.1f})")
@@ -335,7 +352,7 @@ def main() -> None:
                  for _ in range(hogs)]
         try:
             receipts, live, spots_live, memory, cpu = run_graph(
-                [*base, *side, "camera.pacing=realtime", "camera.repeat=0",
+                [*base, *side, *pace, "camera.pacing=realtime", "camera.repeat=0",
                  f"recorder.output={recording}",
                  "recorder.exclude=[/tracker/spots_live,/recon/points_live"
                  + ("]" if args.record_images else ",/camera/image,/lateral/image]")],
@@ -346,6 +363,7 @@ def main() -> None:
             for load in loads:
                 load.kill()
                 load.wait()
+        packets = recorded_frames(recording, scenario.fps, "/camera/video")
         images = recorded_frames(recording, scenario.fps) if args.record_images else None
         side_images = (recorded_frames(recording, side_fps, "/lateral/image")
                        if args.record_images and args.lateral else None)
@@ -386,6 +404,8 @@ def main() -> None:
         camera_frames = round((stamps[-1] - stamps[0]) * scenario.fps) + 1
         print(f"  frames measured: {len(stamps)} of the camera's {camera_frames} in that time "
               f"({camera_frames - len(stamps)} skipped)")
+        print(f"  packets recorded: {packets[0]} of the camera's {packets[1]} from the first "
+              "recorded to the last")
         if images is not None:
             print(f"  frames recorded: {images[0]} of the camera's {images[1]} from the first "
                   "recorded to the last")
@@ -405,7 +425,40 @@ def main() -> None:
             slope = np.polyfit(t[half:] / 60, rss[half:] / 1024, 1)[0]
             print(f"  memory {name}: {rss[0] / 1024:.0f} -> {rss[-1] / 1024:.0f} MB RSS, "
                   f"second-half slope {slope:+.2f} MB/min")
+    if args.check_process:
+        check_process(args.out, scratch, video, rig_file, base, pace, hog_counts[-1])
     scratch.rmdir()
+
+
+def check_process(out: Path, scratch: Path, video: Path, rig_file: Path, base: list[str],
+                  pace: list[str], hogs: int) -> None:
+    """One real-time play of the file beside `hogs` busy processes; `sds process --mcap` on
+    its recording against `sds process --video` on the file, table by table."""
+    recording = scratch / "check.mcap"
+    loads = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(hogs)]
+    try:
+        run_graph([*base, *pace, "camera.pacing=realtime", f"recorder.output={recording}"],
+                  None, None, image_subscribers=1, log_file=out / "check.log")
+    finally:
+        for load in loads:
+            load.kill()
+            load.wait()
+    sds = str(Path(sys.executable).with_name("sds"))
+    for flag, source, folder in (("--mcap", recording, scratch / "from_mcap"),
+                                 ("--video", video, scratch / "from_video")):
+        subprocess.run([sds, "process", flag, str(source), "--rig", str(rig_file), "--out",
+                        str(folder), "--no-progress"], check=True, capture_output=True)
+    shed = [line.strip() for line in (out / "check.log").read_text().splitlines()
+            if "end of" in line]
+    print(f"process --mcap against --video, one real-time play beside {hogs} busy "
+          f"process(es): {shed[-1] if shed else 'no end line'}")
+    for table in ("spots.csv", "points.csv", "line.csv", "fits.csv"):
+        same = (scratch / "from_mcap" / table).read_bytes() == \
+            (scratch / "from_video" / table).read_bytes()
+        print(f"  {table}: {'identical' if same else 'DIFFERENT'}")
+    for folder in ("from_mcap", "from_video"):
+        shutil.rmtree(scratch / folder)
+    recording.unlink()
 
 
 if __name__ == "__main__":

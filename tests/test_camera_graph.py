@@ -233,8 +233,10 @@ def test_the_camera_imu_beside_a_video_is_published_on_the_frames_clock(clip, pr
     write_sidecar(imu, sidecar_path(video))
     messages = probe.collect(Imu, "/camera/imu", IMU_QOS)
     images = probe.collect(Image, "/camera/image")
+    # Frames decoded ahead (no packets): four times real time sheds no frame on any machine.
     graph = SdsGraphRun("camera.yaml", "--set", f"camera.source={video}", "--set",
-                        "camera.stamp=media", "--set", "camera.rate=4.0")
+                        "camera.stamp=media", "--set", "camera.rate=4.0",
+                        "--set", "camera.video=false")
     assert graph.wait(timeout=60) == 0, graph.output()
     last_frame_s = ntsc_time_ns(len(FRAMES) - 1) * 1e-9
     accel_t, gyro_t = (t[(t >= 0) & (t <= last_frame_s)] for t in (accel_t, gyro_t))
@@ -262,11 +264,25 @@ def test_a_video_without_telemetry_says_so_in_one_line(clip, probe):
     assert "has no camera IMU" in graph.output() and not messages
 
 
-def test_a_file_played_behind_real_time_says_so(clip):
-    # 1000 times real time: the frames' times run ahead of what decoding can give.
+@pytest.mark.parametrize("video", [False, True])
+def test_a_file_played_behind_real_time_says_so(clip, video):
+    """1000 times real time: the frames' times run ahead of what decoding can give. Without
+    packets every frame comes late; with them, the packets come late and the frames that
+    could not be decoded in time are shed, counted."""
     graph = SdsGraphRun("camera.yaml", "--set", f"camera.source={clip}",
                         "--set", "camera.rate=1000.0", "--set", "camera.repeat=10",
-                        "--set", "camera.wait_for_subscribers=0")
+                        "--set", "camera.wait_for_subscribers=0",
+                        "--set", f"camera.video={str(video).lower()}")
     assert graph.wait(timeout=120) == 0, graph.output()
-    assert "behind real time (decoding and the graph need more CPU" in graph.output()
-    assert "published 300 frames, up to" in graph.output()
+    output = graph.output()
+    if not video:
+        assert "behind real time (reading and the graph need more CPU" in output
+        assert "published 300 frames, up to" in output
+        return
+    # Reading packets is quick: the frames' 10 ms fall behind by what the decoder cannot do.
+    counts = re.search(r"published (\d+) frames(?: \((\d+) more shed while decoding fell "
+                       r"behind[^)]*\))? and the 300 video packets they came in", output)
+    assert counts is not None, output
+    shed = int(counts[2] or 0)
+    assert int(counts[1]) + shed == 300, output
+    assert ("decoding falls behind the camera" in output) == (shed > 0), output

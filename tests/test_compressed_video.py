@@ -18,11 +18,16 @@ import pytest
 from builtin_interfaces.msg import Time
 from mcap_ros2.reader import read_ros2_messages
 from rclpy.serialization import serialize_message
-from sds_camera.compressed_video import PacketDecoder, VideoFilePackets, packet_format
+from sds_camera.compressed_video import (
+    LivePackets,
+    PacketDecoder,
+    VideoFilePackets,
+    packet_format,
+)
 from sds_camera.frame_source import FrameSourceError, Region, VideoFileSource
 from sds_camera.video_writer import VideoWriter
 from sds_record.mcap_files import McapRecorder
-from sds_ros.image_msg import video_packet_msg
+from sds_ros.image_msg import packet_msg
 from sds_workflows.pipeline import mcap_frames
 from sensor_msgs.msg import RegionOfInterest
 
@@ -143,7 +148,7 @@ def record_packets(path: Path, video: Path) -> int:
     count = 0
     for packet in packets.packets():
         stamp_ns = 1000 * 10**9 + packet.time_ns
-        msg = video_packet_msg(packet.data, Time(sec=stamp_ns // 10**9,
+        msg = packet_msg(packet.data, Time(sec=stamp_ns // 10**9,
                                                  nanosec=stamp_ns % 10**9),
                                "camera_optical", packets.format)
         recorder.write("/camera/video", serialize_message(msg), 2 + count, 2 + count)
@@ -171,3 +176,48 @@ def test_a_recording_of_packets_gives_the_files_frames(tmp_path: Path, h264_vide
     assert [round(f.time_s * 1e9) for f in frames] == [f.time_ns for f in expected]
     for frame, reference in zip(frames, expected, strict=True):
         np.testing.assert_array_equal(frame.red, reference.image)
+
+
+def write_stream(path: Path, codec: str, container_format: str, pixel_format: str) -> None:
+    """The moving frames as a live camera streams them: MPEG-TS H.264 without B-frames (a UVC
+    camera's), or Motion JPEG."""
+    with av.open(str(path), "w", format=container_format) as container:
+        stream = container.add_stream(codec, rate=30)
+        stream.width, stream.height, stream.pix_fmt = WIDTH, HEIGHT, pixel_format
+        if codec == "libx264":
+            stream.options = {"bf": "0", "tune": "zerolatency"}
+        for image in moving_frames():
+            for packet in stream.encode(av.VideoFrame.from_ndarray(image, format="bgr24")):
+                container.mux(packet)
+        for packet in stream.encode(None):
+            container.mux(packet)
+
+
+@pytest.mark.parametrize(("codec", "container_format", "pixel_format", "input_format"), [
+    ("libx264", "mpegts", "yuv420p", "h264"), ("mjpeg", "avi", "yuvj420p", "mjpeg")])
+def test_a_live_cameras_packets_are_read_as_they_come_and_decode_to_its_frames(
+        tmp_path: Path, codec: str, container_format: str, pixel_format: str,
+        input_format: str) -> None:
+    """LivePackets on an FFmpeg input of what a UVC camera sends (its V4L2 input is the same
+    demuxing with `input_format`): each packet one frame, due when it comes, the frames
+    FFmpeg decodes from the stream; the end of the stream is said."""
+    path = tmp_path / f"camera.{container_format}"
+    write_stream(path, codec, container_format, pixel_format)
+    camera = LivePackets(str(path), input_format, demuxer=container_format)
+    assert (camera.width, camera.height) == (WIDTH, HEIGHT)
+    packets = []
+    with pytest.raises(FrameSourceError, match=f"stopped delivering after {FRAMES} packets"):
+        for packet in camera.packets():
+            packets.append(packet)
+    camera.close()
+    assert [p.due_ns for p in packets] == [p.time_ns for p in packets]
+    assert packets[0].time_ns == 0 and np.all(np.diff([p.time_ns for p in packets]) > 0)
+    assert all(p.keyframe for p in packets) == (input_format == "mjpeg") and packets[0].keyframe
+    decoder = PacketDecoder(camera.format, low_delay=True)
+    decoded = [frame for p in packets for frame in decoder.decode(p)] + decoder.flush()
+    reference = ffmpeg_frames(path)
+    assert [f.time_ns for f in decoded] == [t for t, _ in reference]
+    for frame, (_, image) in zip(decoded, reference, strict=True):
+        np.testing.assert_array_equal(frame.image, image)
+    with pytest.raises(FrameSourceError, match="input format 'yuyv422'"):
+        LivePackets(str(path), "yuyv422")

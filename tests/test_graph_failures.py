@@ -91,7 +91,9 @@ def test_a_node_process_that_crashes_leaves_every_threads_stack_in_the_log(repo,
     output = graph.output()
     assert "camera (camera) was killed by SIGSEGV" in output, output
     assert "Fatal Python error: Segmentation fault" in output, output
-    assert "in _publish_frames" in output and "in _read_frames" in output, output
+    # The clip is H.264: its packets are read, then decoded, on threads of their own.
+    assert all(f"in {thread}" in output
+               for thread in ("_publish_frames", "_read_packets", "_decode_packets")), output
 
 
 def test_a_process_that_hangs_while_it_stops_is_ended_with_its_stacks_in_the_log(

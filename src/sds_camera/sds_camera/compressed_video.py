@@ -25,14 +25,18 @@ from sds_camera.frame_source import (
     FrameSourceError,
     Region,
     RegionConverter,
+    announced_frames,
     select,
 )
 
 PACKET_FORMATS = {"h264": ("h264", "h264_mp4toannexb"), "hevc": ("h265", "hevc_mp4toannexb")}
 """FFmpeg's codec name → the packets' format (CompressedVideo.format) and the bitstream filter
 that gives them in Annex B."""
-DECODERS = {"h264": "h264", "h265": "hevc"}
+DECODERS = {"h264": "h264", "h265": "hevc", "jpeg": "mjpeg"}
 """A packet format → FFmpeg's decoder."""
+CAMERA_FORMATS = {"h264": "h264", "mjpeg": "jpeg"}
+"""A live camera's compressed output (V4L2's input_format) → its packets' format (H.264 as
+CompressedVideo, Motion JPEG as sensor_msgs/CompressedImage: every packet a JPEG)."""
 NANOSECOND = Fraction(1, 10**9)
 
 
@@ -78,11 +82,12 @@ class VideoFilePackets:
                                    f"{', '.join(PACKET_FORMATS)} are carried")
         self.format, self._filter_name = PACKET_FORMATS[codec]
         self._played = False
+        self.announced_frames = announced_frames(self._container, self._stream)
 
     def packets(self) -> Iterator[VideoPacket]:
         """Every packet in file (decode) order, in Annex B, from the start of the file (a
-        second call plays it again); FrameSourceError if the file is corrupt or has no
-        packet."""
+        second call plays it again); FrameSourceError if the file is corrupt or ends before
+        the frames its stream announces."""
         if self._played:
             self._container.seek(0, stream=self._stream)
         self._played = True
@@ -106,22 +111,88 @@ class VideoFilePackets:
         except av.FFmpegError as error:
             raise FrameSourceError(f"video {self.path} failed after {index} packets "
                                    f"(corrupt: {error.strerror})") from None
-        if index == 0:
-            raise FrameSourceError(f"video {self.path} has no video packet")
+        if index == 0 or index < self.announced_frames:
+            raise FrameSourceError(f"video {self.path} ended after {index} of "
+                                   f"{self.announced_frames} packets (truncated or corrupt)")
 
     def close(self) -> None:
         """Release the file."""
         self._container.close()
 
 
+class LivePackets:
+    """A live camera's compressed packets as its driver gives them, read without decoding:
+    H.264 or Motion JPEG from a UVC camera (FFmpeg's V4L2 input with `input_format`), or any
+    FFmpeg input of those (`demuxer`, e.g. "h264" for an Annex B stream on a pipe). Times are
+    the driver's capture times since the first packet [ns]; a packet is due when it comes."""
+
+    is_live = True
+
+    def __init__(self, device: str, input_format: str, width: int = 0, height: int = 0,
+                 fps: float = 0.0, demuxer: str = "v4l2") -> None:
+        if input_format not in CAMERA_FORMATS:
+            raise FrameSourceError(f"camera input format {input_format!r} is not one of "
+                                   f"{', '.join(CAMERA_FORMATS)}")
+        options = {"input_format": input_format} if demuxer == "v4l2" else {}
+        if width and height:
+            options["video_size"] = f"{width}x{height}"
+        if fps:
+            options["framerate"] = f"{fps:g}"
+        self.device, self.format = device, CAMERA_FORMATS[input_format]
+        try:
+            self._container = av.open(device, format=demuxer, options=options)
+        except (av.FFmpegError, OSError) as error:
+            raise FrameSourceError(f"cannot open camera {device} for {input_format} "
+                                   f"({error})") from None
+        if not self._container.streams.video:
+            self._container.close()
+            raise FrameSourceError(f"camera {device} gives no video stream")
+        self._stream = self._container.streams.video[0]
+        self.width = self._stream.codec_context.width
+        self.height = self._stream.codec_context.height
+
+    def packets(self) -> Iterator[VideoPacket]:
+        """Packets as they come, until the camera stops (then FrameSourceError)."""
+        time_base = self._stream.time_base or NANOSECOND
+        first: int | None = None
+        index = 0
+        try:
+            for packet in self._container.demux(self._stream):
+                if not packet.size:
+                    break
+                pts = packet.pts if packet.pts is not None else 0
+                first = pts if first is None else first
+                time_ns = round((pts - first) * time_base * 10**9)
+                yield VideoPacket(index, time_ns, packet.is_keyframe or self.format == "jpeg",
+                                  bytes(packet), time_ns)
+                index += 1
+        except av.FFmpegError as error:
+            raise FrameSourceError(f"camera {self.device} failed after {index} packets "
+                                   f"({error.strerror})") from None
+        raise FrameSourceError(f"camera {self.device} stopped delivering after {index} packets")
+
+    def frames(self, region: Region | None = None, channel: str = "bgr") -> Iterator[Frame]:
+        """The packets decoded, the region in the channel (the FrameSource protocol)."""
+        decoder = PacketDecoder(self.format, region, channel)
+        for packet in self.packets():
+            yield from decoder.decode(packet)
+
+    def close(self) -> None:
+        """Release the camera."""
+        self._container.close()
+
+
 class PacketDecoder:
     """Frames from a stream of packets of one format: each frame the region (None: whole) in
     the channel, its time the presentation time its packet carried, its index its place in
-    presentation order. The decoder holds a few packets back (B-frames, frame threads):
-    `flush` gives the frames it still holds at the end."""
+    presentation order. The decoder holds packets back (a stream's B-frames; with frame
+    threads, one more per thread): `flush` gives the frames it still holds at the end.
+    `low_delay` decodes on slice threads only (no frame held for a thread: what a live view
+    needs; a stream of one slice per frame then decodes on one core), else on frame and
+    slice threads (throughput)."""
 
     def __init__(self, packet_format: str, region: Region | None = None,
-                 channel: str = "bgr") -> None:
+                 channel: str = "bgr", low_delay: bool = False) -> None:
         if packet_format not in DECODERS:
             raise FrameSourceError(f"packet format {packet_format!r} is not one of "
                                    f"{', '.join(DECODERS)}")
@@ -130,7 +201,7 @@ class PacketDecoder:
         codec = av.CodecContext.create(DECODERS[packet_format], "r")
         assert isinstance(codec, av.VideoCodecContext)
         self._codec = codec
-        self._codec.thread_type = "AUTO"      # frame and slice threads, as many as cores
+        self._codec.thread_type = "SLICE" if low_delay else "AUTO"   # threads: as many as cores
         self._region, self._channel = region, channel
         self._converter: RegionConverter | None = None
         self.frames_out = 0

@@ -108,6 +108,23 @@ def _selected(image: np.ndarray, region: Region | None, channel: str) -> np.ndar
     return select(image, region, channel)
 
 
+def nominal_fps(stream: av.video.stream.VideoStream) -> float:
+    """A video stream's frame rate as its file gives it [fps]; 0 if it gives none."""
+    rate = stream.average_rate or stream.guessed_rate
+    return float(rate) if rate else 0.0
+
+
+def announced_frames(container: av.container.InputContainer,
+                     stream: av.video.stream.VideoStream) -> int:
+    """The frames a video file announces for its stream: its count, else (a file without
+    one) its duration times its rate; 0 if it says neither."""
+    if stream.frames:
+        return stream.frames
+    if container.duration is None or not nominal_fps(stream):
+        return 0
+    return round(container.duration / av.time_base * nominal_fps(stream))
+
+
 class VideoFileSource:
     """A video file decoded by FFmpeg (PyAV); frame times are the file's own presentation
     times (29.97 fps stays 29.97), from the stream's start."""
@@ -131,18 +148,11 @@ class VideoFileSource:
         self.width = self._stream.codec_context.width
         self.height = self._stream.codec_context.height
         self.codec: str = self._stream.codec_context.name   # FFmpeg's name: "h264", "hevc", …
-        rate = self._stream.average_rate or self._stream.guessed_rate
-        self.nominal_fps = float(rate) if rate else 0.0
-        self.announced_frames = self._stream.frames or self._frames_from_duration()
+        self.nominal_fps = nominal_fps(self._stream)
+        self.announced_frames = announced_frames(self._container, self._stream)
         if self.width <= 0 or self.height <= 0:
             self._container.close()
             raise FrameSourceError(f"video {self.path} has no readable video stream")
-
-    def _frames_from_duration(self) -> int:
-        """The frame count a file without one announces through its duration and rate."""
-        if self._container.duration is None or not self.nominal_fps:
-            return 0
-        return round(self._container.duration / av.time_base * self.nominal_fps)
 
     def frames(self, region: Region | None = None, channel: str = "bgr") -> Iterator[Frame]:
         """Decode every frame, the region (None: whole frame) in the channel; raise

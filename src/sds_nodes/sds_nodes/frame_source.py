@@ -26,6 +26,7 @@ from rclpy.subscription import RCLError
 from rclpy.time import Time
 from sds_camera.camera_imu import CameraImuError, imu_samples, read_camera_imu
 from sds_camera.compressed_video import (
+    LivePackets,
     PacketDecoder,
     VideoFilePackets,
     VideoPacket,
@@ -33,6 +34,7 @@ from sds_camera.compressed_video import (
 )
 from sds_camera.frame_source import (
     Frame,
+    FrameSource,
     FrameSourceError,
     Region,
     VideoFileSource,
@@ -47,10 +49,10 @@ from sds_model.camera.rolling_shutter import RollingShutter, rolling_shutter
 from sds_model.errors import InputError
 from sds_ros.ack_credit import AckCredit
 from sds_ros.hosted_node import HostedNode
-from sds_ros.image_msg import image_to_msg, video_packet_msg
+from sds_ros.image_msg import image_to_msg, packet_msg
 from sds_ros.imu_msg import imu_message
 from sds_ros.qos import wait_for_acks
-from sensor_msgs.msg import Image, Imu
+from sensor_msgs.msg import CompressedImage, Image, Imu
 from std_msgs.msg import Header
 
 from foxglove_msgs.msg import CompressedVideo
@@ -59,7 +61,8 @@ from sds_msgs.msg import CameraModel, SyncEvent
 BEHIND_REPORT_S = 0.5
 """A file played in real time this far behind its frames' times is said on the console [s]."""
 PARAMETER_CHOICES = {"channel": ("bgr", "red", "green", "blue", "gray"),
-                     "pacing": ("realtime", "flood"), "stamp": ("clock", "media")}
+                     "pacing": ("realtime", "flood"), "stamp": ("clock", "media"),
+                     "input_format": ("", "h264", "mjpeg")}
 """The values a string parameter may take: a literal, which the launcher reads without
 importing this module (`graph_file.check_plugins`), so that a wrong one fails before any
 node starts; `channel`'s are the frame source's `CHANNELS`."""
@@ -77,7 +80,8 @@ PARAMETERS = {"source": "", "fps": 0.0, "roi": [0, 0, 0, 0], "channel": "bgr",
               "camera_model": "", "wait_for_subscribers": 1, "ack_consumers": 1,
               "max_in_flight": 2, "led_roi": [0, 0, 0, 0], "repeat": 1, "linger_s": 3.0,
               "follow": False, "stamp_offset_s": 0.0, "video": True,
-              "packet_ack_consumers": 0, "wait_for_packet_subscribers": 0}
+              "packet_ack_consumers": 0, "wait_for_packet_subscribers": 0, "input_format": "",
+              "low_delay": False}
 """The node's parameters and defaults (config/params/frame_source.yaml documents each)."""
 
 
@@ -98,7 +102,7 @@ class FrameSourceNode(HostedNode):
         super().__init__(node_name, **node_kwargs)
         self.published = 0
         self.packets_published = 0
-        self.shed = 0         # frames whose packets were published but not decoded
+        self.shed = 0         # packets published but not decoded (shed)
         self.behind_s = 0.0   # the furthest a file played in real time fell behind [s]
         values = self.declare_parameter_table(PARAMETERS)
         self._stop = threading.Event()
@@ -107,10 +111,15 @@ class FrameSourceNode(HostedNode):
             maxsize=DECODE_BACKLOG)
         self._clock_started = threading.Event()
         self._origin_ns, self._start_s = 0, 0.0
-        self._packets: VideoFilePackets | None = None
+        self._packets: VideoFilePackets | LivePackets | None = None
+        self._source: FrameSource
         try:
             p = self._checked(values)
-            self._source = open_source(p["source"], fps=p["fps"])
+            if p["input_format"]:
+                live = LivePackets(p["source"], p["input_format"], fps=p["fps"])
+                self._source, self._packets = live, live
+            else:
+                self._source = open_source(p["source"], fps=p["fps"])
             if p["video"] and isinstance(self._source, VideoFileSource) \
                     and packet_format(self._source.codec):
                 self._packets = VideoFilePackets(p["source"])
@@ -130,8 +139,12 @@ class FrameSourceNode(HostedNode):
         reliable = QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE)
         self._image_pub = self.create_publisher(Image, "image", reliable)
         if self._packets is not None:
-            self._video_pub = self.create_publisher(CompressedVideo, "video", QoSProfile(
-                depth=VIDEO_HISTORY, reliability=ReliabilityPolicy.RELIABLE))
+            # A stream's packets on `video`; Motion JPEG's (each a JPEG) on `image/compressed`.
+            jpeg = self._packets.format == "jpeg"
+            self._video_pub = self.create_publisher(
+                CompressedImage if jpeg else CompressedVideo, "image/compressed" if jpeg
+                else "video", QoSProfile(depth=VIDEO_HISTORY,
+                                         reliability=ReliabilityPolicy.RELIABLE))
             self._packet_credit = AckCredit(p["packet_ack_consumers"],
                                             self.resolve_topic_name("packet_ack"),
                                             self.get_logger().warning)
@@ -324,11 +337,12 @@ class FrameSourceNode(HostedNode):
                 if flow_control:
                     self._packet_credit.wait(p["max_in_flight"] - 1)
                     self._packet_credit.register(stamp_ns)
-                if not self._publish(self._video_pub, video_packet_msg(
+                if not self._publish(self._video_pub, packet_msg(
                         packet.data, Time(nanoseconds=stamp_ns).to_msg(), p["frame_id"],
                         self._packets.format)):
                     return
                 self.packets_published += 1
+                self._publish_imu_until(packet.time_ns * 1e-9, self._origin_ns)
                 shedding = shedding and not packet.keyframe
                 if p["pacing"] == "flood":
                     if not self._put(self._decode_queue, packet):
@@ -353,7 +367,8 @@ class FrameSourceNode(HostedNode):
 
     def _decode_packets(self) -> None:
         """Decode thread (a source with packets): the packets' frames to the publish thread."""
-        decoder = PacketDecoder(self._packets.format, *self._selection())  # type: ignore[union-attr]
+        decoder = PacketDecoder(self._packets.format, *self._selection(),  # type: ignore[union-attr]
+                                low_delay=self._p["low_delay"])
         while not self._stop.is_set():
             try:
                 item = self._decode_queue.get(timeout=0.1)
@@ -490,7 +505,8 @@ class FrameSourceNode(HostedNode):
             if not self._publish(self._image_pub, image_to_msg(item.image, stamp, p["frame_id"])):
                 return
             self.published += 1
-            self._publish_imu_until(item.time_ns * 1e-9, origin_ns)
+            if self._packets is None:   # else the packets' thread publishes them
+                self._publish_imu_until(item.time_ns * 1e-9, origin_ns)
             led_on = self._led_switches.pop(item.index, None)
             if led_on is not None:
                 led_stamp = Time(nanoseconds=stamp_ns + self._led_delay_ns).to_msg()
@@ -498,7 +514,8 @@ class FrameSourceNode(HostedNode):
                     header=Header(stamp=led_stamp, frame_id=p["frame_id"]), source=p["frame_id"],
                     kind=SyncEvent.KIND_LED_ON if led_on else SyncEvent.KIND_LED_OFF))
 
-    def _publish(self, publisher: Publisher, msg: Image | CompressedVideo) -> bool:
+    def _publish(self, publisher: Publisher, msg: Image | CompressedVideo | CompressedImage
+                 ) -> bool:
         """Publish unless the node is stopping; False once the graph shuts down."""
         if self._stop.is_set():
             return False
@@ -534,10 +551,12 @@ class FrameSourceNode(HostedNode):
         behind = f", up to {self.behind_s:.1f} s behind real time" if self.behind_s else ""
         if self._packets is None:
             return f"published {self.published} frames{behind}"
-        shed = (f" ({self.shed} shed while decoding fell behind: in the recording, not "
+        # Shed: the packets not decoded, and the frames a decoder could not make without them.
+        unmeasured = self.packets_published - self.published
+        shed = (f" ({unmeasured} more shed while decoding fell behind: in the recording, not "
                 "measured live)") if self.shed else ""
-        return (f"published {self.packets_published} video packets and {self.published} "
-                f"frames{shed}{behind}")
+        return (f"published {self.published} frames{shed} and the {self.packets_published} "
+                f"video packets they came in{behind}")
 
     def close(self) -> None:
         """Stop the reading, decoding and publish threads and wait for them."""

@@ -25,9 +25,9 @@ from sds_record.mcap_files import (
 )
 from sds_ros.ack_credit import AckCredit
 from sds_ros.hosted_node import HostedNode
-from sds_ros.image_msg import image_to_msg
+from sds_ros.image_msg import PACKET_TYPES, image_to_msg, packet_fields
 from sds_ros.qos import stream_qos, wait_for_acks
-from sensor_msgs.msg import Image
+from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import Header
 
 from foxglove_msgs.msg import CompressedVideo
@@ -39,7 +39,6 @@ PARAMETER_CHOICES = {"pacing": ("recorded", "flood")}
 DEPTH = 100
 """Messages kept per played topic, for readers that lag (3.3 s at 30 fps)."""
 IMAGE_TYPE = "sensor_msgs/msg/Image"
-VIDEO_TYPE = "foxglove_msgs/msg/CompressedVideo"
 MODEL_TYPE = "sds_msgs/msg/CameraModel"
 
 
@@ -142,7 +141,7 @@ class PlayerNode(HostedNode):
         whose frames are not."""
         recorded = recorded_topics(self._p["input"])
         for source, target in parse_remaps(self._p["decode"]).items():
-            if recorded.get(source, ("",))[0] != VIDEO_TYPE or target in recorded:
+            if recorded.get(source, ("",))[0] not in PACKET_TYPES or target in recorded:
                 continue
             self._decodings[source] = _Decoding(target)
             self._outputs[target] = self.create_publisher(
@@ -157,17 +156,18 @@ class PlayerNode(HostedNode):
     def _decoded_frames(self, message: RecordedMessage) -> list[Frame]:
         """The frames a recorded packet completes, stamped [ns] as their packets."""
         decoding = self._decodings[message.topic]
-        packet = deserialize_message(message.data, CompressedVideo)
+        frame_id, stamp_ns, packet_format, data = packet_fields(deserialize_message(
+            message.data, CompressedImage if message.type_name == "sensor_msgs/msg/CompressedImage"
+            else CompressedVideo))
         if decoding.decoder is None:
-            decoding.frame_id = packet.frame_id
-            model = self._models.get(packet.frame_id)
+            decoding.frame_id = frame_id
+            model = self._models.get(frame_id)
             if model is not None and model.roi.width > 0:
                 decoding.region = Region(int(model.roi.x_offset), int(model.roi.y_offset),
                                          int(model.roi.width), int(model.roi.height))
                 decoding.channel = model.channel or "bgr"
-            decoding.decoder = PacketDecoder(packet.format, decoding.region, decoding.channel)
-        return decoding.decoder.decode(VideoPacket(0, header_stamp_ns(message.data), False,
-                                                   bytes(packet.data)))
+            decoding.decoder = PacketDecoder(packet_format, decoding.region, decoding.channel)
+        return decoding.decoder.decode(VideoPacket(0, stamp_ns, False, data))
 
     def _wait_for_subscribers(self) -> bool:
         """Wait until every played topic has `wait_for_subscribers` subscribers."""

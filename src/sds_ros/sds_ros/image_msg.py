@@ -4,10 +4,11 @@ foxglove_msgs/CompressedVideo, without per-element copies."""
 from __future__ import annotations
 
 import array
+from typing import Any
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from sensor_msgs.msg import Image
+from sensor_msgs.msg import CompressedImage, Image
 
 from foxglove_msgs.msg import CompressedVideo
 
@@ -57,14 +58,33 @@ def msg_to_image(msg: Image) -> np.ndarray:
     return rows.reshape(msg.height, msg.width, channels)
 
 
-def video_packet_msg(data: bytes, stamp: Time, frame_id: str, packet_format: str
-                     ) -> CompressedVideo:
-    """CompressedVideo message holding one copy of a packet's bytes."""
-    msg = CompressedVideo()
-    msg.timestamp = stamp
-    msg.frame_id = frame_id
-    msg.format = packet_format
+def packet_msg(data: bytes, stamp: Time, frame_id: str, packet_format: str
+               ) -> CompressedVideo | CompressedImage:
+    """A camera's packet as it is published: a JPEG as sensor_msgs/CompressedImage, a video
+    stream's packet as foxglove_msgs/CompressedVideo; one copy of its bytes."""
     packet = array.array("B")
     packet.frombytes(data)
-    msg.data = packet
+    if packet_format == "jpeg":
+        image = CompressedImage()
+        image.header.stamp, image.header.frame_id = stamp, frame_id
+        image.format, image.data = "jpeg", packet
+        return image
+    msg = CompressedVideo()
+    msg.timestamp, msg.frame_id = stamp, frame_id
+    msg.format, msg.data = packet_format, packet
     return msg
+
+
+PACKET_TYPES = ("foxglove_msgs/msg/CompressedVideo", "sensor_msgs/msg/CompressedImage")
+"""The messages that carry a camera's packets: a video stream's, a JPEG camera's."""
+
+
+def packet_fields(msg: Any) -> tuple[str, int, str, bytes]:
+    """(frame_id, stamp [ns], format, bytes) of a CompressedVideo or CompressedImage message
+    (rclpy's objects or rosbags')."""
+    if hasattr(msg, "timestamp"):
+        frame_id, stamp = msg.frame_id, msg.timestamp
+    else:
+        frame_id, stamp = msg.header.frame_id, msg.header.stamp
+    return (frame_id, int(stamp.sec) * 10**9 + int(stamp.nanosec), msg.format,
+            msg.data.tobytes())

@@ -17,6 +17,7 @@ from sds_model.errors import InputError
 from sds_model.rig import Rig
 from sds_model.staging import staged_file
 from sds_record.mcap_files import decoded_messages, require_mcap
+from sds_ros.image_msg import PACKET_TYPES, packet_fields
 
 from sds_viz.messages import log_message
 from sds_viz.scene import RerunScene
@@ -49,10 +50,10 @@ def mcap_to_rrd(recording: str | Path, output: str | Path, rig: Rig | None = Non
         try:
             for recorded, msg in decoded_messages(recording):
                 type_name = recorded.type_name
-                if type_name == VIDEO_TYPE:
-                    frames = _decoded(decoders, scene, msg)
+                if type_name in PACKET_TYPES:
+                    frame_id, frames = _decoded(decoders, scene, msg)
                     for frame in frames:
-                        count = images[msg.frame_id] = images.get(msg.frame_id, 0) + 1
+                        count = images[frame_id] = images.get(frame_id, 0) + 1
                         if not (count - 1) % image_every:
                             scene.set_time(frame.time_ns * 1e-9)
                             scene.log_image(frame.image, tuple(scene.roi_offset.astype(int)))
@@ -81,16 +82,15 @@ def mcap_to_rrd(recording: str | Path, output: str | Path, rig: Rig | None = Non
     return Conversion(shown, skipped)
 
 
-VIDEO_TYPE = "foxglove_msgs/msg/CompressedVideo"
-
-
-def _decoded(decoders: dict[str, PacketDecoder], scene: RerunScene, msg) -> list[Frame]:
-    """The frames (time: stamp [ns]) a recorded packet completes; each camera's decoder is
-    made at its first packet, cut to the camera model's region known then (else whole)."""
-    if msg.frame_id not in decoders:
+def _decoded(decoders: dict[str, PacketDecoder], scene: RerunScene, msg
+             ) -> tuple[str, list[Frame]]:
+    """The camera (frame_id) of a recorded packet and the frames (time: stamp [ns]) it
+    completes; each camera's decoder is made at its first packet, cut to the camera model's
+    region known then (else whole)."""
+    frame_id, stamp_ns, packet_format, data = packet_fields(msg)
+    if frame_id not in decoders:
         width, height = scene.roi_size
         region = Region(int(scene.roi_offset[0]), int(scene.roi_offset[1]), width, height) \
             if width > 0 else None
-        decoders[msg.frame_id] = PacketDecoder(msg.format, region)
-    stamp_ns = int(msg.timestamp.sec) * 10**9 + int(msg.timestamp.nanosec)
-    return decoders[msg.frame_id].decode(VideoPacket(0, stamp_ns, False, msg.data.tobytes()))
+        decoders[frame_id] = PacketDecoder(packet_format, region)
+    return frame_id, decoders[frame_id].decode(VideoPacket(0, stamp_ns, False, data))

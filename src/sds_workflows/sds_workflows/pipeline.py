@@ -37,7 +37,7 @@ from sds_recon.reconstruction import (
 )
 from sds_record.mcap_files import decoded_messages, recorded_topics
 from sds_ros.graph_file import node_parameters
-from sds_ros.image_msg import msg_to_image
+from sds_ros.image_msg import PACKET_TYPES, msg_to_image, packet_fields
 from sds_ros.point_cloud import stamp_ns
 from sds_ros.static_tf import LATERAL_FRAME
 from sds_sloshing.surface_series import RecordingError
@@ -109,35 +109,36 @@ def _red_frames(source: FrameSource, region: Region) -> Iterator[RedFrame]:
         source.close()
 
 
-VIDEO_TYPE = "foxglove_msgs/msg/CompressedVideo"
 IMAGE_TYPE = "sensor_msgs/msg/Image"
+MODEL_TYPE = "sds_msgs/msg/CameraModel"
 
 
 def mcap_frames(path: Path) -> Iterator[RedFrame]:
     """A recording's camera frames and the region its camera model gives: decoded from the
-    camera's packets (foxglove_msgs/CompressedVideo) when it has them, all that the camera sent
-    (also those the live chain shed), else its frames (sensor_msgs/Image); a recording with
-    neither is refused here, before the first frame is asked for."""
+    camera's packets (`PACKET_TYPES`) when it has them, all that the camera sent (also those
+    the live chain shed), else its frames (sensor_msgs/Image); a recording with neither is
+    refused here, before the first frame is asked for."""
     types = {type_name for type_name, _ in recorded_topics(path).values()}
-    if VIDEO_TYPE in types:
-        return read_ahead(_decoded_packets(path))
+    packets = [t for t in PACKET_TYPES if t in types]
+    if packets:
+        return read_ahead(_decoded_packets(path, packets[0]))
     if IMAGE_TYPE not in types:
         raise RecordingError(f"{path}: the recording has no camera frames (sensor_msgs/Image) "
-                             "or packets (foxglove_msgs/CompressedVideo)")
+                             f"or packets ({', '.join(PACKET_TYPES)})")
     return read_ahead(_recorded_frames(path))
 
 
 def _top_camera_messages(path: Path, frame_type: str) -> Iterator[tuple[Any, Any]]:
     """The top camera's models and messages of `frame_type` in recorded order, as (model, None)
     or (None, message) (the side camera's, frame_id LATERAL_FRAME, left out)."""
-    for recorded, msg in decoded_messages(path, types=("sds_msgs/msg/CameraModel", frame_type)):
-        frame_id = msg.frame_id if recorded.type_name == VIDEO_TYPE else msg.header.frame_id
+    for recorded, msg in decoded_messages(path, types=(MODEL_TYPE, frame_type)):
+        frame_id = msg.frame_id if hasattr(msg, "frame_id") else msg.header.frame_id
         if frame_id == LATERAL_FRAME:
             continue
-        yield (msg, None) if recorded.type_name == "sds_msgs/msg/CameraModel" else (None, msg)
+        yield (msg, None) if recorded.type_name == MODEL_TYPE else (None, msg)
 
 
-def _decoded_packets(path: Path) -> Iterator[RedFrame]:
+def _decoded_packets(path: Path, packet_type: str) -> Iterator[RedFrame]:
     """The frames of the recorded packets, in presentation order, the region of the camera
     model that precedes them in red (packets before any model wait for it, at most
     FRAMES_BEFORE_MODEL of them)."""
@@ -145,7 +146,7 @@ def _decoded_packets(path: Path) -> Iterator[RedFrame]:
     model: Any = None
     waiting: list[Any] = []
     first: int | None = None
-    for new_model, packet in _top_camera_messages(path, VIDEO_TYPE):
+    for new_model, packet in _top_camera_messages(path, packet_type):
         model = new_model if new_model is not None else model
         if packet is not None:
             waiting.append(packet)
@@ -157,10 +158,10 @@ def _decoded_packets(path: Path) -> Iterator[RedFrame]:
         region = Region(int(model.roi.x_offset), int(model.roi.y_offset),
                         int(model.roi.width), int(model.roi.height))
         for packet in waiting:
+            _, stamp, packet_format, data = packet_fields(packet)
             if decoder is None:
-                decoder = PacketDecoder(packet.format, region, "red")
-            stamp = int(packet.timestamp.sec) * 10**9 + int(packet.timestamp.nanosec)
-            for frame in decoder.decode(VideoPacket(0, stamp, False, packet.data.tobytes())):
+                decoder = PacketDecoder(packet_format, region, "red")
+            for frame in decoder.decode(VideoPacket(0, stamp, False, data)):
                 first = frame.time_ns if first is None else first
                 yield RedFrame(frame.index, (frame.time_ns - first) * 1e-9, frame.image,
                                (region.x, region.y))
