@@ -6,7 +6,7 @@ Usage: python bench/lateral.py [--rigs 3] [--first-seed 8300] [--seconds S]
 
 For each seed, a random rig as built (`calibration_trial.first_use`: leaning beams, camera
 pose, emitters, camera file off by its σ, the table's readings off by their accuracy) is
-calibrated by the README's protocol from its tilt images. A random side camera stands beside
+calibrated by docs/rig.md's protocol from its tilt images. A random side camera stands beside
 it: its centre off the view file's drawing by up to ±5 mm across, ±10 mm in distance, ±3 mm
 in height, looking up to ±3 mm off, turned up to ±1° about its axis; its intrinsics off their
 file by one σ each; the checkerboard off its stated places by its placement σ per axis; its

@@ -1,4 +1,4 @@
-"""Calibration on rigs as built, by the README's protocol, against today's model.
+"""Calibration on rigs as built, by docs/rig.md's protocol, against today's model.
 
 Usage: python bench/rig_as_built.py [--rigs 20] [--first-seed 7000] [--no-drop]
                                     [--inclinometer-deg S] [--imaging] [--frames N]
@@ -6,7 +6,7 @@ Usage: python bench/rig_as_built.py [--rigs 20] [--first-seed 7000] [--no-drop]
 Each trial (`sds_workflows.calibration_trial.as_built_trial`): a random diode layout, its
 beams leaning (σ 0.6°, up to 3°), emitters off their drawn places (σ 0.3 mm per axis), the
 camera turned up to ±2° and moved up to ±5 mm in height, the camera file off by one of its σ
-(Table 2's: a0, centre, stretch), wall reflections; the README's protocol rendered in 4K
+(Table 2's: a0, centre, stretch), wall reflections; docs/rig.md's protocol rendered in 4K
 (eight tilts about X, three about Y, levels 40 and 30 mm lower and 40 mm higher) with the
 table read to ±0.5° about its axis and σ 0.15° across it, level frames to 0.05°, the other fill
 levels to 0.05 mm. The rig file declares `tolerances: {emitter_mm: 0.3}`, the camera file
@@ -70,7 +70,7 @@ def main() -> None:
     prediction = predict(declared_rig, [accuracy.declare(s) for s in protocol_readings()])
     print(f"tilted frames read to sigma {accuracy.table_deg:.3f} deg about the table's axis, "
           f"{accuracy.across_axis_deg:.3f} deg across it")
-    print(f"planner, StELIUM rig with emitters to 0.3 mm, the README's protocol: unseen tilt "
+    print(f"planner, StELIUM rig with emitters to 0.3 mm, docs/rig.md's protocol: unseen tilt "
           f"sigma {prediction.worst_tilt_deg:.3f} deg, heights {prediction.worst_height_mm:.3f}"
           f" mm, camera Z {prediction.sigmas[prediction.names.index('camera Z')]:.3f} mm\n")
     print("seed  wrong/spots  calibrated/visible  chi2/dof (range) | 10x tight | today  "

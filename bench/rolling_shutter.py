@@ -14,7 +14,7 @@ points as measured (before the fits were carried to the frame's time).
 
 With `--as-built`, each rig is a random rig as built (`calibration_trial.first_use`: leaning
 beams, camera pose, emitters, camera file off by its σ, table readings off by their accuracy),
-calibrated by the README's protocol from its tilt images; the drops are rendered with the true
+calibrated by docs/rig.md's protocol from its tilt images; the drops are rendered with the true
 rig and processed with the calibrated one, its camera file stating the readout 0.5 ms long
 (the tolerance `sds camera readout` is held to). Each scenario runs whole (ground_kick 6 s,
 drop_4p7s 4.7 s, or `--seconds`), and each mode's frequency and damping ratio (matrix pencil)

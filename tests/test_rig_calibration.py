@@ -294,7 +294,7 @@ def test_the_line_is_found_on_calibration_images_far_from_the_level_one() -> Non
 
 
 def test_what_the_protocol_determines_is_fitted_however_noisy_the_spots() -> None:
-    """The README's protocol (tilts about both axes, a second fill level) determines the
+    """The docs/rig.md's protocol (tilts about both axes, a second fill level) determines the
     camera's pose: with spots 8× noisier than their σ says (χ²/dof near 60; speckle made
     them 3× noisier), the pose is still fitted, not kept from the rig file (it was: its σ,
     scaled by the χ², passed the limit), and the fit's σ grows with its χ²."""

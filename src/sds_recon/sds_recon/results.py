@@ -4,7 +4,7 @@ One CSV per table, comma-separated, a header row of column names, one row per fr
 (spots, points), per line sample (line), per frame (fits) or per reading (imu, tof, and the
 camera's own IMU, camera_imu);
 `columns.json` describes every column; `analysis.json` holds the sloshing estimates. The names
-and units are the public interface (README, "Result files") and stay stable.
+and units are the public interface (docs/results.md) and stay stable.
 """
 
 from __future__ import annotations

@@ -19,7 +19,7 @@ niced process on a busy machine matched 2.4 s late; a line profile is 45 kB, 13 
 
 def stream_qos(depth: int = STREAM_DEPTH) -> QoSProfile:
     """Reliable, keep-last `depth`, transient-local: spots, line, points, fits and estimates
-    (not frames: README "The graph"), for writers and readers alike.
+    (not frames: docs/graph.md), for writers and readers alike.
 
     A writer counts a new reader a moment before that reader has matched the writer, and a
     volatile Fast DDS reader never gets what was written in between (eProsima/Fast-DDS#2641):

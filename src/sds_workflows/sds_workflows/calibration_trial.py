@@ -306,7 +306,7 @@ class AsBuilt:
 
 
 def protocol_readings() -> list[KnownSurface]:
-    """The README's protocol as read: eight tilts about X (0 level), three about Y, level
+    """The docs/rig.md's protocol as read: eight tilts about X (0 level), three about Y, level
     surfaces at the other fill levels."""
     return ([KnownSurface(0.0, np.radians(a), 0.0) for a in ANGLES]
             + [KnownSurface(0.0, 0.0, np.radians(a)) for a in SECOND_AXIS]
@@ -382,7 +382,7 @@ def _normalised_errors(result: RigCalibration, nominal: Rig, true: Rig,
 @dataclass(frozen=True)
 class FirstUse:
     """A random rig as built, what its user has (the rig file, the protocol's readings and
-    images) and its calibration by the README's protocol with the tolerances declared."""
+    images) and its calibration by docs/rig.md's protocol with the tolerances declared."""
 
     true: Rig
     nominal: Rig
@@ -411,7 +411,7 @@ def rig_as_built(base: Rig, as_built: AsBuilt, rng: np.random.Generator) -> tupl
 def first_use(seed: int, rig_file: Path, scale: float = 1.0, as_built: AsBuilt | None = None
               ) -> FirstUse:
     """A random rig as built (seeded: layout, leans, camera pose, emitters, camera file off by
-    its σ, the table's readings off by their accuracy) calibrated by the README's protocol."""
+    its σ, the table's readings off by their accuracy) calibrated by docs/rig.md's protocol."""
     as_built = as_built or AsBuilt()
     rng = np.random.default_rng(seed)
     base = load_rig(rig_file)
@@ -430,7 +430,7 @@ def first_use(seed: int, rig_file: Path, scale: float = 1.0, as_built: AsBuilt |
 
 def as_built_trial(seed: int, rig_file: Path, scale: float = 1.0,
                    as_built: AsBuilt | None = None, drop: bool = True) -> dict[str, Any]:
-    """Calibrate a random rig as built (seeded) by the README's protocol, with its tolerances
+    """Calibrate a random rig as built (seeded) by docs/rig.md's protocol, with its tolerances
     declared, with them declared ten times too tight, and as today's model (emitters and the
     table exact); check each on an unseen series about the diagonal and (with `drop`) the
     declared one on a 1 g sloshing drop; the declared fit's own σ of the unseen surfaces'

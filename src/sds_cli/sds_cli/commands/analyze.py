@@ -36,7 +36,7 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
     parser.add_argument("--forcing-s", type=float,
                         help="the free decay starts this long after the excitation's onset [s]")
     parser.add_argument("--gravity", type=non_negative_float, help="gravity for the theory [m/s²] "
-                        "(default: the rig's; 0 for a drop: capillary theory, see README)")
+                        "(default: the rig's; 0 for a drop: capillary theory, docs/sloshing.md)")
     parser.add_argument("--expected", action="append", default=[], metavar="MODE=HZ",
                         help="expected frequency of a mode, e.g. lateral_1=1.9 (repeatable)")
     parser.add_argument("--truth", type=existing_file,

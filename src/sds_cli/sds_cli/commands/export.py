@@ -12,8 +12,7 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
     """Register `sds export`."""
     parser = commands.add_parser(
         "export", help="a recording's spots, points, line, fits, IMU, ToF and analysis as files",
-        description="Write the result files of a recording of the graph (see README, "
-                    "'Result files').")
+        description="Write the result files of a recording of the graph (docs/results.md).")
     parser.add_argument("recording", type=existing_file, help="a recording of the graph (MCAP)")
     parser.add_argument("--rig", type=existing_file,
                         help="the rig file (default: the one the recording carries)")

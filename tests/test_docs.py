@@ -1,0 +1,81 @@
+"""The documents stay true to the code: the README is a front door of a few screens, every link
+and every path they name exists, and every `sds` command line they show names a subcommand
+and options that the command has."""
+
+from __future__ import annotations
+
+import argparse
+import re
+from pathlib import Path
+
+import pytest
+from sds_cli.cli import build_parser
+
+REPO = Path(__file__).resolve().parents[1]
+DOCUMENTS = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md")),
+             REPO / "bench" / "README.md", *sorted(REPO.glob("config/**/README.md")),
+             REPO / "firmware" / "README.md"]
+README_LINES = 300
+"""The README's length at most: what SDS is, the two commands, a real rig step by step, the
+command table, links to docs/ (issue 48)."""
+
+
+def test_the_readme_is_a_front_door() -> None:
+    lines = (REPO / "README.md").read_text().splitlines()
+    assert len(lines) <= README_LINES, len(lines)
+    assert lines[0].startswith("# SDS") and "make demo" in "\n".join(lines[:15])
+    linked = set(re.findall(r"\]\((docs/[^)#]+\.md)", "\n".join(lines)))
+    assert linked == {str(p.relative_to(REPO)) for p in (REPO / "docs").glob("*.md")}, \
+        "every page of docs/ is linked from the README, and only pages that exist"
+
+
+@pytest.mark.parametrize("document", DOCUMENTS, ids=lambda p: str(p.relative_to(REPO)))
+def test_every_link_and_path_a_document_names_exists(document: Path) -> None:
+    text = document.read_text()
+    missing = [target for target in re.findall(r"\]\(([^)#\s]+)", text)
+               if not target.startswith("http") and not (document.parent / target).exists()]
+    for path in set(re.findall(
+            r"`((?:src|config|bench|tests|docs|firmware|cmake)/[^`\s*<>{}…]+?)`", text)):
+        if not (REPO / path.split(":")[0].rstrip(".,;")).exists():
+            missing.append(path)
+    assert not missing, missing
+
+
+def subcommands(parser: argparse.ArgumentParser, path: tuple[str, ...] = ("sds",)
+                ) -> dict[tuple[str, ...], set[str]]:
+    """Each (sub)command's words → its option strings."""
+    found = {path: {o for a in parser._actions for o in a.option_strings}}
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                found.update(subcommands(sub, (*path, name)))
+    return found
+
+
+def command_lines(text: str) -> list[str]:
+    """The `sds ...` lines of a document's code blocks, continuation lines joined, comments
+    left out."""
+    lines: list[str] = []
+    for block in re.findall(r"```[a-z]*\n(.*?)```", text, flags=re.S):
+        for line in block.replace("\\\n", " ").splitlines():
+            line = line.split("#")[0].strip()
+            if line.startswith("sds "):
+                lines.append(line)
+    return lines
+
+
+@pytest.mark.parametrize("document", DOCUMENTS, ids=lambda p: str(p.relative_to(REPO)))
+def test_every_command_line_shown_is_one_the_command_takes(document: Path) -> None:
+    known = subcommands(build_parser())
+    wrong = []
+    for line in command_lines(document.read_text()):
+        words = line.split()
+        path = ("sds",)
+        while len(words) > len(path) and (*path, words[len(path)]) in known:
+            path = (*path, words[len(path)])
+        if len(path) == 1:
+            wrong.append(f"{line}: no such subcommand")
+            continue
+        options = {w.split("=")[0] for w in words if w.startswith("--")}
+        wrong += [f"{line}: {o}" for o in sorted(options - known[path])]
+    assert not wrong, wrong
