@@ -284,7 +284,7 @@ def test_a_video_cut_in_half_keeps_the_frames_before_the_cut(kick: SimulationOut
 def test_ctrl_c_during_the_demos_graph_is_an_interruption_not_a_failure(tmp_path: Path) -> None:
     """Ctrl-C (SIGINT to the terminal's process group) while the graph runs: exit 130, said
     in one line, no export or analysis of a partial run."""
-    demo = interruptible([SDS, "demo", "--seconds", "1", "--out", str(tmp_path)],
+    demo = interruptible([SDS, "demo", "--exact-rig", "--seconds", "1", "--out", str(tmp_path)],
                          start_new_session=True)
     assert demo.stdout is not None and demo.stderr is not None
     for line in demo.stdout:

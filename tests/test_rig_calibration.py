@@ -221,6 +221,12 @@ def test_sds_calibrate_rig_writes_rig_report_and_overlays(tmp_path: Path) -> Non
     report = json.loads((tmp_path / "calibrated.report.json").read_text())
     assert report["surfaces"][-1]["declared_tilt_sigma_deg"] == [0.29, 0.15]
     assert report["surfaces"][0]["declared_tilt_sigma_deg"] == [0.0, 0.0]
+    # What the rig states it will measure on unseen surfaces, from the fit's own covariance:
+    # a calibrated rig's σ lies below the 0.5 deg table's and above zero.
+    unseen = report["unseen_surfaces"]
+    assert 0.0 < unseen["tilt_sigma_deg"] < 0.5 and 0.0 < unseen["height_sigma_mm"] < 1.0
+    assert f"tilt ± {unseen['tilt_sigma_deg']:.3f} deg" in \
+        (tmp_path / "calibrated.report.txt").read_text()
     rig = load_rig(out)
     assert rig.calibration is not None and len(rig.calibration["camera"]["rotation_sigma_deg"]) == 3
     assert all(d.direction_sigma_deg is not None for d in rig.tracked_diodes)

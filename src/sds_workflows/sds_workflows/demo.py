@@ -12,9 +12,10 @@ simulator's truth.
 from __future__ import annotations
 
 import csv
+import shutil
 import sys
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -26,6 +27,7 @@ from sds_model.rig import Rig, load_rig
 from sds_model.staging import staged_folder
 from sds_recon.results import ResultsWriter, load_results, refuse_results
 from sds_record.mcap_files import read_messages
+from sds_sim.imaging import merged
 from sds_sim.scenario import load_scenario
 from sds_sim.simulate import simulate
 from sds_sloshing.analysis import AnalysisOptions
@@ -33,6 +35,7 @@ from sds_sloshing.report import summary_lines, truth_from_run
 from sds_sloshing.surface_series import RecordingError
 from sds_viz.from_mcap import mcap_to_rrd
 
+from sds_workflows.demo_rig import DemoRig, demo_rig
 from sds_workflows.export import export_recording
 from sds_workflows.lateral import (
     LateralInput,
@@ -82,15 +85,17 @@ class ChainRunner(Protocol):
                  graphs: tuple[str, ...] = ()) -> ChainOutputs: ...
 
 
-def height_errors(truth_spots: Path, points: np.ndarray) -> np.ndarray:
-    """Measured minus true height [mm] of every spot point with a truth."""
+def height_errors(truth_spots: Path, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Measured minus true height [mm] of every spot point with a truth, and each one's own
+    σ (sigma_Z_mm)."""
     truth = {}
     with truth_spots.open() as file:
         for row in csv.DictReader(file):
             if row["visible"] == "1":
                 truth[(int(row["frame"]), int(row["laser_id"]))] = float(row["Z_mm"])
-    return np.array([p["Z_mm"] - truth[(int(p["frame"]), int(p["laser_id"]))]
-                     for p in points if (int(p["frame"]), int(p["laser_id"])) in truth])
+    kept = [p for p in points if (int(p["frame"]), int(p["laser_id"])) in truth]
+    return (np.array([p["Z_mm"] - truth[(int(p["frame"]), int(p["laser_id"]))] for p in kept]),
+            np.array([p["sigma_Z_mm"] for p in kept]))
 
 
 @dataclass(frozen=True)
@@ -156,29 +161,45 @@ def interrupted(command: str, outputs: ChainOutputs) -> int:
     return 130
 
 
-def run_demo(out: Path, seconds: float | None, run_chain: ChainRunner) -> int:
-    """Simulate a drop, run the whole chain on it, analyse, print the summary."""
+def run_demo(out: Path, seconds: float | None, run_chain: ChainRunner,
+             exact_rig: bool = False) -> int:
+    """Simulate a drop, run the whole chain on it, analyse, print the summary. The drop is
+    rendered with a rig as built and measured with the rig file the calibration protocol gave
+    (`demo_rig`); with `exact_rig`, rendered and measured with the scenario's own rig file."""
     out.mkdir(parents=True, exist_ok=True)
     overrides = {} if seconds is None else {"duration_s": seconds}
     scenario = load_scenario(DEMO_SCENARIO, overrides)
+    built = None
+    if not exact_rig:
+        folder = out / "calibration"
+        if folder.exists():   # the demo's own folder: its earlier calibration is replaced
+            shutil.rmtree(folder)
+        folder.mkdir()
+        print(f"calibrating a rig as built ({folder}): sds calibrate plan, the tilt table's "
+              "images, sds calibrate rig")
+        built = demo_rig(scenario, folder)
+        scenario = replace(load_scenario(DEMO_SCENARIO, merged(overrides,
+                                                               built.scenario_overrides)),
+                           rig=built.true)
+    rig_file = built.calibrated_file if built else scenario.rig_file.resolve()
+    rig = load_rig(rig_file)
     print(f"simulating '{scenario.name}': {scenario.duration_s:g} s, {scenario.frame_count} "
-          f"frames at {scenario.rig.camera.width_px}x{scenario.rig.camera.height_px}")
+          f"frames at {scenario.rig.camera.width_px}x{scenario.rig.camera.height_px}"
+          + (", the rig as built with a real camera's imaging" if built else ""))
     simulation = simulate(scenario, out / "simulation")
-    rig = scenario.rig
     led_x, led_y = (int(v) for v in scenario.events.led_position_px)
     half = LED_ROI_HALF_PX
     port = (out / "ttyARDUINO").resolve()
     serial_lines = simulation.serial.read_bytes().splitlines(keepends=True)
+    camera_model = [] if rig.camera_file is None else [f"camera.camera_model={rig.camera_file}"]
     # The watcher ends the demo's graph once every frame and the Arduino's last line are in.
     outputs = run_chain(["recorder.overwrite=true", "camera.linger_s=60.0",
                          f"camera.source={simulation.video.resolve()}",
                          f"camera.roi={list(rig.container_region_px(rig.camera))}",
-                         f"camera.camera_model={scenario.rig.camera_file}",
+                         *camera_model,
                          f"camera.led_roi={[led_x - half, led_y - half, 2 * half, 2 * half]}",
-                         f"tracker.rig={scenario.rig_file.resolve()}",
-                         f"recon.rig={scenario.rig_file.resolve()}",
-                         f"viewer.rig={scenario.rig_file.resolve()}",
-                         f"arduino.port={port}"],
+                         f"tracker.rig={rig_file}", f"recon.rig={rig_file}",
+                         f"viewer.rig={rig_file}", f"arduino.port={port}"],
                         out, scenario.frame_count, serial_lines, port, graphs=("arduino.yaml",))
     if outputs.interrupted:
         return interrupted("sds demo", outputs)
@@ -189,24 +210,40 @@ def run_demo(out: Path, seconds: float | None, run_chain: ChainRunner) -> int:
     analysed = analyse_run(outputs.recording, rig, out, AnalysisOptions(
         gravity_m_s2=scenario.gravity, damping_caveat=damping_caveat(simulation.video)),
         simulation.run)
-    return print_summary(out, scenario, simulation, outputs, analysed.results)
+    return print_summary(out, scenario, simulation, outputs, analysed.results, built)
 
 
-def print_summary(out: Path, scenario, simulation, outputs: ChainOutputs, result: dict) -> int:
-    """The demo's summary: files, modes against the truth, heights, spots, the Arduino."""
+def print_summary(out: Path, scenario, simulation, outputs: ChainOutputs, result: dict,
+                  built: DemoRig | None = None) -> int:
+    """The demo's summary: the rig's calibration (with `built`), files, modes against the
+    truth, heights, spots, the Arduino."""
     results = load_results(out / "results")
     spots, points = results.spots, results.points
     if spots is None or points is None:
         print(f"demo failed: no spots or points in {out / 'results'}", file=sys.stderr)
         return 1
     frames = len(set(spots["frame"].tolist()))
-    errors = height_errors(simulation.spots, points[points["laser_id"] != 65535])
+    errors, sigmas = height_errors(simulation.spots, points[points["laser_id"] != 65535])
     log = outputs.log.read_text()
     arduino = [line for line in log.splitlines() if "final: records" in line]
     offset = [line.split("LED offset ")[1] for line in log.splitlines() if "LED offset" in line]
     print(f"\nSDS demo: '{scenario.name}', {scenario.frame_count} frames "
           f"({scenario.duration_s:g} s at {scenario.fps:g} fps, "
           f"{scenario.rig.camera.width_px}x{scenario.rig.camera.height_px})")
+    if built is not None:
+        report = built.report
+        check, unseen = report["model_check"], report["unseen_surfaces"]
+        print(f"  rig as built       calibrated by the protocol: {len(built.images)} table "
+              f"images ({built.surfaces_csv.name} from sds calibrate plan), "
+              f"{built.calibrated_file}")
+        print(f"    chi2/dof         {check['chi2_per_dof']:.2f} (expected "
+              f"{check['expected'][0]:.2f}–{check['expected'][1]:.2f}: "
+              + ("the model explains the images)" if check["explained"]
+                 else "THE MODEL DOES NOT EXPLAIN THE IMAGES; see the rig report)"))
+        print(f"    unseen surfaces  the rig report states tilt ± {unseen['tilt_sigma_deg']:.3f} "
+              f"deg, heights ± {unseen['height_sigma_mm']:.3f} mm (the plan predicted tilt ± "
+              f"{built.planned_tilt_sigma_deg:.3f} deg)")
+        print("\n".join(f"    {line}" for line in built.against_truth()))
     print(f"  recording (MCAP)   {outputs.recording}")
     print(f"  Rerun              {outputs.rerun}   (open: rerun {outputs.rerun.name})")
     print(f"  report             {out / 'analysis' / 'report.html'}")
@@ -214,7 +251,7 @@ def print_summary(out: Path, scenario, simulation, outputs: ChainOutputs, result
     print(f"  frames processed   {frames} of {scenario.frame_count}; "
           f"{live_coverage(outputs.recording)}")
     print(f"  heights            RMSE {np.sqrt(np.mean(errors**2)):.3f} mm against the truth "
-          f"({len(errors)} points)")
+          f"({len(errors)} points; their own σ RMS {np.sqrt(np.mean(sigmas**2)):.3f} mm)")
     flags = {name: int(np.sum(spots["flags"] & bit != 0)) for name, bit in (
         ("lost", 1), ("saturated", 2), ("reflection suspected", 4), ("off path", 8),
         ("Hampel-replaced", 16))}

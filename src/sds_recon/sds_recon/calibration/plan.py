@@ -198,6 +198,19 @@ def unseen_tilt_sigmas_deg(sensitivity: UnseenSensitivity, names: list[str],
     return np.array(sigmas)
 
 
+def unseen_height_sigmas_mm(sensitivity: UnseenSensitivity, names: list[str],
+                            covariance: np.ndarray) -> np.ndarray:
+    """RMS over its points of each unseen diagonal surface's height σ [mm] (one per
+    UNSEEN_TILTS_DEG) that the parameters `names` with `covariance` give (NaN, a parameter
+    held fixed, counts as known)."""
+    known = np.nan_to_num(covariance)
+    sigmas = []
+    for unseen in range(len(UNSEEN_TILTS_DEG)):
+        _, gradient = sensitivity.rows(names, unseen)
+        sigmas.append(np.sqrt(np.mean(np.einsum("ki,kl,li->i", gradient, known, gradient))))
+    return np.array(sigmas)
+
+
 def predict(rig: Rig, surfaces: list[KnownSurface],
             sensitivity: UnseenSensitivity | None = None) -> Prediction:
     """The posterior σ of every parameter after calibrating `rig` (its tolerances as priors)
@@ -216,15 +229,11 @@ def predict(rig: Rig, surfaces: list[KnownSurface],
     posterior = np.linalg.pinv(information, rcond=1e-12) * np.outer(scales, scales)
     sigmas = np.sqrt(np.clip(np.diag(posterior), 0.0, None))
     tilt_sigmas = unseen_tilt_sigmas_deg(sensitivity, model.table.names, posterior)
-    height_sigma = []
-    for unseen in range(len(UNSEEN_TILTS_DEG)):
-        _, height_gradient = sensitivity.rows(model.table.names, unseen)
-        height_variance = np.einsum("ki,kl,li->i", height_gradient, posterior, height_gradient)
-        height_sigma.append(float(np.sqrt(np.mean(height_variance))))
+    height_sigma = unseen_height_sigmas_mm(sensitivity, model.table.names, posterior)
     worst_unseen, worst_axis = np.unravel_index(int(np.argmax(tilt_sigmas)), tilt_sigmas.shape)
     worst_gradient = sensitivity.rows(model.table.names, int(worst_unseen))[0][:, worst_axis]
     return Prediction(list(surfaces), model.table, sigmas, tilt_sigmas.max(axis=1),
-                      np.array(height_sigma), posterior, worst_gradient)
+                      height_sigma, posterior, worst_gradient)
 
 
 GROUP_OF_KIND = {BEAM_KIND: "beams' leans", EMITTER_KIND: "emitters' places",

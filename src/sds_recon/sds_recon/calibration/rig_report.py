@@ -14,6 +14,12 @@ from sds_recon.calibration.parameters import (
     CAMERA_SHIFT,
     LINE_PLANE,
 )
+from sds_recon.calibration.plan import (
+    UNSEEN_TILTS_DEG,
+    unseen_height_sigmas_mm,
+    unseen_sensitivity,
+    unseen_tilt_sigmas_deg,
+)
 from sds_recon.calibration.rig_calibration import RigCalibration
 from sds_recon.calibration.self_calibration import SelfCalibration
 
@@ -58,8 +64,9 @@ def calibrated_rig(nominal: Rig, result: RigCalibration) -> Rig:
         for d in fitted.diodes)
     report = rig_report(nominal, result)
     record = {key: report[key] for key in ("model_check", "method", "frames", "spots",
-                                           "rms_px", "camera", "line_laser", "unidentified",
-                                           "not_determined", "weakly_determined")}
+                                           "rms_px", "camera", "line_laser", "unseen_surfaces",
+                                           "unidentified", "not_determined",
+                                           "weakly_determined")}
     fit = result.fit
     intrinsics = {name: fit.sigma_of(f"camera {name}") for name in nominal.camera_sigma}
     if not intrinsics:
@@ -69,6 +76,21 @@ def calibrated_rig(nominal: Rig, result: RigCalibration) -> Rig:
     return replace(fitted, diodes=diodes, calibration=record, camera_file=None,
                    camera_sigma={name: float(f"{sigma:.4g}")
                                  for name, sigma in intrinsics.items()})
+
+
+def unseen_surfaces(result: RigCalibration) -> dict[str, Any]:
+    """What the calibrated rig states it will measure: the one-σ errors its fit's covariance
+    gives unseen surfaces tilted about the diagonal (plan.UNSEEN_TILTS_DEG, an axis no
+    protocol uses), the worst tilt [deg] and the worst RMS of the points' heights [mm]."""
+    fit = result.fit
+    rig = replace(fit.rig, diodes=tuple(d if d.laser_id in result.laser_ids
+                                        else replace(d, tracked=False) for d in fit.rig.diodes))
+    sensitivity = unseen_sensitivity(rig)
+    tilt_deg = unseen_tilt_sigmas_deg(sensitivity, fit.names, fit.covariance)
+    height_mm = unseen_height_sigmas_mm(sensitivity, fit.names, fit.covariance)
+    return {"tilts_about_diagonal_deg": list(UNSEEN_TILTS_DEG),
+            "tilt_sigma_deg": float(f"{np.max(tilt_deg):.3g}"),
+            "height_sigma_mm": float(f"{np.max(height_mm):.3g}")}
 
 
 def rig_report(nominal: Rig, result: RigCalibration) -> dict[str, Any]:
@@ -127,6 +149,7 @@ def rig_report(nominal: Rig, result: RigCalibration) -> dict[str, Any]:
         "rms_px": float(f"{fit.rms_px:.3g}"), "chi2_per_dof": float(f"{fit.chi2_per_dof:.3g}"),
         "condition_number": float(f"{fit.condition_number:.3g}"),
         "camera": camera, "line_laser": line, "beams": beams, "per_frame": frames,
+        "unseen_surfaces": unseen_surfaces(result),
         "unidentified": {str(k): v for k, v in sorted(result.unidentified.items())},
         "outliers": [{"id": i, "frame": f, "sigma": float(f"{s:.3g}")}
                      for i, f, s in result.outliers],
@@ -215,6 +238,11 @@ def report_text(report: dict[str, Any]) -> str:
                      f"RMS {line['rms_px']} px / {line['rms_mm']} mm, normal "
                      f"{_plus_minus(line['normal_sigma_deg'], 4, 'deg')}, offset "
                      f"{_plus_minus(line['offset_sigma_mm'], 3, 'mm')}")
+    unseen = report["unseen_surfaces"]
+    lines.append(f"unseen surfaces (tilted {unseen['tilts_about_diagonal_deg'][0]:g}–"
+                 f"{unseen['tilts_about_diagonal_deg'][-1]:g} deg about the diagonal), this "
+                 f"calibration's own sigma: tilt ± {unseen['tilt_sigma_deg']:.3f} deg, heights "
+                 f"± {unseen['height_sigma_mm']:.3f} mm")
     fitted_surfaces = [row for row in report["surfaces"]
                        if any(row["declared_tilt_sigma_deg"]) or row["declared_offset_sigma_mm"]]
     if fitted_surfaces:

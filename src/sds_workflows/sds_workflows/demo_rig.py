@@ -1,0 +1,142 @@
+"""`sds demo`'s rig as built and its calibration by docs/rig.md's protocol, as a user does it.
+
+The demo's rig file is the StELIUM rig as designed (vertical beams, the camera where the
+drawing puts it, the emitters' tolerance declared, the camera's readout as measured). The
+simulator renders a rig *as built* from it, seeded: beams leaning, the camera turned and
+moved, emitters off by their tolerance, the true camera's intrinsics off its file by their σ
+and its readout off the measured one, a real camera's imaging (`sds_sim.imaging`, every
+effect drawn in its range). The user's steps then run on what such a user has: `sds calibrate
+plan` on the rig file writes the protocol's surfaces CSV, the tilt table's images are
+rendered at the liquid's true poses (the table read to the seed's accuracy), and `sds
+calibrate rig` on those images writes the calibrated rig file the drop is measured with.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+from scipy.spatial.transform import Rotation
+from sds_model.camera.rolling_shutter import RollingShutter
+from sds_model.rig import Rig, Tolerances, load_rig, save_rig
+from sds_recon.calibration.parameters import CAMERA_ROTATION, CAMERA_SHIFT
+from sds_recon.calibration.rig_calibration import RigCalibration
+from sds_recon.calibration.rig_report import rig_report
+from sds_sim.imaging import draw_imaging, merged
+from sds_sim.scenario import Scenario
+from sds_sim.tilt_series import ReadingErrors, render_surfaces, true_surfaces
+from sds_sim.true_rig import RigErrors, camera_as_calibrated, true_rig
+
+from sds_workflows.calibration_plan import plan_protocol, write_protocol
+from sds_workflows.rig_calibration import calibrate_rig
+
+RIG_ERRORS = RigErrors(emitter_sigma_mm=0.3)
+"""How the demo's rig as built departs from its file (beams, camera pose, line plane: the
+simulator's defaults; emitters: a 3D-printed holder's tenths of a mm)."""
+DECLARED_EMITTER_MM = 0.3
+"""The emitters' tolerance the demo's rig file declares (tolerances.emitter_mm)."""
+READINGS = ReadingErrors(about_axis_deg=0.5, across_deg=0.15, level_deg=0.05, offset_mm=0.05)
+"""How the tilt table is read: the seed's table ("0.5 deg accuracy") about its axis, the other
+angle kept close to 0, a spirit level on level frames, fill levels from a measured volume."""
+READOUT_S = 0.020
+"""The rolling shutter's readout the demo's rig file states (as `sds camera readout` measured
+it; a GoPro at 4K reads its rows over a few tens of ms)."""
+READOUT_SIGMA_S = 0.0003
+"""σ of that measurement: the true camera's readout is drawn off it by this much."""
+STREAM = 48
+"""The second key of the demo rig's random stream (the first is the scenario's seed)."""
+
+
+@dataclass(frozen=True)
+class DemoRig:
+    """The demo's rig: the true one the simulator renders, the scenario overrides of its
+    imaging and rolling shutter, the files the user's steps wrote, and the calibration."""
+
+    true: Rig
+    scenario_overrides: dict[str, dict[str, Any]]
+    rig_file: Path
+    surfaces_csv: Path
+    images: list[Path]
+    calibrated_file: Path
+    nominal: Rig
+    calibrated: Rig
+    result: RigCalibration
+    planned_tilt_sigma_deg: float
+
+    @property
+    def report(self) -> dict[str, Any]:
+        """The calibration's report (`sds calibrate rig`'s JSON)."""
+        return rig_report(self.nominal, self.result)
+
+    def against_truth(self) -> list[str]:
+        """The calibrated rig against the true one, each error beside the σ the calibration
+        states for it: camera turn and position, the beams' directions, the line plane."""
+        fit, true, rig = self.result.fit, self.true, self.calibrated
+        turn_deg = np.degrees(Rotation.from_matrix(
+            rig.world_to_camera.rotation.T @ true.world_to_camera.rotation).as_rotvec())
+        shift_mm = rig.camera_position_mm - true.camera_position_mm
+        camera_sigma_deg = np.degrees([fit.sigma_of(name) for name in CAMERA_ROTATION])
+        position_sigma_mm = [fit.sigma_of(name) for name in CAMERA_SHIFT]
+        beams = [(np.degrees(np.arccos(np.clip(rig.diode(i).direction @ true.diode(i).direction,
+                                               -1.0, 1.0))), rig.diode(i).direction_sigma_deg)
+                 for i in self.result.laser_ids]
+        beam_error = np.array([error for error, _ in beams])
+        beam_sigma = np.array([sigma for _, sigma in beams], dtype=float)
+        lines = [
+            "camera turned   error [deg] " + ", ".join(
+                f"{e:+.3f} ± {s:.3f}" for e, s in zip(turn_deg, camera_sigma_deg, strict=True)),
+            "camera position error [mm]  " + ", ".join(
+                f"{e:+.3f} ± {s:.3f}" for e, s in zip(shift_mm, position_sigma_mm,
+                                                      strict=True)),
+            f"beams           {len(beams)} of {len(true.diodes)} calibrated: direction error "
+            f"RMS {np.sqrt(np.mean(beam_error**2)):.3f} deg, stated σ RMS "
+            f"{np.sqrt(np.mean(beam_sigma**2)):.3f} deg, worst {beam_error.max():.3f} deg"]
+        if rig.line_laser is not None and true.line_laser is not None:
+            cosine = abs(rig.line_laser.normal @ true.line_laser.normal)
+            plane_deg = np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0)))
+            stated = (rig.calibration or {}).get("line_laser") or {}
+            lines.append(f"line plane      normal error {plane_deg:.3f} deg, stated σ "
+                         f"{stated.get('normal_sigma_deg')} deg")
+        return lines
+
+
+def demo_rig(scenario: Scenario, folder: Path) -> DemoRig:
+    """Draw the scenario's rig as built (seeded by the scenario's seed), write the user's rig
+    file, plan the protocol, render the table's images and calibrate the rig from them, all
+    in `folder`."""
+    rng = np.random.default_rng((scenario.seed, STREAM))
+    base = scenario.rig
+    # The rig file as the user writes it: the camera inline (the GoPro's file and the
+    # readout measured), the emitters' tolerance declared.
+    designed = replace(base, camera_file=None,
+                       camera_shutter=RollingShutter(READOUT_S, "top_to_bottom"),
+                       tolerances=Tolerances(emitter_mm=DECLARED_EMITTER_MM))
+    true = true_rig(designed, RIG_ERRORS, rng)
+    true = replace(true, camera=camera_as_calibrated(base.camera, base.camera_sigma, 1.0, rng))
+    readout_s = float(READOUT_S + rng.normal(0.0, READOUT_SIGMA_S))
+    imaging = draw_imaging(rng)
+    rig_file = save_rig(designed, folder / "rig.yaml", comment=(
+        "The demo's rig file as designed (sds demo): the StELIUM rig, the GoPro's camera file "
+        "inline with its readout as measured, the emitters' tolerance declared."))
+    nominal = load_rig(rig_file)
+    steps = plan_protocol(nominal, READINGS.accuracy())
+    surfaces_csv = folder / "surfaces.csv"
+    write_protocol(steps[-1], surfaces_csv)
+    readings = steps[-1].surfaces
+    series = render_surfaces(true, true_surfaces(readings, READINGS, rng), scenario.scale,
+                             scenario.seed, imaging=imaging)
+    images = []
+    for index, image in enumerate(series.images):
+        path = folder / f"table_{index:02d}.png"
+        cv2.imwrite(str(path), image)
+        images.append(path)
+    calibrated_file = folder / "rig_calibrated.yaml"
+    calibrated, result = calibrate_rig(nominal, images, surfaces_csv, calibrated_file,
+                                       "`sds demo` (sds calibrate rig on the table's images)")
+    overrides = merged({"sensor": {"readout_s": readout_s,
+                                   "readout_direction": "top_to_bottom"}}, imaging)
+    return DemoRig(true, overrides, rig_file, surfaces_csv, images, calibrated_file, nominal,
+                   calibrated, result, steps[-1].worst_tilt_deg)
