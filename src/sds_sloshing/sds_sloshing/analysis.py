@@ -25,7 +25,7 @@ from sds_sloshing.estimators import (
 )
 from sds_sloshing.gravity import gravity_regime
 from sds_sloshing.modal import ModeCoordinate, modal_series, mode_coordinates
-from sds_sloshing.surface_series import SurfaceSeries
+from sds_sloshing.surface_series import RecordingError, SurfaceSeries
 
 MATCH_TOLERANCE = 0.15
 """A component matches an expected frequency within ±15 %."""
@@ -340,6 +340,9 @@ def analyze(recording: SurfaceSeries, rig: Rig, options: AnalysisOptions | None 
         start = decay_start(first.time_s, first.values_mm, options)
     except DecayError:
         start = float(recording.time_s[0])   # no decay to find: each mode says why below
+    if options.end_s is None and not float(recording.time_s[-1]) > start:
+        raise RecordingError(f"the recording ends at {float(recording.time_s[-1]):.3f} s, where "
+                             "its free decay starts: too short to analyse")
     end = options.end_s if options.end_s is not None else float(recording.time_s[-1])
     check_window(start, end)
     modes = []

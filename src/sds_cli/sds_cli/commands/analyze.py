@@ -63,11 +63,15 @@ def run(args: argparse.Namespace) -> int:
                     "exists: the folder holds an analysis already")
     from sds_sloshing.analysis import AnalysisOptions
     from sds_sloshing.report import summary_lines, truth_from_run, write_report
+    from sds_sloshing.surface_series import RecordingError
     from sds_workflows.analyze import analyse_recording
 
     options = AnalysisOptions(args.start_s, args.end_s, args.forcing_s, args.gravity,
                               expected_frequencies(args.expected))
-    analysis = analyse_recording(args.recording, args.rig, options)
+    try:
+        analysis = analyse_recording(args.recording, args.rig, options)
+    except RecordingError as error:   # data that give no analysis, said as export and run say it
+        raise RecordingError(f"NO ANALYSIS: {error}") from error
     truth = truth_from_run(args.truth) if args.truth else None
     files = write_report(analysis, args.out, truth)
     print(f"sds analyze: {analysis.source}, free decay {analysis.window_s[0]:.3f}–"
