@@ -231,8 +231,8 @@ def print_summary(out: Path, scenario, simulation, outputs: ChainOutputs, result
           f"({scenario.duration_s:g} s at {scenario.fps:g} fps, "
           f"{scenario.rig.camera.width_px}x{scenario.rig.camera.height_px})")
     if built is not None:
-        report = built.report
-        check, unseen = report["model_check"], report["unseen_surfaces"]
+        record = built.calibrated.calibration or {}
+        check, unseen = record["model_check"], record["unseen_surfaces"]
         print(f"  rig as built       calibrated by the protocol: {len(built.images)} table "
               f"images ({built.surfaces_csv.name} from sds calibrate plan), "
               f"{built.calibrated_file}")

@@ -24,7 +24,6 @@ from sds_model.camera.rolling_shutter import RollingShutter
 from sds_model.rig import Rig, Tolerances, load_rig, save_rig
 from sds_recon.calibration.parameters import CAMERA_ROTATION, CAMERA_SHIFT
 from sds_recon.calibration.rig_calibration import RigCalibration
-from sds_recon.calibration.rig_report import rig_report
 from sds_sim.imaging import draw_imaging, merged
 from sds_sim.scenario import Scenario
 from sds_sim.tilt_series import ReadingErrors, render_surfaces, true_surfaces
@@ -53,23 +52,17 @@ STREAM = 48
 @dataclass(frozen=True)
 class DemoRig:
     """The demo's rig: the true one the simulator renders, the scenario overrides of its
-    imaging and rolling shutter, the files the user's steps wrote, and the calibration."""
+    imaging and rolling shutter, the files the user's steps wrote, and the calibration (the
+    calibrated rig carries its report's record: model check, unseen surfaces' σ)."""
 
     true: Rig
     scenario_overrides: dict[str, dict[str, Any]]
-    rig_file: Path
     surfaces_csv: Path
     images: list[Path]
     calibrated_file: Path
-    nominal: Rig
     calibrated: Rig
     result: RigCalibration
     planned_tilt_sigma_deg: float
-
-    @property
-    def report(self) -> dict[str, Any]:
-        """The calibration's report (`sds calibrate rig`'s JSON)."""
-        return rig_report(self.nominal, self.result)
 
     def against_truth(self) -> list[str]:
         """The calibrated rig against the true one, each error beside the σ the calibration
@@ -136,7 +129,7 @@ def demo_rig(scenario: Scenario, folder: Path) -> DemoRig:
     calibrated_file = folder / "rig_calibrated.yaml"
     calibrated, result = calibrate_rig(nominal, images, surfaces_csv, calibrated_file,
                                        "`sds demo` (sds calibrate rig on the table's images)")
-    overrides = merged({"sensor": {"readout_s": readout_s,
-                                   "readout_direction": "top_to_bottom"}}, imaging)
-    return DemoRig(true, overrides, rig_file, surfaces_csv, images, calibrated_file, nominal,
-                   calibrated, result, steps[-1].worst_tilt_deg)
+    overrides = merged({"sensor": {"readout_s": readout_s, "readout_direction":
+                                   designed.camera_shutter.direction}}, imaging)
+    return DemoRig(true, overrides, surfaces_csv, images, calibrated_file, calibrated, result,
+                   steps[-1].worst_tilt_deg)
