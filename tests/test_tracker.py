@@ -593,3 +593,32 @@ def test_a_blob_beside_the_lines_end_is_not_taken_for_line() -> None:
     assert profile.y_px.min() >= 100 and len(profile.y_px) > 250
     expected = 150.0 + 0.3 * (profile.y_px - 100)
     assert np.max(np.abs(profile.x_px - expected)) < 0.5
+
+
+def rim_and_spot(spot: tuple[float, float] | None, seed: int) -> np.ndarray:
+    """The demo's failure: the container's rim lit by ambient light (a 4 px grey stripe 35
+    grey levels above the dark liquid, as the simulator renders it) across a diode's path,
+    60 px from where its spot is, the spot there or dropped out."""
+    image = spots_image([] if spot is None else [spot], seed).astype(float)
+    rows, columns = np.indices(image.shape)
+    across = (columns - 40.0) - 0.5 * (rows - 100.0)   # the rim crosses the path at x = 40
+    image += 35.0 * (np.abs(across) <= 2.0)
+    return np.clip(image, 0, 255).astype(np.uint8)
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_the_containers_rim_across_a_path_is_no_spot(seed: int) -> None:
+    """A spot that drops out for a frame (foam, a glint) is lost, in a first search along
+    its whole path and where it was tracked, not replaced by the rim where the rim crosses
+    its path (a point 60 px off, marked valid); when it comes back it is its own again, and
+    a spot the rim is beside is found where it is."""
+    path = straight_path((20.0, 100.0), (180.0, 100.0))
+    for previous in (None, (100.0, 100.0), (44.0, 100.0)):
+        tracker = SpotTracker({0: path})
+        tracker.previous[0] = None if previous is None else np.array(previous)
+        (gone,) = tracker.update(rim_and_spot(None, seed))
+        assert gone.flags & LOST and np.isnan(gone.x_px), (previous, gone)
+        (back,) = tracker.update(rim_and_spot((100.0, 100.0), seed))
+        assert np.hypot(back.x_px - 100.0, back.y_px - 100.0) < 0.3, (previous, back)
+    (beside,) = SpotTracker({0: path}).update(rim_and_spot((56.0, 100.0), seed))
+    assert np.hypot(beside.x_px - 56.0, beside.y_px - 100.0) < 0.5, beside

@@ -33,6 +33,49 @@ def background_step(window: np.ndarray, read_noise: float) -> float:
 
 
 @njit(cache=True)
+def light_elongation(image: np.ndarray, cx: float, cy: float, radius: float,
+                     floor: float) -> float:
+    """How elongated the light around (`cx`, `cy`) [image px] is: 1 for a round spot, about
+    L/w for a stripe of length L and width w (the container's rim, the laser line). The
+    square root of the larger over the smaller eigenvalue of the second moments of the signal
+    (the image less the median of the border of the square around the circle) above `floor`
+    within `radius` px, each pixel with its own extent (1/12 px²); 1 where no light is there.
+    The light is taken as it is, under the threshold too: a dim stripe that the threshold
+    breaks into short pieces is still one stripe."""
+    reach = int(np.ceil(radius))
+    x0, x1 = max(round(cx) - reach, 0), min(round(cx) + reach, image.shape[1] - 1)
+    y0, y1 = max(round(cy) - reach, 0), min(round(cy) + reach, image.shape[0] - 1)
+    if x1 <= x0 or y1 <= y0:
+        return 1.0
+    border = np.concatenate((image[y0, x0:x1 + 1].astype(np.float64),
+                             image[y1, x0:x1 + 1].astype(np.float64),
+                             image[y0:y1 + 1, x0].astype(np.float64),
+                             image[y0:y1 + 1, x1].astype(np.float64)))
+    background = np.median(border)
+    total, sx, sy, sxx, syy, sxy = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    for y in range(y0, y1 + 1):
+        for x in range(x0, x1 + 1):
+            if (x - cx) ** 2 + (y - cy) ** 2 > radius * radius:
+                continue
+            signal = float(image[y, x]) - background
+            if signal > floor:
+                total += signal
+                sx += signal * x
+                sy += signal * y
+                sxx += signal * x * x
+                syy += signal * y * y
+                sxy += signal * x * y
+    if total <= 0:
+        return 1.0
+    mx, my = sx / total, sy / total
+    a = sxx / total - mx * mx + 1 / 12
+    b = syy / total - my * my + 1 / 12
+    c = sxy / total - mx * my
+    middle, spread = (a + b) / 2, np.sqrt(((a - b) / 2) ** 2 + c * c)
+    return float(np.sqrt((middle + spread) / max(middle - spread, 1 / 12)))
+
+
+@njit(cache=True)
 def step_sigma_px(step: float, lever_px: float, total: float) -> float:
     """The centroid's σ [px] from a background `step` [grey levels] across a spot: half the
     step added on one side and taken off the other, over the weighted pixels' distances from
@@ -44,7 +87,7 @@ def step_sigma_px(step: float, lever_px: float, total: float) -> float:
 @njit(cache=True, fastmath=True)
 def spot_windows(image: np.ndarray, corners: np.ndarray, half: int, prior: np.ndarray,
                  threshold: float, min_competitor: float, aperture_factor: float,
-                 clip_fraction: float, read_noise: float
+                 clip_fraction: float, read_noise: float, max_elongation: float
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per window (top-left `corners`, size 2·half + 1): the spot-core centroid in window pixels,
     its σ [px], the raw peak, and whether one clear blob settled it.
@@ -54,6 +97,8 @@ def spot_windows(image: np.ndarray, corners: np.ndarray, half: int, prior: np.nd
     mass leaves the spot to the full search. Centroid: `clip_fraction` of the peak taken off,
     within 1.6 × the blob's radius (`aperture_factor`), re-centred once. σ: the photons' and the
     read noise's (`read_noise`), and a background that is not one level (`step_sigma_px`).
+    Light more elongated than `max_elongation` about the centre (`light_elongation` within
+    half/2, above threshold/2: a stripe, not a spot) is left to the full search too.
     """
     count = corners.shape[0]
     size = 2 * half + 1
@@ -110,6 +155,9 @@ def spot_windows(image: np.ndarray, corners: np.ndarray, half: int, prior: np.nd
                 break
             cx, cy = sx / total, sy / total
         if total <= 0 or abs(cx - half) + radius > half or abs(cy - half) + radius > half:
+            continue
+        if light_elongation(image, x0 + cx, y0 + cy, 0.5 * half,
+                            0.5 * threshold) > max_elongation:
             continue
         variance, top, lever = 0.0, 0.0, 0.0
         for y in range(max(0, int(cy) - reach), min(size, int(cy) + reach + 1)):
@@ -324,8 +372,9 @@ def warm_up() -> None:
     """Compile (or load from numba's cache) the kernels now, not on the first frames."""
     image = np.zeros((64, 64), np.uint8)
     spot_windows(image, np.zeros((1, 2), np.int64), 24, np.ones((49, 49)), 30.0, 0.3, 1.6,
-                 0.15, 2.0)
+                 0.15, 2.0, 3.0)
     background_step(image, 2.0)
+    light_elongation(image, 32.0, 32.0, 12.0, 15.0)
     line_rows(image, np.zeros(1, np.int64), np.zeros(1, np.int64), 61, 6, 10, 0.15, 30.0, 2.0)
     symmetric_centre(np.zeros((9, 9)), np.zeros((9, 9), np.bool_), 4.0, 4.0, 3, 30.0, 1, 1)
     remove_line(np.zeros((49, 49), np.float32), 0.0, 0.0, 24.0, 24.0, 12, 0.25, 30.0, 250.0)
