@@ -74,9 +74,12 @@ def find_spots(red: np.ndarray, offset: tuple[int, int] = (0, 0),
     starts = starts + np.asarray(offset, dtype=float)
     if len(starts) == 0:
         return SpotCandidates(np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros(0))
-    # The tracker's centroid, with each blob's own start as its prior and path.
+    # The tracker's centroid, with each blob's own start as its prior and path; the starts
+    # are compact blobs (thin structures opened away), and the line's light beside one is
+    # taken away below, so its shape is no test here.
     tracker = SpotTracker({k: np.array([p, p]) for k, p in enumerate(starts)},
-                          replace(s, path_tolerance_px=1e9), exclusive=False)
+                          replace(s, path_tolerance_px=1e9), exclusive=False,
+                          max_elongation=np.inf)
     for k, start in enumerate(starts):
         tracker.previous[k] = start
     estimates = tracker.update(image, offset)

@@ -34,31 +34,25 @@ def background_step(window: np.ndarray, read_noise: float) -> float:
 
 @njit(cache=True)
 def light_elongation(image: np.ndarray, cx: float, cy: float, radius: float,
-                     floor: float) -> float:
+                     background: float, threshold: float) -> float:
     """How elongated the light around (`cx`, `cy`) [image px] is: 1 for a round spot, about
     L/w for a stripe of length L and width w (the container's rim, the laser line). The
-    square root of the larger over the smaller eigenvalue of the second moments of the signal
-    (the image less the median of the border of the square around the circle) above `floor`
-    within `radius` px, each pixel with its own extent (1/12 px²); 1 where no light is there.
-    The light is taken as it is, under the threshold too: a dim stripe that the threshold
-    breaks into short pieces is still one stripe."""
+    square root of the larger over the smaller eigenvalue of the second moments of the
+    signal (image − `background`) above `threshold` within `radius` px, each pixel with its
+    own extent (1/12 px²); 1 where no light is there. The light within the circle counts,
+    joined or not: a dim stripe that the threshold breaks into short pieces is one stripe.
+    The caller's background and threshold are those that made the blob: a brighter region
+    beyond an edge, under the threshold, is not the blob's light."""
     reach = int(np.ceil(radius))
     x0, x1 = max(round(cx) - reach, 0), min(round(cx) + reach, image.shape[1] - 1)
     y0, y1 = max(round(cy) - reach, 0), min(round(cy) + reach, image.shape[0] - 1)
-    if x1 <= x0 or y1 <= y0:
-        return 1.0
-    border = np.concatenate((image[y0, x0:x1 + 1].astype(np.float64),
-                             image[y1, x0:x1 + 1].astype(np.float64),
-                             image[y0:y1 + 1, x0].astype(np.float64),
-                             image[y0:y1 + 1, x1].astype(np.float64)))
-    background = np.median(border)
     total, sx, sy, sxx, syy, sxy = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     for y in range(y0, y1 + 1):
         for x in range(x0, x1 + 1):
             if (x - cx) ** 2 + (y - cy) ** 2 > radius * radius:
                 continue
             signal = float(image[y, x]) - background
-            if signal > floor:
+            if signal > threshold:
                 total += signal
                 sx += signal * x
                 sy += signal * y
@@ -98,7 +92,7 @@ def spot_windows(image: np.ndarray, corners: np.ndarray, half: int, prior: np.nd
     within 1.6 × the blob's radius (`aperture_factor`), re-centred once. σ: the photons' and the
     read noise's (`read_noise`), and a background that is not one level (`step_sigma_px`).
     Light more elongated than `max_elongation` about the centre (`light_elongation` within
-    half/2, above threshold/2: a stripe, not a spot) is left to the full search too.
+    half/2: a stripe, not a spot) is left to the full search too.
     """
     count = corners.shape[0]
     size = 2 * half + 1
@@ -156,8 +150,8 @@ def spot_windows(image: np.ndarray, corners: np.ndarray, half: int, prior: np.nd
             cx, cy = sx / total, sy / total
         if total <= 0 or abs(cx - half) + radius > half or abs(cy - half) + radius > half:
             continue
-        if light_elongation(image, x0 + cx, y0 + cy, 0.5 * half,
-                            0.5 * threshold) > max_elongation:
+        if light_elongation(image, x0 + cx, y0 + cy, 0.5 * half, background,
+                            threshold) > max_elongation:
             continue
         variance, top, lever = 0.0, 0.0, 0.0
         for y in range(max(0, int(cy) - reach), min(size, int(cy) + reach + 1)):
@@ -374,7 +368,7 @@ def warm_up() -> None:
     spot_windows(image, np.zeros((1, 2), np.int64), 24, np.ones((49, 49)), 30.0, 0.3, 1.6,
                  0.15, 2.0, 3.0)
     background_step(image, 2.0)
-    light_elongation(image, 32.0, 32.0, 12.0, 15.0)
+    light_elongation(image, 32.0, 32.0, 12.0, 0.0, 30.0)
     line_rows(image, np.zeros(1, np.int64), np.zeros(1, np.int64), 61, 6, 10, 0.15, 30.0, 2.0)
     symmetric_centre(np.zeros((9, 9)), np.zeros((9, 9), np.bool_), 4.0, 4.0, 3, 30.0, 1, 1)
     remove_line(np.zeros((49, 49), np.float32), 0.0, 0.0, 24.0, 24.0, 12, 0.25, 30.0, 250.0)

@@ -47,14 +47,14 @@ PATH_GATE_SIGMAS = 3.0
 distance from its path."""
 
 MAX_ELONGATION = 2.5
-"""Most elongated light (`kernels.light_elongation` within half a window, above half the
+"""Most elongated light (`kernels.light_elongation` within half a window, above the
 threshold) that can be a spot: a spot is round, or an ellipse on a tilted surface or blurred
 by its motion; the container's rim lit by ambient light, which crosses the paths of the
 diodes near the wall, is a stripe (about its length over its width). Where a spot dropped
 out for a frame, its path's rim was taken for it, 20-60 px off and marked valid. Measured
-(development data): spots away from the laser line 1.22 at most (three random rigs as
-built, 20 frames each, every imaging effect), the simulator's rim 3.9-4.7 (the demo's
-drop); 2.5 lies about halfway between, in ratio."""
+(development data, over the background of a window's border): spots away from the laser
+line 1.29 at most, 1.73 with a glint beside one (three random rigs as built, 20 frames each,
+every imaging effect), the simulator's rim 4.4-16 (the demo's drop)."""
 
 PROFILE_STEP_PX = 0.25
 """Bin width [px] of the laser line's cross profile that is subtracted from a spot."""
@@ -200,13 +200,17 @@ class SpotTracker:
     """
 
     def __init__(self, paths: dict[int, np.ndarray], settings: SpotSettings | None = None,
-                 tolerances_px: dict[int, float] | None = None, exclusive: bool = True) -> None:
+                 tolerances_px: dict[int, float] | None = None, exclusive: bool = True,
+                 max_elongation: float = MAX_ELONGATION) -> None:
         """`tolerances_px`: a path's own gate [px] where it is known less well than
         `path_tolerance_px` (a weakly calibrated beam); the others use that. `exclusive`
         (diodes): a blob is one path's spot at most (`_one_blob_one_diode`); off, where the
-        paths are starts on blobs not yet told apart (discovery), two may settle on one."""
+        paths are starts on blobs not yet told apart (discovery), two may settle on one.
+        `max_elongation`: the most elongated light that can be a spot (`_spot_like`);
+        discovery, whose starts are compact blobs already, takes any."""
         self.settings = settings or SpotSettings()
         self.exclusive = exclusive
+        self.max_elongation = max_elongation
         self.paths = {i: np.asarray(p, dtype=float) for i, p in paths.items()}
         self.tolerance_px = {i: max(self.settings.path_tolerance_px,
                                     (tolerances_px or {}).get(i, 0.0)) for i in self.paths}
@@ -344,7 +348,7 @@ class SpotTracker:
         corner = corner[inside]
         centre, sigma, peak_raw, ok = spot_windows(
             image, corner, half, self._prior, s.threshold, s.min_competitor, s.aperture_factor,
-            s.clip_fraction, s.read_noise, MAX_ELONGATION)
+            s.clip_fraction, s.read_noise, self.max_elongation)
         full = centre + corner + origin
         paths = self._stacked_paths[[self._row[i] for i in ids]]
         ok &= distances_to_paths(full, paths) <= np.array([self.tolerance_px[i] for i in ids])
@@ -448,8 +452,9 @@ class SpotTracker:
         near_path = off_paths <= tolerance + 2 * radii
         for taken in excluded or []:
             near_path &= np.hypot(*(centres - taken).T) > np.maximum(SAME_BLOB_PX, radii)
-        near_path[near_path] = [self._spot_like(image, origin, np.array(peak), line)
-                                for peak in self._peaks(signal, labels, near_path, (x0, y0))]
+        near_path[near_path] = [
+            self._spot_like(image, origin, np.array(peak), background, line)
+            for peak in self._peaks(signal, labels, near_path, (x0, y0))]
         candidates = [(bool(off_paths[k] <= tolerance), float(masses[k] * priors[k]),
                        float(masses[k]), k + 1, centres[k]) for k in np.flatnonzero(near_path)]
         if not candidates:
@@ -509,19 +514,22 @@ class SpotTracker:
                 for y, x in maximum_position(signal, labels, indices)]
 
     def _spot_like(self, image: np.ndarray, origin: np.ndarray, peak: np.ndarray,
-                   line: tuple[np.ndarray, np.ndarray] | None) -> bool:
+                   background: float, line: tuple[np.ndarray, np.ndarray] | None) -> bool:
         """Whether the light around a blob's brightest pixel `peak` (region px) can be a
-        spot: no more elongated than MAX_ELONGATION (`kernels.light_elongation` within half a
-        window), unless the laser line runs within that reach (a spot on or beside the line
-        is the line-free measurement's to judge)."""
+        spot: no more elongated than `max_elongation` (`kernels.light_elongation` within half
+        a window, above the threshold over the search's `background`), unless the laser line
+        runs within that reach (a spot on or beside the line is the line-free measurement's
+        to judge)."""
+        if not np.isfinite(self.max_elongation):
+            return True
         reach = self.settings.window_px / 2
         if line is not None:
             x, y = peak + origin
             line_x = np.interp(y, line[0], line[1], left=np.nan, right=np.nan)
             if abs(line_x - x) <= 1.5 * reach:
                 return True
-        return light_elongation(image, float(peak[0]), float(peak[1]), reach,
-                                self.settings.threshold / 2) <= MAX_ELONGATION
+        return light_elongation(image, float(peak[0]), float(peak[1]), reach, background,
+                                self.settings.threshold) <= self.max_elongation
 
     @staticmethod
     def _aperture(image: np.ndarray, origin: np.ndarray, centre: np.ndarray, radius: float,
