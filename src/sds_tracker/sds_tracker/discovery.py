@@ -13,6 +13,7 @@ from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
+from scipy.optimize import brentq
 
 from sds_tracker.spots import (
     LOST,
@@ -40,11 +41,15 @@ MIN_SCATTER_FRAMES = 3
 @dataclass(frozen=True)
 class SpotCandidates:
     """Blobs found in one frame: full-frame centroid (N×2 px), its covariance (N×2×2 px²),
-    raw peak."""
+    raw peak; for blobs averaged over a still's frames (`averaged`), their frames' scatter
+    and a single frame's own variance (N each, px² per axis; NaN where fewer than
+    MIN_SCATTER_FRAMES frames saw one)."""
 
     pixels: np.ndarray
     covariance_px2: np.ndarray
     peak: np.ndarray
+    scatter_px2: np.ndarray | None = None
+    frame_variance_px2: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.pixels)
@@ -116,7 +121,7 @@ def averaged(frames: list[SpotCandidates], same_spot_px: float = SAME_SPOT_PX
     (from MIN_SCATTER_FRAMES frames on): what a still's frames say of a spot's error, speckle
     included, beside what its photons say. Its peak is the frames' median."""
     first = frames[0]
-    pixels, covariances, peaks = [], [], []
+    pixels, covariances, peaks, scatters, variances = [], [], [], [], []
     for k, pixel in enumerate(first.pixels):
         seen, own, peak = [pixel], [first.covariance_px2[k]], [first.peak[k]]
         for other in frames[1:]:
@@ -130,15 +135,43 @@ def averaged(frames: list[SpotCandidates], same_spot_px: float = SAME_SPOT_PX
                 peak.append(other.peak[nearest])
         count = len(seen)
         mean_covariance = np.mean(own, axis=0)
-        widen = 1.0
+        widen, spread = 1.0, np.nan
         if count >= MIN_SCATTER_FRAMES:
             scatter = np.cov(np.array(seen).T, ddof=1)
             widen = max(1.0, float(np.trace(scatter) / np.trace(mean_covariance)))
+            spread = float(np.trace(scatter)) / 2
         pixels.append(np.mean(seen, axis=0))
         covariances.append(mean_covariance * widen / count)
         peaks.append(float(np.median(peak)))
+        scatters.append(spread)
+        variances.append(float(np.trace(mean_covariance)) / 2 if count >= MIN_SCATTER_FRAMES
+                         else np.nan)
     return SpotCandidates(np.array(pixels).reshape(-1, 2),
-                          np.array(covariances).reshape(-1, 2, 2), np.array(peaks))
+                          np.array(covariances).reshape(-1, 2, 2), np.array(peaks),
+                          np.array(scatters), np.array(variances))
+
+
+def excess_sigma_px(stills: list[SpotCandidates]) -> float | None:
+    """The σ [px, per axis] that, added to a single frame's own σ (photons, read noise, the
+    background), makes it honest on the stills' repeated frames (`averaged`): chiefly laser
+    speckle, new in every frame on a liquid, which a frame's own light cannot show. The
+    least σ ≥ 0 with which the blobs' frame scatter over their variance averages 1 (the
+    mean, not each blob's excess: blobs whose σ is already wide, on the laser line, do not
+    cancel the others'); None where no still had repeated frames."""
+    pairs = [(s.scatter_px2, s.frame_variance_px2) for s in stills
+             if s.scatter_px2 is not None and s.frame_variance_px2 is not None]
+    if not pairs:
+        return None
+    scatter = np.concatenate([p[0] for p in pairs])
+    variance = np.concatenate([p[1] for p in pairs])
+    seen = np.isfinite(scatter) & np.isfinite(variance)
+    if not seen.any():
+        return None
+    scatter, variance = scatter[seen], variance[seen]
+    if np.mean(scatter / variance) <= 1.0:
+        return 0.0
+    return float(brentq(lambda sigma: np.mean(scatter / (variance + sigma**2)) - 1.0,
+                        0.0, float(np.sqrt(scatter.max()))))
 
 
 def _on_line_covariance(along: np.ndarray, sigma_px: float) -> np.ndarray:

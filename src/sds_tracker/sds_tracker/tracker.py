@@ -165,6 +165,9 @@ class FrameTracker:
                 raise InputError(f"seed for laser {laser_id}, which the rig does not have")
             self.spots.previous[laser_id] = np.asarray(position, dtype=float)
         self.ids = list(self.paths)
+        # What the calibration's stills showed a single frame's σ leaves out (speckle).
+        self.excess_sigma_px = float((rig.calibration or {}).get("spot_excess_sigma_px")
+                                     or 0.0)
         self.hampel = None if self.config.stills else HampelBank(
             self.config.hampel_window, self.config.hampel_k, self.config.hampel_floor_px)
         self._pending: dict[int, dict[int, SpotEstimate]] = {}
@@ -191,7 +194,8 @@ class FrameTracker:
         if self.hampel is None:   # a still: where the spots were says nothing of this image
             self.spots.previous = dict.fromkeys(self.paths)
         # The line's light is kept out of the spots it passes (seen this frame, or expected).
-        estimates = self.spots.update(red, offset, (self._line_rows, self._line_x))
+        estimates = [replace(e, sigma_px=float(np.hypot(e.sigma_px, self.excess_sigma_px)))
+                     for e in self.spots.update(red, offset, (self._line_rows, self._line_x))]
         self._pending[frame] = {e.laser_id: e for e in estimates}
         positions = np.array([[e.x_px, e.y_px] for e in estimates]).reshape(-1, 2)
         if self.hampel is None:

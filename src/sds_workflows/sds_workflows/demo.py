@@ -46,6 +46,7 @@ from sds_workflows.lateral import (
     process_lateral,
 )
 from sds_workflows.pipeline import damping_caveat
+from sds_workflows.rig_calibration import FRAMES_PER_STILL
 from sds_workflows.run_tables import RunTables, finish_analysis
 
 VIDEO_TOPIC = "/camera/video"
@@ -234,8 +235,8 @@ def print_summary(out: Path, scenario, simulation, outputs: ChainOutputs, result
         record = built.calibrated.calibration or {}
         check, unseen = record["model_check"], record["unseen_surfaces"]
         print(f"  rig as built       calibrated by the protocol: {len(built.images)} table "
-              f"images ({built.surfaces_csv.name} from sds calibrate plan), "
-              f"{built.calibrated_file}")
+              f"images, {len(built.images) // FRAMES_PER_STILL} positions "
+              f"({built.surfaces_csv.name} from sds calibrate plan), {built.calibrated_file}")
         print(f"    chi2/dof         {check['chi2_per_dof']:.2f} (expected "
               f"{check['expected'][0]:.2f}–{check['expected'][1]:.2f}: "
               + ("the model explains the images)" if check["explained"]

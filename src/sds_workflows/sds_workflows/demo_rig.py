@@ -6,9 +6,10 @@ simulator renders a rig *as built* from it, seeded: beams leaning, the camera tu
 moved, emitters off by their tolerance, the true camera's intrinsics off its file by their σ
 and its readout off the measured one, a real camera's imaging (`sds_sim.imaging`, every
 effect drawn in its range). The user's steps then run on what such a user has: `sds calibrate
-plan` on the rig file writes the protocol's surfaces CSV, the tilt table's images are
-rendered at the liquid's true poses (the table read to the seed's accuracy), and `sds
-calibrate rig` on those images writes the calibrated rig file the drop is measured with.
+plan` on the rig file writes the protocol's surfaces CSV, a burst of images at each table
+position is rendered at the liquid's true pose (the table read to the seed's accuracy; the
+speckle new in every frame), and `sds calibrate rig` on those images writes the calibrated
+rig file the drop is measured with.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from sds_sim.tilt_series import ReadingErrors, render_surfaces, true_surfaces
 from sds_sim.true_rig import RigErrors, camera_as_calibrated, true_rig
 
 from sds_workflows.calibration_plan import plan_protocol, write_protocol
-from sds_workflows.rig_calibration import calibrate_rig
+from sds_workflows.rig_calibration import FRAMES_PER_STILL, calibrate_rig
 
 RIG_ERRORS = RigErrors(emitter_sigma_mm=0.3)
 """How the demo's rig as built departs from its file (beams, camera pose, line plane: the
@@ -58,7 +59,7 @@ class DemoRig:
     true: Rig
     scenario_overrides: dict[str, dict[str, Any]]
     surfaces_csv: Path
-    images: list[Path]
+    images: list[Path]   # FRAMES_PER_STILL per table position, in the surfaces' order
     calibrated_file: Path
     calibrated: Rig
     result: RigCalibration
@@ -120,12 +121,13 @@ def demo_rig(scenario: Scenario, folder: Path) -> DemoRig:
     write_protocol(steps[-1], surfaces_csv)
     readings = steps[-1].surfaces
     series = render_surfaces(true, true_surfaces(readings, READINGS, rng), scenario.scale,
-                             scenario.seed, imaging=imaging)
+                             scenario.seed, frames=FRAMES_PER_STILL, imaging=imaging)
     images = []
     for index, image in enumerate(series.images):
-        path = folder / f"table_{index:02d}.png"
-        cv2.imwrite(str(path), image)
-        images.append(path)
+        for shot, frame in enumerate([image, *series.repeats[index]]):
+            path = folder / f"table_{index:02d}_{shot}.png"
+            cv2.imwrite(str(path), frame, [cv2.IMWRITE_PNG_COMPRESSION, 1])
+            images.append(path)
     calibrated_file = folder / "rig_calibrated.yaml"
     calibrated, result = calibrate_rig(nominal, images, surfaces_csv, calibrated_file,
                                        "`sds demo` (sds calibrate rig on the table's images)")

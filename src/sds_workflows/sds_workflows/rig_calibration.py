@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import html
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import cv2
@@ -28,7 +28,7 @@ from sds_recon.calibration.rig_calibration import calibrate_rig as fit_rig
 from sds_recon.calibration.rig_model import LineObservations
 from sds_recon.calibration.rig_report import calibrated_rig, report_text, rig_report
 from sds_recon.triangulation import beam_image_path
-from sds_tracker.discovery import SpotCandidates, averaged, find_spots
+from sds_tracker.discovery import SpotCandidates, averaged, excess_sigma_px, find_spots
 from sds_tracker.line import LineSettings, seek_line
 from sds_tracker.plateaus import Plateau, changed_pixels, find_plateaus
 from sds_tracker.tracker import flat_line_px, line_reach_px
@@ -52,11 +52,13 @@ full 4K frames per surface hold about 1.1 GB for the protocol's eleven."""
 
 @dataclass(frozen=True)
 class CalibrationImages:
-    """What was found in each calibration image: blobs and line pixels."""
+    """What was found in each calibration image: blobs and line pixels, and what the stills'
+    repeated frames showed of a single frame's spot σ (`excess_sigma_px`; None without)."""
 
     spots: list[SpotCandidates]
     line: LineObservations
     region: Region
+    spot_excess_sigma_px: float | None = None
 
 
 def read_images(paths: list[Path]) -> list[np.ndarray]:
@@ -82,14 +84,24 @@ def known_surfaces(path: Path) -> list[KnownSurface]:
 
 def calibration_frames(paths: list[Path], rig: Rig, count: int
                        ) -> tuple[list[np.ndarray], list[str], list[list[np.ndarray]] | None]:
-    """Images of the known surfaces (one per surface) from image files, or from the still
-    stretches of one video file (VIDEO_SUFFIXES), with each stretch's further frames
-    (`read_video_plateaus`; None for image files); a name for each image."""
+    """Images of the known surfaces from image files (one per surface, or a burst of the
+    same number per surface, in order: the first of each burst is its image, the others its
+    repeats), or from the still stretches of one video file (VIDEO_SUFFIXES), with each
+    stretch's further frames (`read_video_plateaus`); a name for each image; no repeats
+    (None) for one image per surface."""
     if len(paths) == 1 and paths[0].suffix.lower() in VIDEO_SUFFIXES:
         return read_video_plateaus(paths[0], rig, count)
-    if len(paths) != count:
-        raise InputError(f"{len(paths)} images but {count} known surfaces")
-    return read_images(paths), [str(p) for p in paths], None
+    if count == 0 or len(paths) % count:
+        raise InputError(f"{len(paths)} images but {count} known surfaces: give one image per "
+                         "surface, or a burst of the same number for each, in the surfaces' "
+                         "order")
+    burst = len(paths) // count
+    images = read_images(paths)
+    firsts = images[::burst]
+    names = [str(p) for p in paths[::burst]]
+    if burst == 1:
+        return firsts, names, None
+    return firsts, names, [images[k * burst + 1:(k + 1) * burst] for k in range(count)]
 
 
 def read_video_plateaus(path: Path, rig: Rig, count: int, min_still_s: float = STILL_S
@@ -185,7 +197,7 @@ def observe(rig: Rig, images: list[np.ndarray],
             line_sigma += list(profile.sigma_px[keep])
     line = LineObservations(np.array(line_frame, int), np.array(line_pixels).reshape(-1, 2),
                             np.array(line_sigma, float))
-    return CalibrationImages(spots, line, region)
+    return CalibrationImages(spots, line, region, excess_sigma_px(spots))
 
 
 def calibrate_images(rig: Rig, images: list[np.ndarray], surfaces: list[KnownSurface],
@@ -224,6 +236,13 @@ def write_calibration(nominal: Rig, result: RigCalibration, found: CalibrationIm
     rig = calibrated_rig(nominal, result)
     report = rig_report(nominal, result)
     text = report_text(report)
+    if found.spot_excess_sigma_px is not None:
+        # The tracker adds it to every spot's σ (a single frame's σ does not know speckle).
+        rig = replace(rig, calibration={**(rig.calibration or {}),
+                                        "spot_excess_sigma_px": found.spot_excess_sigma_px})
+        text += (f"\nspots' frame-to-frame scatter on the stills beyond their own σ: "
+                 f"{found.spot_excess_sigma_px:.3f} px per axis (added to every tracked spot's "
+                 "σ)")
     save_rig(rig, rig_path, comment=f"Self-calibrated by {source} ({len(images)} images):\n"
                                     f"{text}")
     stem = rig_path.with_suffix("")

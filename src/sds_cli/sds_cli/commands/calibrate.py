@@ -71,7 +71,9 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
     rig.add_argument("--rig", type=existing_file, required=True, help="the rig file as designed")
     source = rig.add_mutually_exclusive_group(required=True)
     source.add_argument("--images", type=existing_file, nargs="+",
-                        help="images of known surfaces (image k is frame k of --surfaces)")
+                        help="images of known surfaces (image k is frame k of --surfaces), "
+                             "or a burst of the same number per surface in that order (the "
+                             "first its image, the others its repeats)")
     source.add_argument("--video", type=existing_file,
                         help="video of the tilt table: its still stretches (0.5 s or more), "
                              "in order, are the frames of --surfaces")
