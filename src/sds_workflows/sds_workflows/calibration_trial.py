@@ -41,7 +41,11 @@ from sds_sim.true_rig import RigErrors, camera_as_calibrated, random_layout, tru
 from sds_tracker.spots import LOST
 from sds_tracker.tracker import FrameTracker
 
-from sds_workflows.rig_calibration import CalibrationImages, calibrate_images
+from sds_workflows.rig_calibration import (
+    CalibrationImages,
+    calibrate_images,
+    calibrated_rig_file,
+)
 
 IMAGING_STREAM = 45
 """The second key of a rig's imaging draws' random stream (the first is its seed)."""
@@ -395,7 +399,7 @@ class FirstUse:
     @property
     def calibrated(self) -> Rig:
         """The rig the calibration gives, as `sds calibrate rig` writes it."""
-        return calibrated_rig(self.nominal, self.result)
+        return calibrated_rig_file(self.nominal, self.result, self.found)
 
 
 def rig_as_built(base: Rig, as_built: AsBuilt, rng: np.random.Generator) -> tuple[Rig, Rig]:

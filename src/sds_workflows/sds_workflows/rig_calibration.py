@@ -229,17 +229,26 @@ def calibrate_rig(rig: Rig, paths: list[Path], surfaces_csv: Path, rig_path: Pat
     return write_calibration(rig, result, found, images, names, rig_path, source), result
 
 
+def calibrated_rig_file(nominal: Rig, result: RigCalibration, found: CalibrationImages
+                        ) -> Rig:
+    """The calibrated rig as `sds calibrate rig` writes it: `calibrated_rig`, and where the
+    stills had repeated frames, the σ a single frame's spots leave out in its record
+    (`spot_excess_sigma_px`: the tracker adds it to every spot's σ)."""
+    rig = calibrated_rig(nominal, result)
+    if found.spot_excess_sigma_px is None:
+        return rig
+    return replace(rig, calibration={**(rig.calibration or {}),
+                                     "spot_excess_sigma_px": found.spot_excess_sigma_px})
+
+
 def write_calibration(nominal: Rig, result: RigCalibration, found: CalibrationImages,
                       images: list[np.ndarray], names: list[str], rig_path: Path,
                       source: str) -> Rig:
     """Write the calibrated rig, `<rig>.report.json`/`.txt`/`.html` and overlays beside it."""
-    rig = calibrated_rig(nominal, result)
+    rig = calibrated_rig_file(nominal, result, found)
     report = rig_report(nominal, result)
     text = report_text(report)
     if found.spot_excess_sigma_px is not None:
-        # The tracker adds it to every spot's σ (a single frame's σ does not know speckle).
-        rig = replace(rig, calibration={**(rig.calibration or {}),
-                                        "spot_excess_sigma_px": found.spot_excess_sigma_px})
         text += (f"\nspots' frame-to-frame scatter on the stills beyond their own σ: "
                  f"{found.spot_excess_sigma_px:.3f} px per axis (added to every tracked spot's "
                  "σ)")
