@@ -79,3 +79,20 @@ def test_every_command_line_shown_is_one_the_command_takes(document: Path) -> No
         options = {w.split("=")[0] for w in words if w.startswith("--")}
         wrong += [f"{line}: {o}" for o in sorted(options - known[path])]
     assert not wrong, wrong
+
+
+def github_anchor(heading: str) -> str:
+    """The anchor GitHub gives a Markdown heading: lower case, punctuation dropped, spaces
+    to hyphens."""
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
+def test_every_anchor_a_document_links_is_one_of_its_headings() -> None:
+    """bench/README.md's table of today's figures links each figure to its section: every
+    `](#anchor)` of a document is one of its own headings'."""
+    for document in (REPO / "README.md", REPO / "bench" / "README.md",
+                     *(REPO / "docs").glob("*.md")):
+        text = document.read_text()
+        anchors = {github_anchor(h) for h in re.findall(r"^#{1,6} (.+)$", text, re.MULTILINE)}
+        missing = set(re.findall(r"\]\(#([^)]+)\)", text)) - anchors
+        assert not missing, (document, missing)
