@@ -12,6 +12,7 @@ import html
 import json
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -229,12 +230,13 @@ def calibrate_rig(rig: Rig, paths: list[Path], surfaces_csv: Path, rig_path: Pat
     return write_calibration(rig, result, found, images, names, rig_path, source), result
 
 
-def calibrated_rig_file(nominal: Rig, result: RigCalibration, found: CalibrationImages
-                        ) -> Rig:
-    """The calibrated rig as `sds calibrate rig` writes it: `calibrated_rig`, and where the
-    stills had repeated frames, the σ a single frame's spots leave out in its record
-    (`spot_excess_sigma_px`: the tracker adds it to every spot's σ)."""
-    rig = calibrated_rig(nominal, result)
+def calibrated_rig_file(nominal: Rig, result: RigCalibration, found: CalibrationImages,
+                        report: dict[str, Any] | None = None) -> Rig:
+    """The calibrated rig as `sds calibrate rig` writes it: `calibrated_rig` (its record from
+    `report` where given), and where the stills had repeated frames, the σ a single frame's
+    spots leave out in its record (`spot_excess_sigma_px`: the tracker adds it to every
+    spot's σ)."""
+    rig = calibrated_rig(nominal, result, report)
     if found.spot_excess_sigma_px is None:
         return rig
     return replace(rig, calibration={**(rig.calibration or {}),
@@ -245,10 +247,11 @@ def write_calibration(nominal: Rig, result: RigCalibration, found: CalibrationIm
                       images: list[np.ndarray], names: list[str], rig_path: Path,
                       source: str) -> Rig:
     """Write the calibrated rig, `<rig>.report.json`/`.txt`/`.html` and overlays beside it."""
-    rig = calibrated_rig_file(nominal, result, found)
     report = rig_report(nominal, result)
+    rig = calibrated_rig_file(nominal, result, found, report)
     text = report_text(report)
     if found.spot_excess_sigma_px is not None:
+        report["spot_excess_sigma_px"] = found.spot_excess_sigma_px
         text += (f"\nspots' frame-to-frame scatter on the stills beyond their own σ: "
                  f"{found.spot_excess_sigma_px:.3f} px per axis (added to every tracked spot's "
                  "σ)")

@@ -156,17 +156,17 @@ def run_rig(args: argparse.Namespace) -> int:
     """The self-calibrated rig file, its report and overlays."""
     from sds_model.rig import load_rig
     from sds_recon.calibration.rig_calibration import CalibrationSettings
-    from sds_recon.calibration.rig_report import report_text, rig_report
     from sds_workflows.rig_calibration import calibrate_rig
 
     refuse_existing(args.out, args.overwrite)
     rig = load_rig(args.rig)
     settings = CalibrationSettings(cone_deg=args.cone_deg, camera_turn_deg=args.camera_turn_deg,
                                    fit_emitters=args.fit_emitters)
-    _, result = calibrate_rig(rig, args.images or [args.video], args.surfaces, args.out,
-                              f"`sds calibrate rig` from {args.rig}", settings)
-    print(report_text(rig_report(rig, result)))
-    print(f"wrote {args.out} and its report, {args.out.with_suffix('')}.report.html")
+    calibrate_rig(rig, args.images or [args.video], args.surfaces, args.out,
+                  f"`sds calibrate rig` from {args.rig}", settings)
+    stem = args.out.with_suffix("")
+    print(Path(f"{stem}.report.txt").read_text(), end="")
+    print(f"wrote {args.out} and its report, {stem}.report.html")
     return 0
 
 

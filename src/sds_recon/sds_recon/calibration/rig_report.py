@@ -54,15 +54,17 @@ def beam_sigma_deg(result: RigCalibration, laser_id: int) -> float:
                                 fit.sigma_of(f"beam {laser_id} tilt b"))))
 
 
-def calibrated_rig(nominal: Rig, result: RigCalibration) -> Rig:
+def calibrated_rig(nominal: Rig, result: RigCalibration,
+                   report: dict[str, Any] | None = None) -> Rig:
     """The fitted rig with every beam's σ, unidentified diodes untracked, and the camera's and
-    plane's uncertainties in its `calibration` record."""
+    plane's uncertainties in its `calibration` record (from `report`, the fit's `rig_report`,
+    where the caller has it already)."""
     fitted = result.fit.rig
     diodes = tuple(
         replace(d, direction_sigma_deg=beam_sigma_deg(result, d.laser_id), tracked=True)
         if d.laser_id in result.laser_ids else replace(nominal.diode(d.laser_id), tracked=False)
         for d in fitted.diodes)
-    report = rig_report(nominal, result)
+    report = report or rig_report(nominal, result)
     record = {key: report[key] for key in ("model_check", "method", "frames", "spots",
                                            "rms_px", "camera", "line_laser", "unseen_surfaces",
                                            "unidentified", "not_determined",
