@@ -174,13 +174,14 @@ def sloshing_drop(rig: Rig, true: Rig, scale: float, seed: int, frames: int = 30
 
 @dataclass(frozen=True)
 class GeometryErrors:
-    """A calibrated rig against the true one: camera turn [deg, rotation vector] and shift
-    [mm], each beam's direction error [deg], the line plane's normal error [deg]; with the
-    fitted σ of the camera's angles, each beam's direction and the plane's normal [deg]."""
+    """A calibrated rig against the true one: the camera's turn [deg, rotation vector about
+    the world axes, the fit's `camera rotation about X/Y/Z`] and shift [mm], each beam's
+    direction error [deg], the line plane's normal error [deg]; with the fitted σ of each."""
 
     camera_deg: np.ndarray
     camera_sigma_deg: np.ndarray
     camera_mm: np.ndarray
+    camera_sigma_mm: np.ndarray
     beams_deg: dict[int, float]
     beams_sigma_deg: dict[int, float]
     line_plane_deg: float
@@ -188,9 +189,10 @@ class GeometryErrors:
 
 
 def geometry_errors(rig: Rig, true: Rig, result: RigCalibration) -> GeometryErrors:
-    """How far the calibrated rig's camera, beams and line plane are from the true rig's."""
-    turn = Rotation.from_matrix(rig.world_to_camera.rotation
-                                @ true.world_to_camera.rotation.T).as_rotvec()
+    """How far the calibrated rig's camera, beams and line plane are from the true rig's, in
+    the fit's own parameters (the camera turned about the world axes), beside their σ."""
+    turn = Rotation.from_matrix(rig.world_to_camera.rotation.T
+                                @ true.world_to_camera.rotation).as_rotvec()
     beams = {i: float(np.degrees(np.arccos(np.clip(rig.diode(i).direction
                                                    @ true.diode(i).direction, -1, 1))))
              for i in result.laser_ids}
@@ -200,8 +202,11 @@ def geometry_errors(rig: Rig, true: Rig, result: RigCalibration) -> GeometryErro
         plane_deg = float(np.degrees(np.arccos(np.clip(cosine, -1, 1))))
         # NaN where a tilt was not determined and kept from the rig file
         plane_sigma = float(np.degrees(np.max([result.fit.sigma_of(n) for n in LINE_PLANE[:2]])))
-    return GeometryErrors(np.degrees(turn), np.degrees(result.fit.sigmas[:3]),
-                          rig.camera_position_mm - true.camera_position_mm, beams,
+    fit = result.fit
+    return GeometryErrors(np.degrees(turn),
+                          np.degrees([fit.sigma_of(name) for name in CAMERA_ROTATION]),
+                          rig.camera_position_mm - true.camera_position_mm,
+                          np.array([fit.sigma_of(name) for name in CAMERA_SHIFT]), beams,
                           {i: beam_sigma_deg(result, i) for i in result.laser_ids}, plane_deg,
                           plane_sigma)
 

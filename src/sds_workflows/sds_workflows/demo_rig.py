@@ -20,10 +20,8 @@ from typing import Any
 
 import cv2
 import numpy as np
-from scipy.spatial.transform import Rotation
 from sds_model.camera.rolling_shutter import RollingShutter
 from sds_model.rig import Rig, Tolerances, load_rig, save_rig
-from sds_recon.calibration.parameters import CAMERA_ROTATION, CAMERA_SHIFT
 from sds_recon.calibration.rig_calibration import RigCalibration
 from sds_sim.imaging import draw_imaging, merged
 from sds_sim.scenario import Scenario
@@ -31,6 +29,7 @@ from sds_sim.tilt_series import ReadingErrors, render_surfaces, true_surfaces
 from sds_sim.true_rig import RigErrors, camera_as_calibrated, true_rig
 
 from sds_workflows.calibration_plan import plan_protocol, write_protocol
+from sds_workflows.calibration_trial import geometry_errors
 from sds_workflows.rig_calibration import FRAMES_PER_STILL, calibrate_rig
 
 RIG_ERRORS = RigErrors(emitter_sigma_mm=0.3)
@@ -67,35 +66,25 @@ class DemoRig:
 
     def against_truth(self) -> list[str]:
         """The calibrated rig against the true one, each error beside the σ the calibration
-        states for it: camera turn and position, the beams' directions, the line plane."""
-        fit, true, rig = self.result.fit, self.true, self.calibrated
-        turn_deg = np.degrees(Rotation.from_matrix(
-            rig.world_to_camera.rotation.T @ true.world_to_camera.rotation).as_rotvec())
-        shift_mm = rig.camera_position_mm - true.camera_position_mm
-        camera_sigma_deg = np.degrees([fit.sigma_of(name) for name in CAMERA_ROTATION])
-        position_sigma_mm = [fit.sigma_of(name) for name in CAMERA_SHIFT]
-        beams = [(np.degrees(np.arccos(np.clip(rig.diode(i).direction @ true.diode(i).direction,
-                                               -1.0, 1.0))), rig.diode(i).direction_sigma_deg)
-                 for i in self.result.laser_ids]
-        beam_error = np.array([error for error, _ in beams])
-        beam_sigma = np.array([sigma for _, sigma in beams], dtype=float)
+        states for it (`calibration_trial.geometry_errors`): camera turn and position, the
+        beams' directions, the line plane."""
+        errors = geometry_errors(self.calibrated, self.true, self.result)
+        beam_error = np.array(list(errors.beams_deg.values()))
+        beam_sigma = np.array([errors.beams_sigma_deg[i] for i in errors.beams_deg])
         lines = [
             "camera turned   error [deg] " + ", ".join(
-                f"{e:+.3f} ± {s:.3f}" for e, s in zip(turn_deg, camera_sigma_deg, strict=True)),
+                f"{e:+.3f} ± {s:.3f}" for e, s in zip(errors.camera_deg, errors.camera_sigma_deg,
+                                                     strict=True)),
             "camera position error [mm]  " + ", ".join(
-                f"{e:+.3f} ± {s:.3f}" for e, s in zip(shift_mm, position_sigma_mm,
-                                                      strict=True)),
-            f"beams           {len(beams)} of {len(true.diodes)} calibrated: direction error "
-            f"RMS {np.sqrt(np.mean(beam_error**2)):.3f} deg, stated σ RMS "
+                f"{e:+.3f} ± {s:.3f}" for e, s in zip(errors.camera_mm, errors.camera_sigma_mm,
+                                                     strict=True)),
+            f"beams           {len(beam_error)} of {len(self.true.diodes)} calibrated: "
+            f"direction error RMS {np.sqrt(np.mean(beam_error**2)):.3f} deg, stated σ RMS "
             f"{np.sqrt(np.mean(beam_sigma**2)):.3f} deg, worst {beam_error.max():.3f} deg"]
-        if rig.line_laser is not None and true.line_laser is not None:
-            cosine = abs(rig.line_laser.normal @ true.line_laser.normal)
-            plane_deg = np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0)))
-            stated = (rig.calibration or {}).get("line_laser") or {}
-            lines.append(f"line plane      normal error {plane_deg:.3f} deg, stated σ "
-                         f"{stated.get('normal_sigma_deg')} deg")
+        if np.isfinite(errors.line_plane_deg):
+            lines.append(f"line plane      normal error {errors.line_plane_deg:.3f} deg, stated "
+                         f"σ {errors.line_plane_sigma_deg:.3f} deg")
         return lines
-
 
 def demo_rig(scenario: Scenario, folder: Path) -> DemoRig:
     """Draw the scenario's rig as built (seeded by the scenario's seed), write the user's rig
