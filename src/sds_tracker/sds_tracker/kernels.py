@@ -81,16 +81,14 @@ def step_sigma_px(step: float, lever_px: float, total: float) -> float:
 @njit(cache=True, fastmath=True)
 def spot_windows(image: np.ndarray, corners: np.ndarray, half: int, prior: np.ndarray,
                  threshold: float, min_competitor: float, aperture_factor: float,
-                 clip_fraction: float, flat_clip_fraction: float, read_noise: float,
-                 max_elongation: float
+                 clip_fraction: float, read_noise: float, max_elongation: float
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per window (top-left `corners`, size 2·half + 1): the spot-core centroid in window pixels,
     its σ [px], the raw peak, and whether one clear blob settled it.
 
     Background: median of the window's border. Blob: the prior-weighted brightest pixel, its
     area and mass above `threshold` within half/2 px; another blob with `min_competitor` of that
-    mass leaves the spot to the full search. Centroid: `clip_fraction` of the peak taken off
-    (`flat_clip_fraction` where the window's border shows one level, `background_step` 0),
+    mass leaves the spot to the full search. Centroid: `clip_fraction` of the peak taken off,
     within 1.6 × the blob's radius (`aperture_factor`), re-centred once. σ: the photons' and the
     read noise's (`read_noise`), and a background that is not one level (`step_sigma_px`).
     Light more elongated than `max_elongation` about the centre (`light_elongation` within
@@ -136,15 +134,13 @@ def spot_windows(image: np.ndarray, corners: np.ndarray, half: int, prior: np.nd
         radius = max(aperture_factor * np.sqrt(area / np.pi), 3.0)
         radius2 = radius * radius
         reach = int(np.ceil(radius)) + 1
-        edge = background_step(image[y0:y0 + size, x0:x0 + size], read_noise)
-        clip = clip_fraction if edge > 0 else flat_clip_fraction
         cx, cy, total = float(gx), float(gy), 0.0
         for _ in range(2):
             total, sx, sy = 0.0, 0.0, 0.0
             for y in range(max(0, int(cy) - reach), min(size, int(cy) + reach + 1)):
                 for x in range(max(0, int(cx) - reach), min(size, int(cx) + reach + 1)):
                     if (x - cx) ** 2 + (y - cy) ** 2 <= radius2:
-                        weight = image[y0 + y, x0 + x] - background - clip * peak
+                        weight = image[y0 + y, x0 + x] - background - clip_fraction * peak
                         if weight > 0:
                             total += weight
                             sx += weight * x
@@ -165,10 +161,11 @@ def spot_windows(image: np.ndarray, corners: np.ndarray, half: int, prior: np.nd
                     raw = float(image[y0 + y, x0 + x])
                     variance += (raw + read_noise * read_noise) * distance2
                     top = max(top, raw)
-                    if raw - background - clip * peak > 0:
+                    if raw - background - clip_fraction * peak > 0:
                         lever += np.sqrt(distance2)
         centres[k, 0], centres[k, 1] = cx, cy
-        step = step_sigma_px(edge, lever, total)
+        step = step_sigma_px(background_step(image[y0:y0 + size, x0:x0 + size], read_noise),
+                             lever, total)
         sigmas[k] = np.sqrt(variance / 2 / total**2 + step**2)
         peaks[k] = top
         settled[k] = True
@@ -369,7 +366,7 @@ def warm_up() -> None:
     """Compile (or load from numba's cache) the kernels now, not on the first frames."""
     image = np.zeros((64, 64), np.uint8)
     spot_windows(image, np.zeros((1, 2), np.int64), 24, np.ones((49, 49)), 30.0, 0.3, 1.6,
-                 0.15, 0.02, 2.0, 3.0)
+                 0.15, 2.0, 3.0)
     background_step(image, 2.0)
     light_elongation(image, 32.0, 32.0, 12.0, 0.0, 30.0)
     line_rows(image, np.zeros(1, np.int64), np.zeros(1, np.int64), 61, 6, 10, 0.15, 30.0, 2.0)

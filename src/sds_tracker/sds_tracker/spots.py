@@ -90,7 +90,6 @@ class SpotSettings:
     threshold: float = 30.0        # signal above the local background that makes a spot
     aperture_factor: float = 1.6   # centroid aperture radius / the blob's radius at threshold
     clip_fraction: float = 0.15    # share of the peak removed before the centroid (see below)
-    flat_clip_fraction: float = 0.02   # the same where the background is one level
     path_tolerance_px: float = 4.0  # farthest a spot may lie from its beam's image path
     saturation_level: float = 250.0
     read_noise: float = 2.0        # grey levels, for the position uncertainty; a background
@@ -349,7 +348,7 @@ class SpotTracker:
         corner = corner[inside]
         centre, sigma, peak_raw, ok = spot_windows(
             image, corner, half, self._prior, s.threshold, s.min_competitor, s.aperture_factor,
-            s.clip_fraction, s.flat_clip_fraction, s.read_noise, self.max_elongation)
+            s.clip_fraction, s.read_noise, self.max_elongation)
         full = centre + corner + origin
         paths = self._stacked_paths[[self._row[i] for i in ids]]
         ok &= distances_to_paths(full, paths) <= np.array([self.tolerance_px[i] for i in ids])
@@ -469,11 +468,7 @@ class SpotTracker:
             flags |= REFLECTION_SUSPECTED
         radius = max(s.aperture_factor * np.sqrt(stats[label, cv2.CC_STAT_AREA] / np.pi), 3.0)
         peak_signal = float(signal[labels == label].max())
-        bounds = spot_window(image.shape, origin, centre, s.window_px)
-        around = window if bounds is None else image[bounds[1]:bounds[3], bounds[0]:bounds[2]]
-        edge = background_step(np.ascontiguousarray(around), s.read_noise)
-        floor = background + (s.clip_fraction if edge > 0 else s.flat_clip_fraction) * \
-            peak_signal
+        floor = background + s.clip_fraction * peak_signal
         for _ in range(2):
             region = self._aperture(image, origin, centre, radius, floor)
             if region is None:
@@ -486,7 +481,10 @@ class SpotTracker:
         peak = float(raw.max())
         variance = np.clip(raw, 0, None) + s.read_noise**2
         distances = np.hypot(xs - centre[0], ys - centre[1])
-        step = step_sigma_px(edge, float(distances[weights > 0].sum()), total)
+        bounds = spot_window(image.shape, origin, centre, s.window_px)
+        around = window if bounds is None else image[bounds[1]:bounds[3], bounds[0]:bounds[2]]
+        step = step_sigma_px(background_step(np.ascontiguousarray(around), s.read_noise),
+                             float(distances[weights > 0].sum()), total)
         sigma = float(np.sqrt(np.sum(variance * distances**2) / 2 / total**2 + step**2))
         # The laser line's light pulls a spot it passes towards itself, even off its path:
         # such a spot is measured again with the line's light subtracted.
