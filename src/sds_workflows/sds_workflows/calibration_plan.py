@@ -21,6 +21,7 @@ from sds_recon.calibration.lasers import Accuracy, KnownSurface
 from sds_recon.calibration.plan import (
     HEIGHT_GOAL_MM,
     LEAST_GAIN,
+    SPOT_SIGMA_PX,
     TILT_GOAL_DEG,
     Prediction,
     plan,
@@ -29,6 +30,8 @@ from sds_recon.calibration.plan import (
     unseen_reach_mm,
     unseen_sensitivity,
 )
+
+from sds_workflows.rig_calibration import FRAMES_PER_STILL
 
 SHOWN_SHARE = 0.1
 """A parameter group is named among what sets the unseen tilt when knowing it exactly would
@@ -85,7 +88,8 @@ def what_would_meet_the_goals(rig: Rig, accuracy: Accuracy, planned: Prediction
                               ) -> list[tuple[str, Prediction]]:
     """The planned surfaces' prediction under better knowledge, one change at a time: the
     tilted frames read with an inclinometer, the emitters measured, the protocol recorded
-    twice (two readings of every surface, their errors independent)."""
+    twice (two readings of every surface, their errors independent), each surface's spots
+    averaged over FRAMES_PER_STILL frames (speckle new in each: σ over √n)."""
     sensitivity = unseen_sensitivity(rig)
     whatif = []
     for sigma_deg in INCLINOMETER_DEG:
@@ -101,6 +105,10 @@ def what_would_meet_the_goals(rig: Rig, accuracy: Accuracy, planned: Prediction
                        predict(measured, planned.surfaces, unseen_sensitivity(measured))))
     whatif.append(("every surface recorded twice",
                    predict(rig, [*planned.surfaces, *planned.surfaces], sensitivity)))
+    # Speckle on the liquid is new in every frame: the frames of a still average it down.
+    averaged_px = SPOT_SIGMA_PX / np.sqrt(FRAMES_PER_STILL)
+    whatif.append((f"{FRAMES_PER_STILL} frames of each surface (spots to {averaged_px:.3f} px)",
+                   predict(rig, planned.surfaces, sensitivity, averaged_px)))
     return whatif
 
 

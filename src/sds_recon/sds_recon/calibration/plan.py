@@ -212,14 +212,16 @@ def unseen_height_sigmas_mm(sensitivity: UnseenSensitivity, names: list[str],
 
 
 def predict(rig: Rig, surfaces: list[KnownSurface],
-            sensitivity: UnseenSensitivity | None = None) -> Prediction:
+            sensitivity: UnseenSensitivity | None = None,
+            spot_sigma_px: float = SPOT_SIGMA_PX) -> Prediction:
     """The posterior σ of every parameter after calibrating `rig` (its tolerances as priors)
-    on `surfaces`, and the σ of tilt and heights it gives unseen diagonal surfaces
-    (`sensitivity`: `unseen_sensitivity(rig)`, computed here if not given)."""
+    on `surfaces` whose spots are measured to `spot_sigma_px` in each direction, and the σ of
+    tilt and heights it gives unseen diagonal surfaces (`sensitivity`:
+    `unseen_sensitivity(rig)`, computed here if not given)."""
     sensitivity = sensitivity or unseen_sensitivity(rig)
     ids, diode, frame, pixels = _visible_spots(rig, surfaces)
     model = RigModel(rig, ids, surfaces)
-    covariance = np.full((len(pixels), 1, 1), SPOT_SIGMA_PX**2) * np.eye(2)
+    covariance = np.full((len(pixels), 1, 1), spot_sigma_px**2) * np.eye(2)
     observations = Observations(diode, frame, pixels, spot_whitening(covariance), np.empty(0))
     free = np.ones(model.size, bool)
     x = np.zeros(model.size)
