@@ -31,6 +31,7 @@ from sds_sim.scenario import load_scenario
 from sds_sim.simulate import simulate
 from sds_sloshing.analysis import AnalysisOptions
 from sds_sloshing.report import truth_from_run
+from sds_workflows.calibration_trial import geometry_errors
 from sds_workflows.demo import DEMO_SCENARIO, height_errors
 from sds_workflows.demo_rig import demo_rig
 from sds_workflows.pipeline import damping_caveat, video_frames
@@ -73,15 +74,13 @@ def one_rig(seed: int, seconds: float, folder: Path) -> dict[str, Any]:
     assert points is not None
     errors, sigmas = height_errors(simulation.spots, points[points["laser_id"] != 65535])
     record = built.calibrated.calibration or {}
-    beams = [(d, t) for d in built.calibrated.tracked_diodes for t in built.true.diodes
-             if d.laser_id == t.laser_id and d.direction_sigma_deg]
-    beam_in_sigma = np.sqrt(np.mean([
-        (np.degrees(np.arccos(np.clip(d.direction @ t.direction, -1, 1)))
-         / d.direction_sigma_deg) ** 2 for d, t in beams]))
+    geometry = geometry_errors(built.calibrated, built.true, built.result)
+    beam_in_sigma = np.sqrt(np.mean([(error / geometry.beams_sigma_deg[i]) ** 2
+                                     for i, error in geometry.beams_deg.items()]))
     return {"seed": seed, "chi2": record["model_check"]["chi2_per_dof"],
             "explained": record["model_check"]["explained"],
             "unseen_tilt_sigma_deg": record["unseen_surfaces"]["tilt_sigma_deg"],
-            "beams": len(beams), "beam_in_sigma": float(beam_in_sigma),
+            "beams": len(geometry.beams_deg), "beam_in_sigma": float(beam_in_sigma),
             "excess_px": record.get("spot_excess_sigma_px", np.nan),
             "heights_rmse_mm": float(np.sqrt(np.mean(errors**2))),
             "heights_in_sigma": float(np.sqrt(np.mean((errors / sigmas) ** 2))),

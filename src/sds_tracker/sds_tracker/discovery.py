@@ -135,17 +135,16 @@ def averaged(frames: list[SpotCandidates], same_spot_px: float = SAME_SPOT_PX
                 peak.append(other.peak[nearest])
         count = len(seen)
         mean_covariance = np.mean(own, axis=0)
-        widen, spread = 1.0, np.nan
+        widen, spread, variance = 1.0, np.nan, np.nan
         if count >= MIN_SCATTER_FRAMES:
             scatter = np.cov(np.array(seen).T, ddof=1)
             widen = max(1.0, float(np.trace(scatter) / np.trace(mean_covariance)))
-            spread = float(np.trace(scatter)) / 2
+            spread, variance = np.trace(scatter) / 2, np.trace(mean_covariance) / 2
         pixels.append(np.mean(seen, axis=0))
         covariances.append(mean_covariance * widen / count)
         peaks.append(float(np.median(peak)))
         scatters.append(spread)
-        variances.append(float(np.trace(mean_covariance)) / 2 if count >= MIN_SCATTER_FRAMES
-                         else np.nan)
+        variances.append(variance)
     return SpotCandidates(np.array(pixels).reshape(-1, 2),
                           np.array(covariances).reshape(-1, 2, 2), np.array(peaks),
                           np.array(scatters), np.array(variances))

@@ -194,8 +194,10 @@ class FrameTracker:
         if self.hampel is None:   # a still: where the spots were says nothing of this image
             self.spots.previous = dict.fromkeys(self.paths)
         # The line's light is kept out of the spots it passes (seen this frame, or expected).
-        estimates = [replace(e, sigma_px=float(np.hypot(e.sigma_px, self.excess_sigma_px)))
-                     for e in self.spots.update(red, offset, (self._line_rows, self._line_x))]
+        estimates = self.spots.update(red, offset, (self._line_rows, self._line_x))
+        if self.excess_sigma_px:
+            estimates = [replace(e, sigma_px=float(np.hypot(e.sigma_px, self.excess_sigma_px)))
+                         for e in estimates]
         self._pending[frame] = {e.laser_id: e for e in estimates}
         positions = np.array([[e.x_px, e.y_px] for e in estimates]).reshape(-1, 2)
         if self.hampel is None:

@@ -86,6 +86,7 @@ class DemoRig:
                          f"σ {errors.line_plane_sigma_deg:.3f} deg")
         return lines
 
+
 def demo_rig(scenario: Scenario, folder: Path) -> DemoRig:
     """Draw the scenario's rig as built (seeded by the scenario's seed), write the user's rig
     file, plan the protocol, render the table's images and calibrate the rig from them, all
