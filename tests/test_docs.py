@@ -52,6 +52,25 @@ def subcommands(parser: argparse.ArgumentParser, path: tuple[str, ...] = ("sds",
     return found
 
 
+def test_every_subcommand_and_argument_has_help_text() -> None:
+    """`sds <command> --help` explains each of its words: every subcommand has a summary and
+    every argument a help text (issue 48)."""
+    silent = []
+    parsers = [(("sds",), build_parser())]
+    while parsers:
+        path, parser = parsers.pop()
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                summaries = {a.dest: a.help for a in action._choices_actions}
+                for name, sub in action.choices.items():
+                    if not summaries.get(name):
+                        silent.append(" ".join((*path, name)))
+                    parsers.append(((*path, name), sub))
+            elif not isinstance(action, argparse._HelpAction) and not action.help:
+                silent.append(f"{' '.join(path)} {action.option_strings or action.dest}")
+    assert not silent, silent
+
+
 def command_lines(text: str) -> list[str]:
     """The `sds ...` lines of a document's code blocks, continuation lines joined, comments
     left out."""
