@@ -39,7 +39,11 @@ data determine it (about the tracker's on a 4K spot): that is a question of the 
 data's geometry, not of how noisy its spots are. Judged at the spots' own σ and χ², noisier
 spots (or σ understated: χ²/dof of 60) left the camera's rotation kept from the rig file
 although the protocol's tilts about the second axis determine it; such a fit now fits it,
-and its σ (scaled by its χ²/dof) says how well."""
+and its σ (scaled by its χ²/dof) says how well. Only the spots' and line pixels' σ are set
+to it: the declared tolerances stay as declared. Scaled with them, the precise spots of
+averaged stills made the camera's yaw, which the emitters' and the table readings' tolerances
+determine, look undetermined; kept from the rig file, a turned camera turned the fitted
+emitters and surfaces with it, and unseen tilts were off across their axis."""
 NULL_SINGULAR = 1e-9
 """Singular values below this share of the largest (scaled Jacobian) are null directions."""
 
@@ -204,6 +208,16 @@ def uncertainty(jacobian_free: np.ndarray, scales: np.ndarray, chi2_per_dof: flo
     return np.sqrt(np.diag(covariance)), covariance, singular
 
 
+def at_reference_spots(jacobian_free: np.ndarray, prior_rows: int, to_reference: float
+                       ) -> np.ndarray:
+    """The whitened Jacobian as it would be with every spot's and line pixel's σ times
+    `to_reference` (its rows before the last `prior_rows`, the declared tolerances', divided
+    by it): for judging what the data determine at DETERMINATION_SPOT_SIGMA_PX."""
+    data_rows = jacobian_free.shape[0] - prior_rows
+    return np.concatenate([jacobian_free[:data_rows] / to_reference,
+                           jacobian_free[data_rows:]])
+
+
 def least_determined(table: ParameterTable, free: np.ndarray, sigmas: np.ndarray) -> int | None:
     """The free parameter without a prior furthest beyond its limit (its index), or None if
     every one is determined. A parameter with a declared tolerance is always determined."""
@@ -247,8 +261,10 @@ def self_calibrate(rig: Rig, laser_ids: list[int], surfaces: list[KnownSurface],
                                                      SIGMA_FLOOR_PX) if len(pixels) else 1.0
     # What the data cannot determine is fixed before solving (linearised at the rig file):
     # left free, the solver runs off along those directions.
-    while (worst := least_determined(table, free, to_reference * uncertainty(
-            jacobian(model, observations, x, free, rows), scales[free], 1.0)[0])) is not None:
+    prior_rows = len(model.prior_parameters)
+    while (worst := least_determined(table, free, uncertainty(at_reference_spots(
+            jacobian(model, observations, x, free, rows), prior_rows, to_reference),
+            scales[free], 1.0)[0])) is not None:
         free[worst] = False
         fixed[table.names[worst]] = table.parameters[worst].advice
     while True:
@@ -260,9 +276,8 @@ def self_calibrate(rig: Rig, laser_ids: list[int], surfaces: list[KnownSurface],
         dof = max(len(solution.fun) - int(free.sum()), 1)
         chi2 = float(np.sum(solution.fun**2))
         sigmas, covariance, singular = uncertainty(solution.jac, scales[free], chi2 / dof)
-        # `uncertainty` scales σ by √(χ²/dof) where that is above 1: undone for the judgement
-        worst = least_determined(table, free,
-                                 to_reference * sigmas / np.sqrt(max(chi2 / dof, 1.0)))
+        worst = least_determined(table, free, uncertainty(at_reference_spots(
+            solution.jac, prior_rows, to_reference), scales[free], 1.0)[0])
         if worst is None:
             break
         free[worst] = False
