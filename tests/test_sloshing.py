@@ -17,6 +17,7 @@ from rosbags.typesys import Stores, get_typestore
 from scipy.io import loadmat
 from sds_arduino.protocol import format_record, read_log, unwrap_time_s
 from sds_model.mode_theory import theoretical_modes
+from sds_model.rig import Rig, rig_document
 from sds_recon.triangulation import triangulate_beams
 from sds_record.recorded_series import read_surface_series
 from sds_sim.arduino import arduino_records
@@ -381,10 +382,12 @@ def points_rows(recording: SurfaceSeries) -> tuple[np.ndarray, np.ndarray, np.nd
             np.tile(recording.laser_ids, frames), recording.points_mm.reshape(-1, 3))
 
 
-def write_points_mcap(recording: SurfaceSeries, path: Path, epoch_ns: int = 0) -> None:
+def write_points_mcap(recording: SurfaceSeries, path: Path, epoch_ns: int = 0,
+                      rig: Rig | None = None) -> None:
     """The recording as PointCloud2 messages on /points, in metres as the reconstruction node
-    sends them, stamped `epoch_ns` + its times (written with rosbags' message definition and
-    the mcap writer, not ours)."""
+    sends them, stamped `epoch_ns` + its times, and with `rig` the rig on /recon/rig as the
+    node latches it (written with rosbags' message definitions and the mcap writer, not
+    ours)."""
     typestore = get_typestore(Stores.ROS2_KILTED)
     msgdef, _ = typestore.generate_msgdef("sensor_msgs/msg/PointCloud2", ros_version=2)
     fields = [{"name": n, "offset": o, "datatype": d, "count": 1}
@@ -394,6 +397,11 @@ def write_points_mcap(recording: SurfaceSeries, path: Path, epoch_ns: int = 0) -
     with path.open("wb") as stream:
         writer = McapWriter(stream)
         schema = writer.register_msgdef("sensor_msgs/msg/PointCloud2", msgdef)
+        if rig is not None:
+            text, _ = typestore.generate_msgdef("std_msgs/msg/String", ros_version=2)
+            writer.write_message("/recon/rig", writer.register_msgdef("std_msgs/msg/String", text),
+                                 {"data": rig_document(rig)}, log_time=epoch_ns,
+                                 publish_time=epoch_ns)
         for time_s, points in zip(recording.time_s, recording.points_mm, strict=True):
             keep = np.isfinite(points).all(axis=1)
             cloud = np.zeros(int(keep.sum()), dtype)
