@@ -24,7 +24,7 @@ from sds_camera.camera_imu import CameraImu, sidecar_path, write_sidecar
 from sds_model.camera import PinholeCamera, camera_from_dict, save_camera
 from sds_recon.results import load_results
 from sds_ros.image_msg import msg_to_image
-from sds_workflows.demo import height_errors
+from sds_workflows.demo import height_errors, hidden_points
 from sensor_msgs.msg import Image, Imu
 from std_msgs.msg import Header
 
@@ -242,6 +242,7 @@ def test_the_demo_calibrates_a_rig_as_built_and_marks_no_wrong_point_valid(tmp_p
     points = results.points[results.points["laser_id"] != 65535]
     errors, _ = height_errors(tmp_path / "simulation" / "truth" / "spots.csv", points)
     assert len(errors) > 50 * 17 and np.abs(errors).max() < 1.0, np.abs(errors).max()
+    assert hidden_points(tmp_path / "simulation" / "truth" / "spots.csv", points) == 0
 
 
 def test_the_camera_imu_beside_a_video_is_published_on_the_frames_clock(clip, probe, tmp_path):

@@ -46,6 +46,11 @@ PATH_GATE_SIGMAS = 3.0
 """A path's gate (`path_tolerance_px`, or a weak beam's own) is this many σ of a spot's
 distance from its path."""
 
+REACQUIRE_FRAMES = 5
+"""A spot lost for at most this many frames is looked for near where it was last seen: within
+`prior_sigma_px` per frame since then (the liquid moves a spot a few px per frame; a glint or
+a reflection further along its path, while the spot is hidden, is not it). Lost longer, it is
+looked for along its whole path again."""
 MAX_ELONGATION = 2.5
 """Most elongated light (`kernels.light_elongation` within half a window, above the
 threshold) that can be a spot: a spot is round, or an ellipse on a tilted surface or blurred
@@ -195,8 +200,9 @@ class SpotTracker:
     window's border, connected blobs above `threshold`, the blob chosen by brightness times a
     Gaussian prior around the previous position among those within `path_tolerance_px` of the
     beam's path, and the position = intensity centroid of the background-subtracted signal in
-    a round aperture (re-centred once). A spot not found is reported lost, with no position,
-    and searched for along its whole path in the next frame.
+    a round aperture (re-centred once). A spot not found is reported lost, with no position;
+    it is searched for near where it was last seen for REACQUIRE_FRAMES frames, then along its
+    whole path.
     """
 
     def __init__(self, paths: dict[int, np.ndarray], settings: SpotSettings | None = None,
@@ -215,6 +221,8 @@ class SpotTracker:
         self.tolerance_px = {i: max(self.settings.path_tolerance_px,
                                     (tolerances_px or {}).get(i, 0.0)) for i in self.paths}
         self.previous: dict[int, np.ndarray | None] = dict.fromkeys(self.paths)
+        # Where a spot lost in recent frames was last seen, and the frames since (REACQUIRE_FRAMES).
+        self.last_seen: dict[int, tuple[np.ndarray, int] | None] = dict.fromkeys(self.paths)
         # All paths in one array for the batched pass; shorter ones repeat their last point
         # (a zero-length segment, which changes no distance).
         longest = max((len(p) for p in self.paths.values()), default=0)
@@ -263,9 +271,30 @@ class SpotTracker:
         if self.exclusive:
             estimates = self._one_blob_one_diode(image, origin, estimates, line)
         for laser_id, estimate in estimates.items():
-            self.previous[laser_id] = None if estimate.flags & LOST else \
-                np.array([estimate.x_px, estimate.y_px])
+            if estimate.flags & LOST:
+                self.previous[laser_id] = None
+                seen = self.last_seen[laser_id]
+                self.last_seen[laser_id] = None if seen is None or seen[1] >= REACQUIRE_FRAMES \
+                    else (seen[0], seen[1] + 1)
+            else:
+                position = np.array([estimate.x_px, estimate.y_px])
+                self.previous[laser_id] = position
+                self.last_seen[laser_id] = (position, 1)
         return list(estimates.values())
+
+    def forget(self) -> None:
+        """Every spot not yet acquired: the next image is looked at as if it were the first
+        (a still, whose spots say nothing of the next one's)."""
+        self.previous = dict.fromkeys(self.paths)
+        self.last_seen = dict.fromkeys(self.paths)
+
+    def _reacquire_reach(self, laser_id: int) -> tuple[np.ndarray, float] | None:
+        """For a spot lost in recent frames (not tracked now), where it was last seen and how
+        far from there it can be now [px] (REACQUIRE_FRAMES); None for any other."""
+        seen = self.last_seen[laser_id]
+        if seen is None or self.previous[laser_id] is not None:
+            return None
+        return seen[0], self.settings.prior_sigma_px * seen[1]
 
     def _one_blob_one_diode(self, image: np.ndarray, origin: np.ndarray,
                             estimates: dict[int, SpotEstimate],
@@ -388,7 +417,8 @@ class SpotTracker:
         the spot can be beyond the reach of its measurement without the line's light.
         Measured so (`settled_line_free_centre`, `_track_on_line`) from starts every half
         window along the stretch of its path within a window of the line; None unless
-        exactly one spot (finds within a quarter window of each other) is there."""
+        exactly one spot (finds within a quarter window of each other) is there; for a spot lost
+        in recent frames, within its reach (REACQUIRE_FRAMES)."""
         s = self.settings
         step = s.window_px / 2
         lengths = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0),
@@ -406,14 +436,23 @@ class SpotTracker:
                                                      estimate.y_px - f.y_px) > step / 2
                                             for f in found):
                 found.append(estimate)
+        reach = self._reacquire_reach(laser_id)
+        if reach is not None:
+            found = [f for f in found
+                     if np.hypot(f.x_px - reach[0][0], f.y_px - reach[0][1]) <= reach[1]]
         return found[0] if len(found) == 1 else None
 
     def _search_box(self, laser_id: int, path: np.ndarray) -> np.ndarray:
-        """(x0, y0, x1, y1) full-frame: around the previous position, or the whole path."""
+        """(x0, y0, x1, y1) full-frame: around the previous position, around where a spot
+        lost in recent frames can be now, or the whole path."""
         half = self.settings.window_px
         previous = self.previous[laser_id]
         if previous is not None:
             return np.array([*(previous - half), *(previous + half)])
+        reach = self._reacquire_reach(laser_id)
+        if reach is not None:
+            last, distance = reach
+            return np.array([*(last - half - distance), *(last + half + distance)])
         return np.array([*(path.min(axis=0) - half), *(path.max(axis=0) + half)])
 
     def _track(self, image: np.ndarray, origin: np.ndarray, laser_id: int, path: np.ndarray,
@@ -452,6 +491,9 @@ class SpotTracker:
         near_path = off_paths <= tolerance + 2 * radii
         for taken in excluded or []:
             near_path &= np.hypot(*(centres - taken).T) > np.maximum(SAME_BLOB_PX, radii)
+        reach = self._reacquire_reach(laser_id)
+        if reach is not None:
+            near_path &= np.hypot(*(centres - reach[0]).T) <= reach[1]
         near_path[near_path] = [
             self._spot_like(image, origin, np.array(peak), background, line)
             for peak in self._peaks(signal, labels, near_path, (x0, y0))]

@@ -192,7 +192,7 @@ class FrameTracker:
         # A still's line says nothing of the next image's.
         self._line_followed = found and self.hampel is not None
         if self.hampel is None:   # a still: where the spots were says nothing of this image
-            self.spots.previous = dict.fromkeys(self.paths)
+            self.spots.forget()
         # The line's light is kept out of the spots it passes (seen this frame, or expected).
         estimates = self.spots.update(red, offset, (self._line_rows, self._line_x))
         if self.excess_sigma_px:

@@ -99,6 +99,15 @@ def height_errors(truth_spots: Path, points: np.ndarray) -> tuple[np.ndarray, np
             np.array([p["sigma_Z_mm"] for p in kept]))
 
 
+def hidden_points(truth_spots: Path, points: np.ndarray) -> int:
+    """How many spot points were measured where the truth says their spot was hidden (a
+    drop-out, outside the image): each one is made of something else's light."""
+    with truth_spots.open() as file:
+        hidden = {(int(row["frame"]), int(row["laser_id"])) for row in csv.DictReader(file)
+                  if row["visible"] != "1"}
+    return sum((int(p["frame"]), int(p["laser_id"])) in hidden for p in points)
+
+
 @dataclass(frozen=True)
 class SideCheck:
     """The side camera's check of a run's top surface (`sds run --lateral`): its placed view,
