@@ -646,3 +646,36 @@ def test_a_glint_on_the_path_of_a_spot_gone_for_two_frames_is_not_it(seed: int) 
         assert gone.flags & LOST
     (far,) = tracker.update(spots_image([(160.0, 100.0)], seed))
     assert np.hypot(far.x_px - 160.0, far.y_px - 100.0) < 0.3, far
+
+
+def blobs_image(blobs: list[tuple[float, float, float]], seed: int, size: int = 200
+                ) -> np.ndarray:
+    """Gaussian blobs (x, y, amplitude over the background) on a dark background, with shot
+    and read noise: a spot, or a glint far dimmer than one."""
+    rows, columns = np.indices((size, size))
+    light = np.full((size, size), 15.0)
+    for x, y, amplitude in blobs:
+        light += amplitude * np.exp(-0.5 * ((columns - x) ** 2 + (rows - y) ** 2) / 2.5**2)
+    noise = np.random.default_rng(seed).normal(0.0, 1.0, light.shape) * np.sqrt(light + 4.0)
+    return np.clip(np.round(light + noise), 0, 255).astype(np.uint8)
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_dim_glint_beside_a_spot_that_dropped_out_is_not_it(seed: int) -> None:
+    """The fresh held-out demo run's fabricated points (seeds 56101-56120): in the first frame
+    a spot is hidden, a glint 5 px away with a fifth of its peak lies in the spot's own window
+    and was taken for it, so the spot never counted as lost. A blob below DIMMED_SHARE of the
+    spot's peak when last seen is not it; an unsaturated spot whose peak halves under speckle
+    (true spots on development rigs fell to 0.43 at the least) is still itself."""
+    path = straight_path((20.0, 100.0), (180.0, 100.0))
+    tracker = SpotTracker({0: path})
+    (seen,) = tracker.update(spots_image([(100.0, 100.0)], seed))
+    assert np.hypot(seen.x_px - 100.0, seen.y_px - 100.0) < 0.3 and seen.peak == 255
+    (gone,) = tracker.update(blobs_image([(105.0, 100.0, 40.0)], seed + 1))
+    assert gone.flags & LOST and np.isnan(gone.x_px), gone
+    (back,) = tracker.update(spots_image([(100.5, 100.0)], seed + 2))
+    assert np.hypot(back.x_px - 100.5, back.y_px - 100.0) < 0.3, back
+    tracker = SpotTracker({0: path})
+    for frame, amplitude in enumerate((150.0, 75.0, 150.0)):
+        (spot,) = tracker.update(blobs_image([(100.0 + frame, 100.0, amplitude)], seed + frame))
+        assert not spot.flags & LOST and abs(spot.x_px - 100.0 - frame) < 0.3, (frame, spot)
