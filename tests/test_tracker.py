@@ -490,14 +490,21 @@ def test_a_weakly_calibrated_beam_widens_its_own_path_gate_only(repo: Path) -> N
     assert all(gates[d.laser_id] == 4.0 for d in rig.diodes[1:])
 
 
-def spots_image(centres: list[tuple[float, float]], seed: int, size: int = 200) -> np.ndarray:
-    """Saturating Gaussian spots (x, y) on a dark background, with shot and read noise."""
+def blobs_image(blobs: list[tuple[float, float, float]], seed: int, size: int = 200
+                ) -> np.ndarray:
+    """Gaussian blobs (x, y, amplitude over the background) on a dark background, with shot
+    and read noise: a spot, or a glint far dimmer than one."""
     rows, columns = np.indices((size, size))
     light = np.full((size, size), 15.0)
-    for x, y in centres:
-        light += 400.0 * np.exp(-0.5 * ((columns - x) ** 2 + (rows - y) ** 2) / 2.5**2)
+    for x, y, amplitude in blobs:
+        light += amplitude * np.exp(-0.5 * ((columns - x) ** 2 + (rows - y) ** 2) / 2.5**2)
     noise = np.random.default_rng(seed).normal(0.0, 1.0, light.shape) * np.sqrt(light + 4.0)
     return np.clip(np.round(light + noise), 0, 255).astype(np.uint8)
+
+
+def spots_image(centres: list[tuple[float, float]], seed: int, size: int = 200) -> np.ndarray:
+    """Saturating Gaussian spots (x, y) on a dark background, with shot and read noise."""
+    return blobs_image([(x, y, 400.0) for x, y in centres], seed, size)
 
 
 def straight_path(start: tuple[float, float], end: tuple[float, float]) -> np.ndarray:
@@ -646,18 +653,6 @@ def test_a_glint_on_the_path_of_a_spot_gone_for_two_frames_is_not_it(seed: int) 
         assert gone.flags & LOST
     (far,) = tracker.update(spots_image([(160.0, 100.0)], seed))
     assert np.hypot(far.x_px - 160.0, far.y_px - 100.0) < 0.3, far
-
-
-def blobs_image(blobs: list[tuple[float, float, float]], seed: int, size: int = 200
-                ) -> np.ndarray:
-    """Gaussian blobs (x, y, amplitude over the background) on a dark background, with shot
-    and read noise: a spot, or a glint far dimmer than one."""
-    rows, columns = np.indices((size, size))
-    light = np.full((size, size), 15.0)
-    for x, y, amplitude in blobs:
-        light += amplitude * np.exp(-0.5 * ((columns - x) ** 2 + (rows - y) ** 2) / 2.5**2)
-    noise = np.random.default_rng(seed).normal(0.0, 1.0, light.shape) * np.sqrt(light + 4.0)
-    return np.clip(np.round(light + noise), 0, 255).astype(np.uint8)
 
 
 @pytest.mark.parametrize("seed", [1, 2])

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -107,6 +108,15 @@ class SpotSettings:
     read_noise: float = 2.0        # grey levels, for the position uncertainty; a background
                                    # step within it is noise (kernels.background_step)
     min_competitor: float = 0.3    # a second blob this bright (relative) flags a reflection
+
+
+class LastSeen(NamedTuple):
+    """Where a spot was last seen [px, full frame], the frames since (1: the frame before),
+    and its peak then (REACQUIRE_FRAMES, DIMMED_SHARE)."""
+
+    position_px: np.ndarray
+    frames_since: int
+    peak: float
 
 
 @dataclass(frozen=True)
@@ -228,9 +238,7 @@ class SpotTracker:
         self.tolerance_px = {i: max(self.settings.path_tolerance_px,
                                     (tolerances_px or {}).get(i, 0.0)) for i in self.paths}
         self.previous: dict[int, np.ndarray | None] = dict.fromkeys(self.paths)
-        # Where a spot was last seen (within REACQUIRE_FRAMES), the frames since, and its peak.
-        self.last_seen: dict[int, tuple[np.ndarray, int, float] | None] = \
-            dict.fromkeys(self.paths)
+        self.last_seen: dict[int, LastSeen | None] = dict.fromkeys(self.paths)
         # All paths in one array for the batched pass; shorter ones repeat their last point
         # (a zero-length segment, which changes no distance).
         longest = max((len(p) for p in self.paths.values()), default=0)
@@ -281,17 +289,18 @@ class SpotTracker:
         for laser_id, estimate in estimates.items():
             seen = self.last_seen[laser_id]
             if not estimate.flags & LOST and seen is not None and \
-                    estimate.peak < DIMMED_SHARE * seen[2]:
+                    estimate.peak < DIMMED_SHARE * seen.peak:
                 estimate = SpotEstimate(laser_id, np.nan, np.nan, np.nan, 0.0, LOST)
                 estimates[laser_id] = estimate
             if estimate.flags & LOST:
                 self.previous[laser_id] = None
-                self.last_seen[laser_id] = None if seen is None or seen[1] >= REACQUIRE_FRAMES \
-                    else (seen[0], seen[1] + 1, seen[2])
+                self.last_seen[laser_id] = None if seen is None or \
+                    seen.frames_since >= REACQUIRE_FRAMES else \
+                    seen._replace(frames_since=seen.frames_since + 1)
             else:
                 position = np.array([estimate.x_px, estimate.y_px])
                 self.previous[laser_id] = position
-                self.last_seen[laser_id] = (position, 1, estimate.peak)
+                self.last_seen[laser_id] = LastSeen(position, 1, estimate.peak)
         return list(estimates.values())
 
     def forget(self) -> None:
@@ -306,7 +315,7 @@ class SpotTracker:
         seen = self.last_seen[laser_id]
         if seen is None or self.previous[laser_id] is not None:
             return None
-        return seen[0], self.settings.prior_sigma_px * seen[1]
+        return seen.position_px, self.settings.prior_sigma_px * seen.frames_since
 
     def _one_blob_one_diode(self, image: np.ndarray, origin: np.ndarray,
                             estimates: dict[int, SpotEstimate],
