@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import yaml
 from scipy import stats
+from scipy.ndimage import gaussian_filter
 from sds_camera.frame_source import Region, select
 from sds_model.rig import load_rig
 from sds_sim.render import FrameRenderer
@@ -674,3 +675,44 @@ def test_a_dim_glint_beside_a_spot_that_dropped_out_is_not_it(seed: int) -> None
     for frame, amplitude in enumerate((150.0, 75.0, 150.0)):
         (spot,) = tracker.update(blobs_image([(100.0 + frame, 100.0, amplitude)], seed + frame))
         assert not spot.flags & LOST and abs(spot.x_px - 100.0 - frame) < 0.3, (frame, spot)
+
+
+def speckle_pattern(rng: np.random.Generator, shape: tuple[int, int], contrast: float,
+                    grain_px: float) -> np.ndarray:
+    """A laser speckle pattern of mean 1: a fully developed pattern (the squared modulus of a
+    complex Gaussian field smoothed to a grain of `grain_px`) mixed down to `contrast`."""
+    field = gaussian_filter(rng.normal(size=shape), grain_px) + \
+        1j * gaussian_filter(rng.normal(size=shape), grain_px)
+    intensity = np.abs(field) ** 2
+    return (1 - contrast) + contrast * intensity / intensity.mean()
+
+
+@pytest.mark.parametrize("beside_px", [2.0, 4.0])
+def test_an_unsaturated_spot_on_a_speckled_line_says_it_is_uncertain(beside_px: float
+                                                                      ) -> None:
+    """A dim spot (peak 180) overlapping a saturating line, both under speckle (contrast 0.5):
+    what the line's profile leaves of its speckle moves the spot's centre by a pixel or two,
+    and its σ says so (`line_speckle_sigma_px`) instead of the saturated spots' 0.13 px.
+    Measured over 40 frames: error/σ RMS 3.9 and 3.3 (before: 11.8 and 7.4; the rest is the
+    spot's own speckle, which no single frame's σ holds); bound at 5."""
+    ratios, sigmas = [], []
+    size = 160
+    rows, columns = np.mgrid[0:size, 0:size].astype(float)
+    line_x = np.full(size, 80.3)
+    for seed in range(40):
+        rng = np.random.default_rng(seed)
+        spot = np.array([80.3 - beside_px, 81.0]) + rng.uniform(-0.5, 0.5, 2)
+        light = 10.0 + speckle_pattern(rng, (size, size), 0.5, 1.0) * (
+            300.0 * np.exp(-0.5 * ((columns - line_x[:, None]) / 1.8) ** 2) +
+            180.0 * np.exp(-0.5 * ((columns - spot[0]) ** 2 + (rows - spot[1]) ** 2) / 3.0**2))
+        noisy = light + rng.normal(size=light.shape) * np.sqrt(light + 4.0)
+        image = np.clip(np.round(noisy), 0, 255).astype(np.uint8)
+        tracker = SpotTracker({0: spot + np.array([[0.0, -40.0], [0.0, 40.0]])}, SpotSettings())
+        tracker.previous[0] = spot + np.array([0.5, 0.5])
+        (estimate,) = tracker.update(image, (0, 0), (np.arange(size), line_x))
+        assert not estimate.flags & LOST
+        error = np.hypot(estimate.x_px - spot[0], estimate.y_px - spot[1])
+        ratios.append(error / np.sqrt(2) / estimate.sigma_px)
+        sigmas.append(estimate.sigma_px)
+    assert np.median(sigmas) > 2 * ON_LINE_SIGMA_PX[1]
+    assert np.sqrt(np.mean(np.square(ratios))) < 5.0

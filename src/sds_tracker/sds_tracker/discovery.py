@@ -101,7 +101,8 @@ def find_spots(red: np.ndarray, offset: tuple[int, int] = (0, 0),
         if refined is not None:
             pixels[row] = refined.centre
             if refined.clearance_px < 0:
-                covariance[row] = _on_line_covariance(refined.along, sigma[row])
+                covariance[row] = _on_line_covariance(
+                    refined.along, max(sigma[row], refined.line_sigma_px))
     # A blob that was the line's light alone is no spot; two starts on one blob settle on
     # the same centre: keep one.
     spots = np.flatnonzero(np.isfinite(pixels).all(axis=1))

@@ -416,8 +416,9 @@ class SpotTracker:
                        ) -> SpotEstimate | None:
         """A tracked spot that overlaps the laser line (`beside_too`: or lies beside it),
         from its measurement without the line's light (`refined`), σ ON_LINE_SIGMA_PX across
-        the line; None for a spot clear of the line (unless `beside_too`), off its path or
-        not there (the full search decides)."""
+        the line or what the line's speckle leaves (`line_speckle_sigma_px`), the larger;
+        None for a spot clear of the line (unless `beside_too`), off its path or not there
+        (the full search decides)."""
         s = self.settings
         clear = refined.clearance_px >= 0 and not beside_too
         if not np.isfinite(refined.centre).all() or clear or \
@@ -426,7 +427,7 @@ class SpotTracker:
         x, y = np.round(refined.centre - origin).astype(int)
         peak = float(image[max(y - 2, 0):y + 3, max(x - 2, 0):x + 3].max())
         return SpotEstimate(laser_id, float(refined.centre[0]), float(refined.centre[1]),
-                            ON_LINE_SIGMA_PX[1], peak,
+                            max(ON_LINE_SIGMA_PX[1], refined.line_sigma_px), peak,
                             SATURATED if peak >= s.saturation_level else 0)
 
     def _acquire_on_line(self, image: np.ndarray, origin: np.ndarray, laser_id: int,
@@ -558,7 +559,7 @@ class SpotTracker:
                 return lost   # the blob was the line's light alone
             centre = refined.centre
             if refined.clearance_px < 0:
-                sigma = max(sigma, ON_LINE_SIGMA_PX[1])
+                sigma = max(sigma, ON_LINE_SIGMA_PX[1], refined.line_sigma_px)
         if distance_to_path(centre, path) > self.tolerance_px[laser_id]:
             return SpotEstimate(laser_id, np.nan, np.nan, np.nan, 0.0, LOST | OFF_PATH)
         if peak >= s.saturation_level:
@@ -622,11 +623,13 @@ class LineFreeSpot:
     `clearance_px` is the gap between the spot's edge and the line's edge at the threshold
     (negative where the two overlap, and there the centre is uncertain across the line: a
     saturated line hides the spot's light on its side; along the line it is not). Both are
-    NaN where the line's light was all there was: no spot."""
+    NaN where the line's light was all there was: no spot. `line_sigma_px` is the centre's
+    uncertainty from the line's speckle left in the spot's light (`line_speckle_sigma_px`)."""
 
     centre: np.ndarray
     along: np.ndarray
     clearance_px: float
+    line_sigma_px: float = 0.0
 
 
 def line_free_centre(image: np.ndarray, origin: np.ndarray, centre: np.ndarray,
@@ -676,7 +679,8 @@ def window_without_line(image: np.ndarray, origin: np.ndarray,
                               centre - origin - (x0, y0), s)
     if local is None:
         return None
-    return LineFreeSpot(local.centre + origin + (x0, y0), local.along, local.clearance_px)
+    return LineFreeSpot(local.centre + origin + (x0, y0), local.along, local.clearance_px,
+                        local.line_sigma_px)
 
 
 def spot_window(shape: tuple[int, ...], offset: np.ndarray, centre: np.ndarray, half: int
@@ -763,8 +767,24 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
     to_line = (intercept + slope * centre[1] - centre[0]) / norm
     spot_rows, spot_columns = np.nonzero(near & (left > s.threshold))
     spot_pixels = np.column_stack([spot_columns, spot_rows])
+    distance2 = (columns - x) ** 2 + (rows - y) ** 2
+    sigma = line_speckle_sigma_px(speckle, distance2[near & band & ~unknown],
+                                  float(np.clip(left[near & ~unknown], 0, None).sum()))
     return LineFreeSpot(centre, along, _clearance(spot_pixels, centre, to_line * across, along,
-                                                  line_half_width / norm))
+                                                  line_half_width / norm), sigma)
+
+
+def line_speckle_sigma_px(speckle: float, distance2_px2: np.ndarray, light: float) -> float:
+    """The uncertainty [px] a spot's centre gets from the laser line's speckle left in its
+    light where the line crosses it: the line's profile is a median, so each pixel of its
+    band keeps its own speckle (robust σ `speckle`), which moves the centre of the spot's
+    known `light` as noise moves a centroid, by the pixels' squared distances from it
+    (`distance2_px2`). A saturated spot outshines it (about 0.1 px, ON_LINE_SIGMA_PX); a dim
+    one under strong speckle is uncertain by a pixel or more. 0 where none of the spot's
+    light is known (all saturated: its outline centres it)."""
+    if light <= 0:
+        return 0.0
+    return float(speckle * np.sqrt(distance2_px2.sum() / 2) / light)
 
 
 def _clearance(spot_pixels: np.ndarray, centre: np.ndarray, to_line: np.ndarray,
