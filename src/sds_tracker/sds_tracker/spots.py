@@ -767,7 +767,7 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
     to_line = (intercept + slope * centre[1] - centre[0]) / norm
     spot_rows, spot_columns = np.nonzero(near & (left > s.threshold))
     spot_pixels = np.column_stack([spot_columns, spot_rows])
-    distance2 = (columns - x) ** 2 + (rows - y) ** 2
+    distance2 = np.asarray((columns - x) ** 2 + (rows - y) ** 2)
     sigma = line_speckle_sigma_px(speckle, distance2[near & band & ~unknown],
                                   float(np.clip(left[near & ~unknown], 0, None).sum()))
     return LineFreeSpot(centre, along, _clearance(spot_pixels, centre, to_line * across, along,
