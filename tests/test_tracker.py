@@ -332,7 +332,9 @@ def test_the_tracker_takes_the_lines_light_out_of_a_spot_it_overlaps() -> None:
     assert estimate.sigma_px >= ON_LINE_SIGMA_PX[1]
     tracker.previous[0] = spot + np.array([1.0, 0.5])
     (plain,) = tracker.update(image, (0, 0))
-    assert np.hypot(plain.x_px - spot[0], plain.y_px - spot[1]) > 0.5   # without the line
+    # Without the line the spot is not found where it is: its blob is the line's, and the
+    # neighbour 18 px away is beyond where the spot can have moved in a frame (lost).
+    assert plain.flags & LOST or np.hypot(plain.x_px - spot[0], plain.y_px - spot[1]) > 0.5
 
 
 @pytest.mark.parametrize("last_seen", [(76.0, 81.0), (80.0, 81.0), None])
@@ -716,3 +718,25 @@ def test_an_unsaturated_spot_on_a_speckled_line_says_it_is_uncertain(beside_px: 
         sigmas.append(estimate.sigma_px)
     assert np.median(sigmas) > 2 * ON_LINE_SIGMA_PX[1]
     assert np.sqrt(np.mean(np.square(ratios))) < 5.0
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_spot_that_vanishes_is_not_replaced_by_a_blob_beyond_a_frames_motion(seed: int
+                                                                                ) -> None:
+    """The fourth held-out demo run's wrong point (seed 57105): a spot tracked up to the video's
+    last frame vanished there, and a blob 27 px away with a third of its peak, inside its
+    window, was taken for it (a valid point 8.9 mm off). A spot measured k frames ago is
+    looked for within (k + 1) × `prior_sigma_px` of where it was: the blob is beyond it, so
+    the spot is lost. A spot moving 12 px per frame, half again the fastest in the shipped
+    scenarios, is still followed."""
+    path = straight_path((20.0, 20.0), (180.0, 180.0))
+    tracker = SpotTracker({0: path})
+    (seen,) = tracker.update(spots_image([(100.0, 100.0)], seed))
+    assert np.hypot(seen.x_px - 100.0, seen.y_px - 100.0) < 0.3
+    (gone,) = tracker.update(blobs_image([(119.0, 119.0, 100.0)], seed + 1))
+    assert gone.flags & LOST and np.isnan(gone.x_px), gone
+    tracker = SpotTracker({0: path})
+    for frame in range(6):
+        x = 40.0 + 12.0 / np.sqrt(2) * frame
+        (spot,) = tracker.update(spots_image([(x, x)], seed + frame))
+        assert np.hypot(spot.x_px - x, spot.y_px - x) < 0.3, (frame, spot)
