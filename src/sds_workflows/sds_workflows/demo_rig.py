@@ -14,6 +14,7 @@ rig file the drop is measured with.
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -30,7 +31,7 @@ from sds_sim.true_rig import RigErrors, camera_as_calibrated, true_rig
 
 from sds_workflows.calibration_plan import plan_protocol, write_protocol
 from sds_workflows.calibration_trial import geometry_errors
-from sds_workflows.rig_calibration import FRAMES_PER_STILL, calibrate_rig
+from sds_workflows.rig_calibration import FRAMES_PER_STILL, IMAGE_THREADS, calibrate_rig
 
 RIG_ERRORS = RigErrors(emitter_sigma_mm=0.3)
 """How the demo's rig as built departs from its file (beams, camera pose, line plane: the
@@ -112,12 +113,15 @@ def demo_rig(scenario: Scenario, folder: Path) -> DemoRig:
     readings = steps[-1].surfaces
     series = render_surfaces(true, true_surfaces(readings, READINGS, rng), scenario.scale,
                              scenario.seed, frames=FRAMES_PER_STILL, imaging=imaging)
-    images = []
-    for index, image in enumerate(series.images):
-        for shot, frame in enumerate([image, *series.repeats[index]]):
-            path = folder / f"table_{index:02d}_{shot}.png"
-            cv2.imwrite(str(path), frame, [cv2.IMWRITE_PNG_COMPRESSION, 1])
-            images.append(path)
+    shots = {folder / f"table_{index:02d}_{shot}.png": frame
+             for index, image in enumerate(series.images)
+             for shot, frame in enumerate([image, *series.repeats[index]])}
+    with ThreadPoolExecutor(IMAGE_THREADS) as pool:
+        written = pool.map(lambda path: cv2.imwrite(str(path), shots[path],
+                                                    [cv2.IMWRITE_PNG_COMPRESSION, 1]), shots)
+        if not all(written):
+            raise OSError(f"{folder}: a table image could not be written")
+    images = list(shots)
     calibrated_file = folder / "rig_calibrated.yaml"
     calibrated, result = calibrate_rig(nominal, images, surfaces_csv, calibrated_file,
                                        "`sds demo` (sds calibrate rig on the table's images)")
