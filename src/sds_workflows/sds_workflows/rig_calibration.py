@@ -70,10 +70,12 @@ def read_images(paths: list[Path]) -> list[np.ndarray]:
     """BGR images from files, IMAGE_THREADS at once; a one-line error (InputError) for one
     that cannot be read."""
     with ThreadPoolExecutor(IMAGE_THREADS) as pool:
-        images = list(pool.map(lambda path: cv2.imread(str(path), cv2.IMREAD_COLOR), paths))
-    for path, image in zip(paths, images, strict=True):
+        read = list(pool.map(lambda path: cv2.imread(str(path), cv2.IMREAD_COLOR), paths))
+    images: list[np.ndarray] = []
+    for path, image in zip(paths, read, strict=True):
         if image is None:
             raise InputError(f"{path}: not a readable image")
+        images.append(image)
     return images
 
 
