@@ -115,3 +115,24 @@ def test_every_anchor_a_document_links_is_one_of_its_headings() -> None:
         anchors = {github_anchor(h) for h in re.findall(r"^#{1,6} (.+)$", text, re.MULTILINE)}
         missing = set(re.findall(r"\]\(#([^)]+)\)", text)) - anchors
         assert not missing, (document, missing)
+
+
+def todays_figures_rows(text: str) -> list[tuple[str, str]]:
+    """(anchor, figure) of each row of bench/README.md's table of today's figures."""
+    table = text.split("## Today's figures", 1)[1].split("\n## ", 1)[0]
+    return re.findall(r"^\| \[[^]]+\]\(#([^)]+)\) \| (.+?) \| `", table, re.MULTILINE)
+
+
+def test_todays_figures_are_the_figures_of_their_sections() -> None:
+    """No figure in bench/README.md's table of today's figures contradicts its section: every
+    number the table states (a decimal, or an integer of two digits or more) is written in
+    the section its row links to, so neither can change without the other (issue 48)."""
+    text = (REPO / "bench" / "README.md").read_text()
+    sections = {github_anchor(heading): body for heading, body in
+                re.findall(r"^## (.+)\n((?:(?!^## ).*\n?)*)", text, re.MULTILINE)}
+    rows = todays_figures_rows(text)
+    assert len(rows) >= 10
+    for anchor, figure in rows:
+        numbers = re.findall(r"\d+\.\d+|\d{2,}", figure.replace(",", ""))
+        missing = [n for n in numbers if n not in sections[anchor].replace(",", "")]
+        assert not missing, (anchor, missing)
