@@ -136,3 +136,27 @@ def test_todays_figures_are_the_figures_of_their_sections() -> None:
         numbers = re.findall(r"\d+\.\d+|\d{2,}", figure.replace(",", ""))
         missing = [n for n in numbers if n not in sections[anchor].replace(",", "")]
         assert not missing, (anchor, missing)
+
+
+def test_every_figure_of_a_seeded_run_is_one_bench_records() -> None:
+    """A sentence of the README or docs/ that names a run's seeds (`seeds 58101–58120`)
+    gives only figures that bench/README.md records for that run: every decimal number in it
+    is written in a section of bench/README.md that names the same seeds, so a page cannot
+    keep a figure the run did not give or the benchmarks have replaced (issue 48)."""
+    bench = (REPO / "bench" / "README.md").read_text().replace(",", "")
+    # A run's record: from where bench/README.md names its seeds to the next entry (a bold
+    # paragraph start) or heading.
+    entries = re.split(r"^(?=\*\*|#)", bench, flags=re.MULTILINE)
+    checked = 0
+    for document in (REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))):
+        text = document.read_text().replace(",", "")
+        for paragraph in re.split(r"\n\s*\n|\n- |\.\s+(?=[A-Z])", text):
+            runs = re.findall(r"seeds (\d{4,5}[–-]\d{4,5})", paragraph)
+            if not runs:
+                continue
+            recorded = "".join(entry for entry in entries if any(run in entry for run in runs))
+            assert recorded, (document.name, runs)
+            missing = [n for n in re.findall(r"\d+\.\d+", paragraph) if n not in recorded]
+            assert not missing, (document.name, runs, missing)
+            checked += 1
+    assert checked >= 3
