@@ -141,8 +141,9 @@ def test_todays_figures_are_the_figures_of_their_sections() -> None:
 def test_every_figure_of_a_seeded_run_is_one_bench_records() -> None:
     """A sentence of the README or docs/ that names a run's seeds (`seeds 58101–58120`)
     gives only figures that bench/README.md records for that run: every decimal number in it
-    is written in a section of bench/README.md that names the same seeds, so a page cannot
-    keep a figure the run did not give or the benchmarks have replaced (issue 48)."""
+    is written in an entry of bench/README.md that names the same seeds (from that entry's
+    bold start or heading to the next), so a page cannot keep a figure the run did not give
+    or the benchmarks have replaced (issue 48)."""
     bench = (REPO / "bench" / "README.md").read_text().replace(",", "")
     # A run's record: from where bench/README.md names its seeds to the next entry (a bold
     # paragraph start) or heading.

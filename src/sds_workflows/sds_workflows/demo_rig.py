@@ -117,11 +117,13 @@ def demo_rig(scenario: Scenario, folder: Path) -> DemoRig:
              for index, image in enumerate(series.images)
              for shot, frame in enumerate([image, *series.repeats[index]])}
     with ThreadPoolExecutor(IMAGE_THREADS) as pool:
-        written = pool.map(lambda path: cv2.imwrite(str(path), shots[path],
-                                                    [cv2.IMWRITE_PNG_COMPRESSION, 1]), shots)
-        if not all(written):
-            raise OSError(f"{folder}: a table image could not be written")
+        written = list(pool.map(lambda shot: cv2.imwrite(str(shot[0]), shot[1],
+                                                         [cv2.IMWRITE_PNG_COMPRESSION, 1]),
+                                shots.items()))
     images = list(shots)
+    for path, ok in zip(images, written, strict=True):
+        if not ok:
+            raise OSError(f"{path}: the table image could not be written")
     calibrated_file = folder / "rig_calibrated.yaml"
     calibrated, result = calibrate_rig(nominal, images, surfaces_csv, calibrated_file,
                                        "`sds demo` (sds calibrate rig on the table's images)")
