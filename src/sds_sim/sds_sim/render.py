@@ -103,7 +103,9 @@ class FrameRenderer:
         sensor = self.scenario.sensor
         if not sensor.vignetting and not sensor.ambient_gradient:
             return None
-        ys, xs = np.mgrid[0:self.height, 0:self.width].astype(np.float32)
+        # A row and a column, broadcast: the same values as full grids, without their memory.
+        xs = np.arange(self.width, dtype=np.float32)[np.newaxis, :]
+        ys = np.arange(self.height, dtype=np.float32)[:, np.newaxis]
         u = (xs - (self.width - 1) / 2) / (self.width / 2)
         v = (ys - (self.height - 1) / 2) / (self.height / 2)
         falloff = 1.0 - sensor.vignetting * (u**2 + v**2) / 2.0

@@ -12,9 +12,11 @@ simulator's truth.
 from __future__ import annotations
 
 import csv
+import multiprocessing
 import shutil
 import sys
 from collections import Counter
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Protocol
@@ -28,14 +30,14 @@ from sds_model.staging import staged_folder
 from sds_recon.results import ResultsWriter, load_results, refuse_results
 from sds_record.mcap_files import read_messages
 from sds_sim.imaging import merged
-from sds_sim.scenario import load_scenario
-from sds_sim.simulate import simulate
+from sds_sim.scenario import Scenario, load_scenario
+from sds_sim.simulate import SimulationOutput, simulate
 from sds_sloshing.analysis import AnalysisOptions
 from sds_sloshing.report import summary_lines, truth_from_run
 from sds_sloshing.surface_series import RecordingError
 from sds_viz.from_mcap import mcap_to_rrd
 
-from sds_workflows.demo_rig import DemoRig, demo_rig
+from sds_workflows.demo_rig import DemoRig, calibrate_demo_rig, draw_demo_rig
 from sds_workflows.export import export_recording
 from sds_workflows.lateral import (
     LateralInput,
@@ -171,32 +173,46 @@ def interrupted(command: str, outputs: ChainOutputs) -> int:
     return 130
 
 
+def simulate_drop(scenario: Scenario, out: Path, as_built: bool, progress: bool = True
+                  ) -> SimulationOutput:
+    """Simulate the demo's drop into `out`/simulation, saying what it renders."""
+    print(f"simulating '{scenario.name}': {scenario.duration_s:g} s, {scenario.frame_count} "
+          f"frames at {scenario.rig.camera.width_px}x{scenario.rig.camera.height_px}"
+          + (", the rig as built with a real camera's imaging" if as_built else ""), flush=True)
+    return simulate(scenario, out / "simulation", progress=progress)
+
+
 def run_demo(out: Path, seconds: float | None, run_chain: ChainRunner,
              exact_rig: bool = False) -> int:
     """Simulate a drop, run the whole chain on it, analyse, print the summary. The drop is
-    rendered with a rig as built and measured with the rig file the calibration protocol gave
-    (`demo_rig`); with `exact_rig`, rendered and measured with the scenario's own rig file."""
+    rendered with a rig as built (while its table's images are) and measured with the rig
+    file the calibration protocol gave (`demo_rig`); with `exact_rig`, rendered and measured
+    with the scenario's own rig file."""
     out.mkdir(parents=True, exist_ok=True)
     overrides = {} if seconds is None else {"duration_s": seconds}
     scenario = load_scenario(DEMO_SCENARIO, overrides)
     built = None
-    if not exact_rig:
+    if exact_rig:
+        simulation = simulate_drop(scenario, out, as_built=False)
+    else:
         folder = out / "calibration"
         if folder.exists():   # the demo's own folder: its earlier calibration is replaced
             shutil.rmtree(folder)
         folder.mkdir()
         print(f"calibrating a rig as built ({folder}): sds calibrate plan, the tilt table's "
-              "images, sds calibrate rig")
-        built = demo_rig(scenario, folder)
+              "images, sds calibrate rig", flush=True)
+        drawn = draw_demo_rig(scenario, folder)
         scenario = replace(load_scenario(DEMO_SCENARIO, merged(overrides,
-                                                               built.scenario_overrides)),
-                           rig=built.true)
+                                                               drawn.scenario_overrides)),
+                           rig=drawn.true)
+        # The drop needs only the true rig: it is rendered in a second process while the
+        # table's images are, so that the two share the machine's cores.
+        with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
+            drop = pool.submit(simulate_drop, scenario, out, as_built=True, progress=False)
+            built = calibrate_demo_rig(drawn, folder)
+            simulation = drop.result()
     rig_file = built.calibrated_file if built else scenario.rig_file.resolve()
     rig = load_rig(rig_file)
-    print(f"simulating '{scenario.name}': {scenario.duration_s:g} s, {scenario.frame_count} "
-          f"frames at {scenario.rig.camera.width_px}x{scenario.rig.camera.height_px}"
-          + (", the rig as built with a real camera's imaging" if built else ""))
-    simulation = simulate(scenario, out / "simulation")
     led_x, led_y = (int(v) for v in scenario.events.led_position_px)
     half = LED_ROI_HALF_PX
     port = (out / "ttyARDUINO").resolve()

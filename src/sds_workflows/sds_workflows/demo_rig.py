@@ -23,6 +23,7 @@ import cv2
 import numpy as np
 from sds_model.camera.rolling_shutter import RollingShutter
 from sds_model.rig import Rig, Tolerances, load_rig, save_rig
+from sds_recon.calibration.lasers import KnownSurface
 from sds_recon.calibration.rig_calibration import RigCalibration
 from sds_sim.imaging import draw_imaging, merged
 from sds_sim.scenario import Scenario
@@ -88,10 +89,26 @@ class DemoRig:
         return lines
 
 
-def demo_rig(scenario: Scenario, folder: Path) -> DemoRig:
+@dataclass(frozen=True)
+class DrawnRig:
+    """The demo's rig as built before any image: the true rig and the true surfaces the table
+    gives, the scenario overrides of its imaging and rolling shutter, and the user's files so
+    far (the rig file as designed, the protocol's surfaces CSV)."""
+
+    true: Rig
+    scenario_overrides: dict[str, dict[str, Any]]
+    imaging: dict[str, dict[str, Any]]
+    nominal: Rig
+    surfaces_csv: Path
+    surfaces: list[KnownSurface]   # the liquid's true pose at each table position
+    planned_tilt_sigma_deg: float
+    scale: float
+    seed: int
+
+
+def draw_demo_rig(scenario: Scenario, folder: Path) -> DrawnRig:
     """Draw the scenario's rig as built (seeded by the scenario's seed), write the user's rig
-    file, plan the protocol, render the table's images and calibrate the rig from them, all
-    in `folder`."""
+    file and plan the protocol in `folder`: everything the drop's simulation needs."""
     rng = np.random.default_rng((scenario.seed, STREAM))
     base = scenario.rig
     # The rig file as the user writes it: the camera inline (the GoPro's file and the
@@ -110,9 +127,18 @@ def demo_rig(scenario: Scenario, folder: Path) -> DemoRig:
     steps = plan_protocol(nominal, READINGS.accuracy())
     surfaces_csv = folder / "surfaces.csv"
     write_protocol(steps[-1], surfaces_csv)
-    readings = steps[-1].surfaces
-    series = render_surfaces(true, true_surfaces(readings, READINGS, rng), scenario.scale,
-                             scenario.seed, frames=FRAMES_PER_STILL, imaging=imaging)
+    surfaces = true_surfaces(steps[-1].surfaces, READINGS, rng)
+    overrides = merged({"sensor": {"readout_s": readout_s, "readout_direction":
+                                   designed.camera_shutter.direction}}, imaging)
+    return DrawnRig(true, overrides, imaging, nominal, surfaces_csv, surfaces,
+                    steps[-1].worst_tilt_deg, scenario.scale, scenario.seed)
+
+
+def calibrate_demo_rig(drawn: DrawnRig, folder: Path) -> DemoRig:
+    """Render the table's images of the drawn rig into `folder` and calibrate the rig from
+    them as `sds calibrate rig` does."""
+    series = render_surfaces(drawn.true, drawn.surfaces, drawn.scale, drawn.seed,
+                             frames=FRAMES_PER_STILL, imaging=drawn.imaging)
     shots = {folder / f"table_{index:02d}_{shot}.png": frame
              for index, image in enumerate(series.images)
              for shot, frame in enumerate([image, *series.repeats[index]])}
@@ -125,9 +151,14 @@ def demo_rig(scenario: Scenario, folder: Path) -> DemoRig:
         if not ok:
             raise OSError(f"{path}: the table image could not be written")
     calibrated_file = folder / "rig_calibrated.yaml"
-    calibrated, result = calibrate_rig(nominal, images, surfaces_csv, calibrated_file,
+    calibrated, result = calibrate_rig(drawn.nominal, images, drawn.surfaces_csv,
+                                       calibrated_file,
                                        "`sds demo` (sds calibrate rig on the table's images)")
-    overrides = merged({"sensor": {"readout_s": readout_s, "readout_direction":
-                                   designed.camera_shutter.direction}}, imaging)
-    return DemoRig(true, overrides, surfaces_csv, images, calibrated_file, calibrated, result,
-                   steps[-1].worst_tilt_deg)
+    return DemoRig(drawn.true, drawn.scenario_overrides, drawn.surfaces_csv, images,
+                   calibrated_file, calibrated, result, drawn.planned_tilt_sigma_deg)
+
+
+def demo_rig(scenario: Scenario, folder: Path) -> DemoRig:
+    """Draw the scenario's rig as built, write the user's rig file, plan the protocol, render
+    the table's images and calibrate the rig from them, all in `folder`."""
+    return calibrate_demo_rig(draw_demo_rig(scenario, folder), folder)
