@@ -300,6 +300,34 @@ def test_ctrl_c_during_the_demos_graph_is_an_interruption_not_a_failure(tmp_path
     assert "FRAMES MISSING" not in demo.stdout.read()
 
 
+def test_ctrl_c_while_the_demo_calibrates_and_renders_leaves_no_process(tmp_path: Path) -> None:
+    """Ctrl-C while the demo renders and calibrates the table's images, its drop rendered in
+    a second process meanwhile: exit 130, said in one line, and no process of the demo's
+    (the drop's renderer, its encoder) is left running."""
+    demo = interruptible([SDS, "demo", "--seconds", "1", "--out", str(tmp_path)],
+                         start_new_session=True)
+    assert demo.stdout is not None and demo.stderr is not None
+    for line in demo.stdout:
+        if line.startswith("simulating"):   # the drop's process has started
+            break
+    time.sleep(2.0)
+    os.killpg(demo.pid, signal.SIGINT)
+    code = demo.wait(timeout=60)
+    stderr = demo.stderr.read()
+    assert code == 130 and stderr == "sds: interrupted\n", stderr
+    deadline = time.monotonic() + 10.0
+    while time.monotonic() < deadline:
+        try:
+            os.killpg(demo.pid, 0)   # a process of the demo's group is still there
+        except ProcessLookupError:
+            break
+        time.sleep(0.1)
+    else:
+        os.killpg(demo.pid, signal.SIGKILL)
+        pytest.fail("a process of the demo outlived it")
+    assert not (tmp_path / "results").exists()
+
+
 def test_a_report_that_fails_half_way_leaves_no_result(kick: SimulationOutput, tmp_path: Path,
                                                        monkeypatch: pytest.MonkeyPatch) -> None:
     """A fault while the report is written (after analysis.json, before report.html) is the
