@@ -81,8 +81,8 @@ def test_record_play_record_gives_the_same_messages(tmp_path: Path) -> None:
         "/test/header": 40, "/test/sync": 40, "/test/model": 1}
     # The player sends each message at its log time's offset in the first recording; the
     # second recording's publish times are those sends (the DDS source timestamps), so they
-    # measure the player's pacing. (Its log times are the recorder's receptions, which a busy
-    # moment of the recorder's delays: once 11 ms behind over the 2 s.) Five runs on the
+    # measure the player's pacing. (Its log times are when the recorder received them: a
+    # busy moment of the recorder's once put them 11 ms behind over the 2 s.) Five runs on the
     # 2-core machine: median 0.10-0.21 ms, largest 0.32-1.30 ms; the bounds leave a loaded
     # machine's late wake-ups room.
     origin = min(m.log_time_ns for messages in original.values() for m in messages)
