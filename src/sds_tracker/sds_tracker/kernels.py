@@ -10,6 +10,12 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+FIXED_APERTURE_PASSES = 8
+"""Most passes of a centroid in a fixed aperture (`spot_windows`): started at a spot's
+brightest pixel, a grain of speckle up to a few px from its centre, it settles in 3-5."""
+FIXED_APERTURE_SETTLED_PX = 0.01
+"""A centroid in a fixed aperture that moved less than this in a pass [px] has settled."""
+
 
 @njit(cache=True)
 def background_step(window: np.ndarray, read_noise: float) -> float:
@@ -78,10 +84,25 @@ def step_sigma_px(step: float, lever_px: float, total: float) -> float:
     return step / 2 * (2 / np.pi) * lever_px / total
 
 
+@njit(cache=True)
+def ring_median(window: np.ndarray, centre: int, half: int) -> float:
+    """Median of the border of the square of half size `half` about (`centre`, `centre`) of
+    a window: the background just outside a fixed aperture of radius half/2."""
+    values = np.empty(8 * half)
+    low, high = centre - half, centre + half
+    for i in range(2 * half):
+        values[4 * i] = window[low, low + i]
+        values[4 * i + 1] = window[high, high - i]
+        values[4 * i + 2] = window[high - i, low]
+        values[4 * i + 3] = window[low + i, high]
+    return float(np.median(values))
+
+
 @njit(cache=True, fastmath=True)
 def spot_windows(image: np.ndarray, corners: np.ndarray, half: int, prior: np.ndarray,
                  threshold: float, min_competitor: float, aperture_factor: float,
-                 clip_fraction: float, read_noise: float, max_elongation: float
+                 clip_fraction: float, read_noise: float, max_elongation: float,
+                 apertures_px: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per window (top-left `corners`, size 2·half + 1): the spot-core centroid in window pixels,
     its σ [px], the raw peak, and whether one clear blob settled it.
@@ -89,7 +110,9 @@ def spot_windows(image: np.ndarray, corners: np.ndarray, half: int, prior: np.nd
     Background: median of the window's border. Blob: the prior-weighted brightest pixel, its
     area and mass above `threshold` within half/2 px; another blob with `min_competitor` of that
     mass leaves the spot to the full search. Centroid: `clip_fraction` of the peak taken off,
-    within 1.6 × the blob's radius (`aperture_factor`), re-centred once. σ: the photons' and the
+    within 1.6 × the blob's radius (`aperture_factor`), re-centred once; or, where the window's
+    `apertures_px` is above 0, nothing taken off within that radius, re-centred until it moves
+    less than FIXED_APERTURE_SETTLED_PX (FIXED_APERTURE_PASSES at most). σ: the photons' and the
     read noise's (`read_noise`), and a background that is not one level (`step_sigma_px`).
     Light more elongated than `max_elongation` about the centre (`light_elongation` within
     half/2: a stripe, not a spot) is left to the full search too.
@@ -131,23 +154,31 @@ def spot_windows(image: np.ndarray, corners: np.ndarray, half: int, prior: np.nd
                         far += signal
         if area == 0 or peak <= threshold or far >= min_competitor * max(main, 1e-9):
             continue
-        radius = max(aperture_factor * np.sqrt(area / np.pi), 3.0)
+        fixed = apertures_px[k] > 0
+        radius = apertures_px[k] if fixed else max(aperture_factor * np.sqrt(area / np.pi), 3.0)
+        floor = background + clip_fraction * peak
+        if fixed:
+            floor = ring_median(image[y0:y0 + size, x0:x0 + size], half,
+                                min(half, int(np.round(2 * radius))))
         radius2 = radius * radius
         reach = int(np.ceil(radius)) + 1
         cx, cy, total = float(gx), float(gy), 0.0
-        for _ in range(2):
+        for _ in range(FIXED_APERTURE_PASSES if fixed else 2):
             total, sx, sy = 0.0, 0.0, 0.0
             for y in range(max(0, int(cy) - reach), min(size, int(cy) + reach + 1)):
                 for x in range(max(0, int(cx) - reach), min(size, int(cx) + reach + 1)):
                     if (x - cx) ** 2 + (y - cy) ** 2 <= radius2:
-                        weight = image[y0 + y, x0 + x] - background - clip_fraction * peak
+                        weight = image[y0 + y, x0 + x] - floor
                         if weight > 0:
                             total += weight
                             sx += weight * x
                             sy += weight * y
             if total <= 0:
                 break
+            moved = np.hypot(sx / total - cx, sy / total - cy)
             cx, cy = sx / total, sy / total
+            if fixed and moved < FIXED_APERTURE_SETTLED_PX:
+                break
         if total <= 0 or abs(cx - half) + radius > half or abs(cy - half) + radius > half:
             continue
         if light_elongation(image, x0 + cx, y0 + cy, 0.5 * half, background,
@@ -161,7 +192,7 @@ def spot_windows(image: np.ndarray, corners: np.ndarray, half: int, prior: np.nd
                     raw = float(image[y0 + y, x0 + x])
                     variance += (raw + read_noise * read_noise) * distance2
                     top = max(top, raw)
-                    if raw - background - clip_fraction * peak > 0:
+                    if raw - floor > 0:
                         lever += np.sqrt(distance2)
         centres[k, 0], centres[k, 1] = cx, cy
         step = step_sigma_px(background_step(image[y0:y0 + size, x0:x0 + size], read_noise),
@@ -366,7 +397,7 @@ def warm_up() -> None:
     """Compile (or load from numba's cache) the kernels now, not on the first frames."""
     image = np.zeros((64, 64), np.uint8)
     spot_windows(image, np.zeros((1, 2), np.int64), 24, np.ones((49, 49)), 30.0, 0.3, 1.6,
-                 0.15, 2.0, 3.0)
+                 0.15, 2.0, 3.0, np.zeros(1))
     background_step(image, 2.0)
     light_elongation(image, 32.0, 32.0, 12.0, 0.0, 30.0)
     line_rows(image, np.zeros(1, np.int64), np.zeros(1, np.int64), 61, 6, 10, 0.15, 30.0, 2.0)

@@ -13,9 +13,12 @@ from scipy.optimize import linear_sum_assignment
 from scipy.sparse.csgraph import connected_components
 
 from sds_tracker.kernels import (
+    FIXED_APERTURE_PASSES,
+    FIXED_APERTURE_SETTLED_PX,
     background_step,
     light_elongation,
     remove_line,
+    ring_median,
     spot_windows,
     step_sigma_px,
     symmetric_centre,
@@ -242,19 +245,25 @@ class SpotTracker:
 
     def __init__(self, paths: dict[int, np.ndarray], settings: SpotSettings | None = None,
                  tolerances_px: dict[int, float] | None = None, exclusive: bool = True,
-                 max_elongation: float = MAX_ELONGATION) -> None:
+                 max_elongation: float = MAX_ELONGATION,
+                 apertures_px: dict[int, float] | None = None) -> None:
         """`tolerances_px`: a path's own gate [px] where it is known less well than
         `path_tolerance_px` (a weakly calibrated beam); the others use that. `exclusive`
         (diodes): a blob is one path's spot at most (`_one_blob_one_diode`); off, where the
         paths are starts on blobs not yet told apart (discovery), two may settle on one.
         `max_elongation`: the most elongated light that can be a spot (`_spot_like`);
-        discovery, whose starts are compact blobs already, takes any."""
+        discovery, whose starts are compact blobs already, takes any. `apertures_px`: a
+        diode's fixed centroid aperture [px], with nothing of the peak taken off (a video's,
+        where a speckled spot's every grain counts); a diode without one takes
+        `aperture_factor` × its blob's radius with `clip_fraction` of the peak taken off
+        (stills, whose averaged frames keep the liquid's mirrored surroundings as wings)."""
         self.settings = settings or SpotSettings()
         self.exclusive = exclusive
         self.max_elongation = max_elongation
         self.paths = {i: np.asarray(p, dtype=float) for i, p in paths.items()}
         self.tolerance_px = {i: max(self.settings.path_tolerance_px,
                                     (tolerances_px or {}).get(i, 0.0)) for i in self.paths}
+        self.aperture_px = {i: (apertures_px or {}).get(i, 0.0) for i in self.paths}
         self.previous: dict[int, np.ndarray | None] = dict.fromkeys(self.paths)
         self.last_seen: dict[int, LastSeen | None] = dict.fromkeys(self.paths)
         # All paths in one array for the batched pass; shorter ones repeat their last point
@@ -418,7 +427,8 @@ class SpotTracker:
         corner = corner[inside]
         centre, sigma, peak_raw, ok = spot_windows(
             image, corner, half, self._prior, s.threshold, s.min_competitor, s.aperture_factor,
-            s.clip_fraction, s.read_noise, self.max_elongation)
+            s.clip_fraction, s.read_noise, self.max_elongation,
+            np.array([self.aperture_px[i] for i in ids]))
         full = centre + corner + origin
         paths = self._stacked_paths[[self._row[i] for i in ids]]
         ok &= distances_to_paths(full, paths) <= np.array([self.tolerance_px[i] for i in ids])
@@ -551,10 +561,16 @@ class SpotTracker:
         flags = 0
         if any(c[0] == on_path and c[2] >= s.min_competitor * mass for c in candidates[1:]):
             flags |= REFLECTION_SUSPECTED
-        radius = max(s.aperture_factor * np.sqrt(stats[label, cv2.CC_STAT_AREA] / np.pi), 3.0)
-        peak_signal = float(signal[labels == label].max())
-        floor = background + s.clip_fraction * peak_signal
-        for _ in range(2):
+        fixed = self.aperture_px[laser_id] > 0
+        radius = self.aperture_px[laser_id] if fixed else \
+            max(s.aperture_factor * np.sqrt(stats[label, cv2.CC_STAT_AREA] / np.pi), 3.0)
+        floor = background + s.clip_fraction * float(signal[labels == label].max())
+        if fixed:
+            ring = min(s.window_px, round(2 * radius))
+            bounds = spot_window(image.shape, origin, centre, ring)
+            floor = background if bounds is None else ring_median(
+                np.ascontiguousarray(image[bounds[1]:bounds[3], bounds[0]:bounds[2]]), ring, ring)
+        for _ in range(FIXED_APERTURE_PASSES if fixed else 2):
             region = self._aperture(image, origin, centre, radius, floor)
             if region is None:
                 return lost
@@ -562,7 +578,10 @@ class SpotTracker:
             total = float(weights.sum())
             if total <= 0:
                 return lost
-            centre = np.array([np.sum(weights * xs), np.sum(weights * ys)]) / total
+            settled = np.array([np.sum(weights * xs), np.sum(weights * ys)]) / total
+            moved, centre = float(np.hypot(*(settled - centre))), settled
+            if fixed and moved < FIXED_APERTURE_SETTLED_PX:
+                break
         peak = float(raw.max())
         variance = np.clip(raw, 0, None) + s.read_noise**2
         distances = np.hypot(xs - centre[0], ys - centre[1])

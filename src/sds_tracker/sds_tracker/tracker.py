@@ -51,6 +51,7 @@ class TrackerConfig:
     hampel_floor_px: float = 0.5
     path_heights_mm: tuple[float, float] = (-40.0, 40.0)   # surface heights the paths span
     stills: bool = False   # every frame a still of its own surface: no motion prior, no Hampel
+    aperture_mm: float = 1.2   # a video's centroid aperture on the liquid (spot_apertures_px)
 
 
 _DEFAULT = TrackerConfig()
@@ -59,7 +60,7 @@ TRACKING_PARAMETERS: dict[str, Any] = {
     "threshold": _DEFAULT.spots.threshold, "prior_sigma_px": _DEFAULT.spots.prior_sigma_px,
     "path_tolerance_px": _DEFAULT.spots.path_tolerance_px, "line_band_px": _DEFAULT.line.band_px,
     "path_heights_mm": list(_DEFAULT.path_heights_mm), "seeds": [0.0],
-    "stills": _DEFAULT.stills}
+    "stills": _DEFAULT.stills, "aperture_mm": _DEFAULT.aperture_mm}
 """The tracking parameters a node or `sds process` may set, with their defaults: those of
 TrackerConfig, SpotSettings and LineSettings (one source; config/params/tracker.yaml documents
 each, and a test holds it to these values)."""
@@ -76,7 +77,7 @@ def tracker_config(values: Mapping[str, Any]) -> TrackerConfig:
         line=LineSettings(band_px=int(p["line_band_px"]), threshold=float(p["threshold"])),
         hampel_window=int(p["hampel_window"]),
         path_heights_mm=(float(p["path_heights_mm"][0]), float(p["path_heights_mm"][1])),
-        stills=bool(p["stills"]))
+        stills=bool(p["stills"]), aperture_mm=float(p["aperture_mm"]))
 
 
 def parse_seeds(values: list[float]) -> dict[int, tuple[float, float]]:
@@ -143,6 +144,21 @@ def path_sigma_px(rig: Rig, laser_id: int, heights_mm: np.ndarray) -> float:
     return float(max(moves))
 
 
+def spot_apertures_px(rig: Rig, radius_mm: float) -> dict[int, float]:
+    """Per tracked diode, a radius of `radius_mm` on the level surface at its spot, in image
+    px (the mean of its images along the container's X and Y): a centroid aperture that holds
+    the spot's light whatever its brightness. The default, 1.2 mm, is about 3 σ of the seed's
+    spots (a 1.5 mm beam, 4 σ): 12 px on the 4K GoPro."""
+    apertures = {}
+    for diode in rig.tracked_diodes:
+        spot = diode.point_at(-diode.emitter_mm[2] / diode.direction[2])
+        pixels = rig.project(spot + np.array([[0.0, 0.0, 0.0], [radius_mm, 0.0, 0.0],
+                                              [0.0, radius_mm, 0.0]]))
+        apertures[diode.laser_id] = float(np.mean(np.linalg.norm(pixels[1:] - pixels[0],
+                                                                 axis=1)))
+    return apertures
+
+
 class FrameTracker:
     """Spots and line per frame; spots come out `hampel_window // 2` frames late, filtered.
     With `stills` (images of different surfaces, not a video) every frame is tracked on its
@@ -159,7 +175,13 @@ class FrameTracker:
                                               PATH_SIGMAS * path_sigma_px(rig, d.laser_id,
                                                                           heights)))
                    for d in rig.tracked_diodes}
-        self.spots = SpotTracker(self.paths, self.config.spots, widened)
+        # A video's spots are measured in an aperture of one size on the liquid: under
+        # speckle every grain counts; a still keeps the clipped centroid of its blob, since
+        # its averaged frames hold the liquid's mirrored surroundings as wings (bench/README).
+        apertures = None if self.config.stills or self.config.aperture_mm <= 0 else \
+            spot_apertures_px(rig, self.config.aperture_mm)
+        self.spots = SpotTracker(self.paths, self.config.spots, widened,
+                                 apertures_px=apertures)
         for laser_id, position in (seeds or {}).items():
             if laser_id not in self.paths:
                 raise InputError(f"seed for laser {laser_id}, which the rig does not have")

@@ -39,7 +39,7 @@ from sds_sim.tilt_series import (
 )
 from sds_sim.true_rig import RigErrors, camera_as_calibrated, random_layout, true_rig
 from sds_tracker.spots import LOST
-from sds_tracker.tracker import FrameTracker
+from sds_tracker.tracker import FrameTracker, TrackerConfig
 
 from sds_workflows.rig_calibration import (
     CalibrationImages,
@@ -101,14 +101,15 @@ class UnseenSeries:
 
 
 def unseen(rig: Rig, series: TiltSeries) -> UnseenSeries:
-    """Track, reconstruct and fit every image of the series with the rig."""
+    """Track (as stills, as `sds process` does an image folder), reconstruct and fit every
+    image of the series with the rig."""
     region = Region(*rig.container_region_px(rig.camera, 60))
     tilt_err, errors, sigmas, rejected_count = [], [], [], 0
     for image, surface, truth in zip(series.images, series.surfaces,
                                      series.truths, strict=True):
-        tracker = FrameTracker(rig)
-        tracker.process(0, select(image, region, "red"), (region.x, region.y))
-        (_, spots), = tracker.flush()
+        tracker = FrameTracker(rig, TrackerConfig(stills=True))
+        ready, _ = tracker.process(0, select(image, region, "red"), (region.x, region.y))
+        (_, spots), = ready
         spots = [s for s in spots if not s.flags & LOST]
         points = reconstruct_spots(rig, [s.laser_id for s in spots],
                                    [(s.x_raw_px, s.y_raw_px) for s in spots],
