@@ -407,20 +407,29 @@ def test_a_spot_whose_light_merges_with_the_lines_is_acquired_in_the_first_frame
             assert np.hypot(spot.x_raw_px - expected[0], spot.y_raw_px - expected[1]) < 0.3
 
 
-def speckled_line_frame(seed: int, spot: np.ndarray | None, size: int = 200
-                        ) -> tuple[np.ndarray, np.ndarray]:
-    """A frame with an unsaturated laser line whose light varies 20 % from pixel to pixel
-    (speckle), read noise, and optionally a saturating spot; and the line's columns."""
+def line_frame(seed: int, spot: np.ndarray | tuple[float, float] | None, line_x: np.ndarray,
+               line_peak: np.ndarray | float, speckle: float, size: int = 200) -> np.ndarray:
+    """A frame with a laser line (its centre column `line_x` and peak `line_peak` on each row,
+    σ 1.8 px) whose light varies `speckle` from pixel to pixel, read noise, and optionally a
+    saturating spot (x, y)."""
     rows, columns = np.mgrid[0:size, 0:size].astype(float)
-    line_x = 100.3 + 0.02 * (np.arange(size) - 100)
     rng = np.random.default_rng(seed)
-    light = 8.0 + 230.0 * rng.normal(1.0, 0.2, (size, size)) * np.exp(
+    peak = np.broadcast_to(np.asarray(line_peak, dtype=float), (size,))
+    light = 8.0 + peak[:, None] * rng.normal(1.0, speckle, (size, size)) * np.exp(
         -0.5 * ((columns - line_x[:, None]) / 1.8) ** 2)
     if spot is not None:
         light += 900.0 * np.exp(-0.5 * ((columns - spot[0]) ** 2 + (rows - spot[1]) ** 2)
                                 / 3.0**2)
     noisy = np.round(light + rng.normal(0, 2, (size, size)))
-    return np.clip(noisy, 0, 255).astype(np.uint8), line_x
+    return np.clip(noisy, 0, 255).astype(np.uint8)
+
+
+def speckled_line_frame(seed: int, spot: np.ndarray | None, size: int = 200
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """A frame with an unsaturated laser line whose light varies 20 % from pixel to pixel
+    (speckle), read noise, and optionally a saturating spot; and the line's columns."""
+    line_x = 100.3 + 0.02 * (np.arange(size) - 100)
+    return line_frame(seed, spot, line_x, 230.0, 0.2, size), line_x
 
 
 @pytest.mark.parametrize("seed", range(5))
@@ -715,17 +724,9 @@ def brightening_line_frame(seed: int, spot: tuple[float, float] | None, brighten
     """A frame with a speckled laser line (20 % from pixel to pixel) that brightens by
     `brightening` over some 16 rows about row 100 (the liquid focusing it), and optionally a
     saturating spot; and the line's columns."""
-    rows, columns = np.mgrid[0:size, 0:size].astype(float)
     line_x = 100.3 + 0.02 * (np.arange(size) - 100)
-    rng = np.random.default_rng(seed)
     gain = 1 + (brightening - 1) * np.exp(-0.5 * ((np.arange(size) - 100) / 8.0) ** 2)
-    light = 8.0 + 150.0 * gain[:, None] * rng.normal(1.0, 0.2, (size, size)) * np.exp(
-        -0.5 * ((columns - line_x[:, None]) / 1.8) ** 2)
-    if spot is not None:
-        light += 900.0 * np.exp(-0.5 * ((columns - spot[0]) ** 2 + (rows - spot[1]) ** 2)
-                                / 3.0**2)
-    noisy = np.round(light + rng.normal(0, 2, (size, size)))
-    return np.clip(noisy, 0, 255).astype(np.uint8), line_x
+    return line_frame(seed, spot, line_x, 150.0 * gain, 0.2, size), line_x
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -756,16 +757,8 @@ def bent_line_frame(seed: int, spot: tuple[float, float] | None, bend_px: float,
                     size: int = 200) -> np.ndarray:
     """A frame with a laser line (speckle 10 %) that bends `bend_px` sideways over some 10
     rows about row 100 (a ripple on the liquid), and optionally a saturating spot."""
-    rows, columns = np.mgrid[0:size, 0:size].astype(float)
     line_x = 100.3 + bend_px * np.exp(-0.5 * ((np.arange(size) - 100) / 4.0) ** 2)
-    rng = np.random.default_rng(seed)
-    light = 8.0 + 230.0 * rng.normal(1.0, 0.1, (size, size)) * np.exp(
-        -0.5 * ((columns - line_x[:, None]) / 1.8) ** 2)
-    if spot is not None:
-        light += 900.0 * np.exp(-0.5 * ((columns - spot[0]) ** 2 + (rows - spot[1]) ** 2)
-                                / 3.0**2)
-    noisy = np.round(light + rng.normal(0, 2, (size, size)))
-    return np.clip(noisy, 0, 255).astype(np.uint8)
+    return line_frame(seed, spot, line_x, 230.0, 0.1, size)
 
 
 @pytest.mark.parametrize("bend_px", [1.0, 3.0])

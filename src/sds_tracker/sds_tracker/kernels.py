@@ -156,10 +156,10 @@ def spot_windows(image: np.ndarray, corners: np.ndarray, half: int, prior: np.nd
             continue
         fixed = apertures_px[k] > 0
         radius = apertures_px[k] if fixed else max(aperture_factor * np.sqrt(area / np.pi), 3.0)
-        floor = background + clip_fraction * peak
-        if fixed:
-            floor = ring_median(image[y0:y0 + size, x0:x0 + size], half,
-                                min(half, int(np.round(2 * radius))))
+        # The background just outside a fixed aperture; a clipped centroid's floor.
+        floor = ring_median(image[y0:y0 + size, x0:x0 + size], half,
+                            min(half, int(np.round(2 * radius)))) if fixed else \
+            float(background + clip_fraction * peak)
         radius2 = radius * radius
         reach = int(np.ceil(radius)) + 1
         cx, cy, total = float(gx), float(gy), 0.0
