@@ -12,7 +12,9 @@ from numba import njit
 
 FIXED_APERTURE_PASSES = 8
 """Most passes of a centroid in a fixed aperture (`spot_windows`): started at a spot's
-brightest pixel, a grain of speckle up to a few px from its centre, it settles in 3-5."""
+brightest pixel, a grain of speckle up to a few px from its centre. Measured on development
+rigs 7001-7002 (clean, speckle, every effect; 3554 spots): settled in 3 passes (median), 5
+(90th percentile), 8 for 99.5 % of them."""
 FIXED_APERTURE_SETTLED_PX = 0.01
 """A centroid in a fixed aperture that moved less than this in a pass [px] has settled."""
 
