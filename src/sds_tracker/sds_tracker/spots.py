@@ -250,9 +250,11 @@ class SpotTracker:
     window's border, connected blobs above `threshold`, the blob chosen by brightness times a
     Gaussian prior around the previous position among those within `path_tolerance_px` of the
     beam's path, and the position = intensity centroid of the background-subtracted signal in
-    a round aperture (re-centred once). A spot not found, or found far dimmer than when it was
-    last seen (DIMMED_SHARE), is reported lost, with no position; it is searched for near
-    where it was last seen for REACQUIRE_FRAMES frames, then along its whole path.
+    a round aperture: a diode's fixed one (`apertures_px`, a video's), re-centred until it
+    settles, or the blob's own with a share of the peak taken off, re-centred once. A spot
+    not found, or found far dimmer than when it was last seen (DIMMED_SHARE), is reported
+    lost, with no position; it is searched for near where it was last seen for
+    REACQUIRE_FRAMES frames, then along its whole path.
     """
 
     def __init__(self, paths: dict[int, np.ndarray], settings: SpotSettings | None = None,
