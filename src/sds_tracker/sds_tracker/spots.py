@@ -591,12 +591,16 @@ class SpotTracker:
         fixed = self.aperture_px[laser_id] > 0
         radius = self.aperture_px[laser_id] if fixed else \
             max(s.aperture_factor * np.sqrt(stats[label, cv2.CC_STAT_AREA] / np.pi), 3.0)
-        floor = background + s.clip_fraction * float(signal[labels == label].max())
-        if fixed:
-            ring = min(s.window_px, round(2 * radius))
-            bounds = spot_window(image.shape, origin, centre, ring)
-            floor = background if bounds is None else ring_median(
-                np.ascontiguousarray(image[bounds[1]:bounds[3], bounds[0]:bounds[2]]), ring, ring)
+        # The background just outside a fixed aperture (as `spot_windows` takes it); a
+        # clipped centroid's floor.
+        ring = min(s.window_px, round(2 * radius))
+        bounds = spot_window(image.shape, origin, centre, ring) if fixed else None
+        if bounds is not None:
+            floor = ring_median(np.ascontiguousarray(
+                image[bounds[1]:bounds[3], bounds[0]:bounds[2]]), ring, ring)
+        else:
+            floor = background + (0.0 if fixed else
+                                  s.clip_fraction * float(signal[labels == label].max()))
         for _ in range(FIXED_APERTURE_PASSES if fixed else 2):
             region = self._aperture(image, origin, centre, radius, floor)
             if region is None:
