@@ -405,3 +405,199 @@ def warm_up() -> None:
     line_rows(image, np.zeros(1, np.int64), np.zeros(1, np.int64), 61, 6, 10, 0.15, 30.0, 2.0)
     symmetric_centre(np.zeros((9, 9)), np.zeros((9, 9), np.bool_), 4.0, 4.0, 3, 30.0, 1, 1)
     remove_line(np.zeros((49, 49), np.float32), 0.0, 0.0, 24.0, 24.0, 12, 0.25, 30.0, 250.0)
+    speckle_sigmas_px(image, np.full((1, 2), 32.0), np.full(1, 12.0), np.full(1, 24), 2.0,
+                      250.0, 0.95)
+
+
+@njit(cache=True, fastmath=True)
+def speckle_light(image: np.ndarray, cx: float, cy: float, radius: float, floor: float,
+                  read_noise: float, saturation: float
+                  ) -> tuple[int, int, float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A spot's light within `radius` of (`cx`, `cy`) [image px], as the speckle estimates
+    read it: its top-left corner (`x0`, `y0`) of a box, the centroid's weight W (all the
+    light above `floor` in the aperture), and per pixel of the box (0 outside the aperture,
+    off the image, and where the pixel or its opposite is saturated, at or above
+    `saturation`: no fluctuation is seen there):
+
+    - odd: half the pixel's difference from the light at the opposite point (bilinear).
+      Only the odd part of a spot's light moves its centroid.
+    - white: the odd part's variance from shot and read noise alone (the pixel's and the
+      four interpolated ones', one grey level per electron as the photon σ counts it).
+    - even: the light above `floor` the speckle multiplies: the mean of the pixel and its
+      opposite, less `floor`, at least 0.
+    - usable: the pixels that tell the speckle (`speckle_sums`): on rings (1 px wide about
+      the centre) whose mean light is within a third of saturation and none of whose
+      pixels is saturated. A ring, not each pixel by its own light: choosing dark pixels
+      would choose dark grains (hiding the speckle's variance); a grain three times its
+      mean is rare (2 % at a contrast of 0.7), so such a ring's light is seen whatever its
+      speckle.
+    """
+    reach = int(np.ceil(radius)) + 1
+    x0, y0 = int(np.floor(cx)) - reach, int(np.floor(cy)) - reach
+    size = 2 * reach + 2
+    rings = reach + 1
+    odd = np.zeros((size, size))
+    white = np.zeros((size, size))
+    even = np.zeros((size, size))
+    seen = np.zeros((size, size), np.bool_)
+    total, count = np.zeros(rings), np.zeros(rings)
+    tainted = np.zeros(rings, np.bool_)
+    weight_total = 0.0
+    height, width = image.shape
+    read2 = read_noise * read_noise
+    for j in range(size):
+        for i in range(size):
+            x, y = x0 + i, y0 + j
+            distance = np.sqrt((x - cx) ** 2 + (y - cy) ** 2)
+            if distance > radius:
+                continue
+            ring = int(distance)
+            ox, oy = 2 * cx - x, 2 * cy - y
+            left, top = int(np.floor(ox)), int(np.floor(oy))
+            if x < 0 or y < 0 or x >= width or y >= height or left < 0 or top < 0 or \
+                    left + 1 >= width or top + 1 >= height:
+                tainted[ring] = True
+                continue
+            here = float(image[y, x])
+            weight_total += max(here - floor, 0.0)
+            tx, ty = ox - left, oy - top
+            corners = (float(image[top, left]), float(image[top, left + 1]),
+                       float(image[top + 1, left]), float(image[top + 1, left + 1]))
+            weights = ((1 - tx) * (1 - ty), tx * (1 - ty), (1 - tx) * ty, tx * ty)
+            if here >= saturation or max(corners) >= saturation:
+                tainted[ring] = True
+                continue
+            opposite, variance = 0.0, max(here, 0.0) + read2
+            for k in range(4):
+                opposite += weights[k] * corners[k]
+                variance += weights[k] ** 2 * (max(corners[k], 0.0) + read2)
+            seen[j, i] = True
+            odd[j, i] = (here - opposite) / 2
+            even[j, i] = max((here + opposite) / 2 - floor, 0.0)
+            white[j, i] = variance / 4
+            total[ring] += (here + opposite) / 2 - floor
+            count[ring] += 1
+    mean = total / np.maximum(count, 1.0)
+    usable = np.zeros((size, size), np.bool_)
+    for j in range(size):
+        for i in range(size):
+            if seen[j, i]:
+                ring = int(np.sqrt((x0 + i - cx) ** 2 + (y0 + j - cy) ** 2))
+                usable[j, i] = not tainted[ring] and mean[ring] > 0 and \
+                    mean[ring] + floor < saturation / 3
+    return x0, y0, weight_total, odd, white, even, usable
+
+
+@njit(cache=True, fastmath=True)
+def speckle_sums(x0: int, y0: int, cx: float, cy: float, odd: np.ndarray, white: np.ndarray,
+                 even: np.ndarray, usable: np.ndarray) -> np.ndarray:
+    """What one spot's light (`speckle_light` about (`cx`, `cy`)) says of the
+    multiplicative noise on it (laser speckle: light s·(1 + C·n), n of unit variance,
+    correlated ρ₁ between neighbouring pixels). Sums over its usable pixels and their right
+    and lower neighbours, each weighted by its squared distance from the centre (the weight
+    with which it moves a centroid): [excess, squares, lag excess, lag squares] of
+    2·(odd² − white), s², 2·odd·odd' and s·s'. excess / squares estimates C², lag excess /
+    lag squares C²·ρ₁: about the truth, C² times the share of the odd part's variance a
+    bilinear opposite keeps; about a centre measured from the same light, less (the centre
+    takes in some of the odd light)."""
+    sums = np.zeros(4)
+    size = odd.shape[0]
+    for j in range(size):
+        for i in range(size):
+            if not usable[j, i]:
+                continue
+            lever = (x0 + i - cx) ** 2 + (y0 + j - cy) ** 2
+            sums[0] += lever * 2 * (odd[j, i] ** 2 - white[j, i])
+            sums[1] += lever * even[j, i] ** 2
+            if i + 1 < size and usable[j, i + 1]:
+                sums[2] += lever * 2 * odd[j, i] * odd[j, i + 1]
+                sums[3] += lever * even[j, i] * even[j, i + 1]
+            if j + 1 < size and usable[j + 1, i]:
+                sums[2] += lever * 2 * odd[j, i] * odd[j + 1, i]
+                sums[3] += lever * even[j, i] * even[j + 1, i]
+    return sums
+
+
+@njit(cache=True, fastmath=True)
+def speckle_sigma_px(x0: int, y0: int, cx: float, cy: float, weight_total: float,
+                     even: np.ndarray, contrast2: float, correlation_px: float) -> float:
+    """The σ [px] per axis that multiplicative noise of squared contrast `contrast2`,
+    correlated between pixels as a Gaussian of σ `correlation_px`, gives the centroid of a
+    spot's light (`speckle_light` about (`cx`, `cy`): its `even` part and the centroid's
+    weight W): the square root of C²·Σᵢⱼ dᵢ·dⱼ·sᵢ·sⱼ·ρ(i − j) / W², d a pixel's offset from
+    the centre along an axis, the mean of the two axes. The correlation is applied
+    separably to the fields u = d·s: Σ u·(ρ*u)."""
+    if weight_total <= 0 or contrast2 <= 0:
+        return 0.0
+    size = even.shape[0]
+    reach = min(int(np.ceil(3 * correlation_px)), size - 1) if correlation_px > 0 else 0
+    taps = np.exp(-np.arange(-reach, reach + 1) ** 2 / (2 * max(correlation_px, 1e-9) ** 2))
+    # Padded by `reach` on every side, so each tap's pass runs over whole rows.
+    padded = np.zeros((size + 2 * reach, size + 2 * reach))
+    rows = np.zeros((size + 2 * reach, size))
+    quadratic = 0.0
+    for axis in range(2):
+        for j in range(size):
+            for i in range(size):
+                offset = x0 + i - cx if axis == 0 else y0 + j - cy
+                padded[j + reach, i + reach] = offset * even[j, i]
+        rows[:] = 0.0
+        for j in range(size):
+            for t in range(2 * reach + 1):
+                tap = taps[t]
+                for i in range(size):
+                    rows[j + reach, i] += tap * padded[j + reach, i + t]
+        for j in range(size):
+            for t in range(2 * reach + 1):
+                tap = taps[t]
+                for i in range(size):
+                    quadratic += tap * padded[j + reach, i + reach] * rows[j + t, i]
+    return float(np.sqrt(max(contrast2 * quadratic / 2, 0.0)) / weight_total)
+
+
+@njit(cache=True)   # NaN marks a spot too near the edge: no fastmath
+def speckle_sigmas_px(image: np.ndarray, centres: np.ndarray, radii: np.ndarray,
+                      rings: np.ndarray, read_noise: float, saturation: float,
+                      max_correlation: float) -> np.ndarray:
+    """Per spot measured in a fixed aperture (`centres` N×2 image px, `radii` px), the σ [px]
+    laser speckle gives its centroid (`speckle_sigma_px`): the light above the median of
+    the square of half size `rings` about it (as the aperture's centroid takes it). The
+    speckle's squared contrast and its correlation between neighbouring pixels are the
+    optics', the same for every spot: the medians over the spots of what each one's light
+    says (`speckle_sums`), the correlation at most `max_correlation`. 0 where the spots show
+    no speckle, NaN for a spot too near the image's edge."""
+    count = centres.shape[0]
+    sums = np.zeros((count, 4))
+    floors = np.full(count, np.nan)
+    corners = np.zeros((count, 2), np.int64)
+    weight_totals = np.zeros(count)
+    size = 2 * (int(np.ceil(radii.max())) + 1) + 2 if count else 0
+    evens = np.zeros((count, size, size))
+    height, width = image.shape
+    for k in range(count):
+        x, y, half = int(np.round(centres[k, 0])), int(np.round(centres[k, 1])), rings[k]
+        if x - half < 0 or y - half < 0 or x + half >= width or y + half >= height:
+            continue
+        floors[k] = ring_median(image[y - half:y + half + 1, x - half:x + half + 1], half,
+                                half)
+        x0, y0, weight_totals[k], odd, white, even, usable = speckle_light(
+            image, centres[k, 0], centres[k, 1], radii[k], floors[k], read_noise, saturation)
+        corners[k, 0], corners[k, 1] = x0, y0
+        evens[k, :even.shape[0], :even.shape[1]] = even
+        sums[k] = speckle_sums(x0, y0, centres[k, 0], centres[k, 1], odd, white, even, usable)
+    sigmas = np.where(np.isfinite(floors), 0.0, np.nan)
+    usable_spots = np.isfinite(floors) & (sums[:, 1] > 0) & (sums[:, 3] > 0)
+    if not usable_spots.any():
+        return sigmas
+    contrast2 = np.median(sums[usable_spots, 0] / sums[usable_spots, 1])
+    if contrast2 <= 0:
+        return sigmas
+    neighbours = min(max(np.median(sums[usable_spots, 2] / sums[usable_spots, 3]) /
+                         contrast2, 0.0), max_correlation)
+    correlation_px = np.sqrt(-0.5 / np.log(neighbours)) if neighbours > 0 else 0.0
+    for k in range(count):
+        if np.isfinite(floors[k]):
+            sigmas[k] = speckle_sigma_px(corners[k, 0], corners[k, 1], centres[k, 0],
+                                         centres[k, 1], weight_totals[k], evens[k], contrast2,
+                                         correlation_px)
+    return sigmas

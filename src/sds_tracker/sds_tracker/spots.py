@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import NamedTuple
 
 import cv2
@@ -19,6 +19,7 @@ from sds_tracker.kernels import (
     light_elongation,
     remove_line,
     ring_median,
+    speckle_sigmas_px,
     spot_windows,
     step_sigma_px,
     symmetric_centre,
@@ -101,6 +102,10 @@ percentile), 0.67 at the most (speckle); where a spot on the line was hidden for
 on a held-out rig (59140, motion blur), the line's bend 40 px along its path had 0.95 and was
 acquired as the spot (valid, 25-37 px off for two frames). A spot tracked on the line keeps no
 such test: its previous position vouches for it."""
+MAX_SPECKLE_CORRELATION = 0.95
+"""The largest correlation of laser speckle between neighbouring pixels that a frame's spots
+are taken to show (a grain of 3 px, σ, which a fixed aperture of 12 px still holds; the
+rendered draws reach 1.5 px at half scale): more is a spot's own shape."""
 ON_LINE_SIGMA_PX = (0.07, 0.13)
 """Least uncertainty [px] along and across the laser line of a spot whose light overlaps the
 line's, measured with the line's light subtracted (`spot_without_line`): where both
@@ -327,6 +332,7 @@ class SpotTracker:
             estimates[laser_id] = estimate
         if self.exclusive:
             estimates = self._one_blob_one_diode(image, origin, estimates, line)
+        estimates = self._with_speckle(image, origin, estimates)
         for laser_id, estimate in estimates.items():
             seen, reach = self.last_seen[laser_id], self._reach(laser_id)
             if not estimate.flags & LOST and seen is not None and reach is not None and (
@@ -344,6 +350,27 @@ class SpotTracker:
                 self.previous[laser_id] = position
                 self.last_seen[laser_id] = LastSeen(position, 1, identity_peak(estimate))
         return list(estimates.values())
+
+    def _with_speckle(self, image: np.ndarray, origin: np.ndarray,
+                      estimates: dict[int, SpotEstimate]) -> dict[int, SpotEstimate]:
+        """The frame's estimates with the σ that multiplicative noise (laser speckle, which
+        the photons' σ does not hold) gives each spot measured in a fixed aperture clear of
+        the laser line, added in quadrature (`kernels.speckle_sigmas_px`)."""
+        s = self.settings
+        ids = [i for i, e in estimates.items() if not e.flags & LOST and
+               self.aperture_px[i] > 0 and not np.isfinite(e.beside_line_peak)]
+        if not ids:
+            return estimates
+        centres = np.array([[estimates[i].x_px, estimates[i].y_px] for i in ids]) - origin
+        radii = np.array([self.aperture_px[i] for i in ids])
+        rings = np.minimum(s.window_px, np.round(2 * radii)).astype(np.int64)
+        speckle = speckle_sigmas_px(image, centres, radii, rings, s.read_noise,
+                                    s.saturation_level, MAX_SPECKLE_CORRELATION)
+        for laser_id, sigma in zip(ids, speckle, strict=True):
+            if np.isfinite(sigma):
+                estimates[laser_id] = replace(estimates[laser_id], sigma_px=float(
+                    np.hypot(estimates[laser_id].sigma_px, sigma)))
+        return estimates
 
     def forget(self) -> None:
         """Every spot not yet acquired: the next image is looked at as if it were the first
