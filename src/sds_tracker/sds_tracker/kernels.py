@@ -535,6 +535,7 @@ def speckle_sigma_px(x0: int, y0: int, cx: float, cy: float, weight_total: float
     # Padded by `reach` on every side, so each tap's pass runs over whole rows.
     padded = np.zeros((size + 2 * reach, size + 2 * reach))
     rows = np.zeros((size + 2 * reach, size))
+    column = np.zeros(size)
     quadratic = 0.0
     for axis in range(2):
         for j in range(size):
@@ -543,15 +544,20 @@ def speckle_sigma_px(x0: int, y0: int, cx: float, cy: float, weight_total: float
                 padded[j + reach, i + reach] = offset * even[j, i]
         rows[:] = 0.0
         for j in range(size):
+            source, target = padded[j + reach], rows[j + reach]
             for t in range(2 * reach + 1):
                 tap = taps[t]
                 for i in range(size):
-                    rows[j + reach, i] += tap * padded[j + reach, i + t]
+                    target[i] += tap * source[i + t]
         for j in range(size):
+            column[:] = 0.0
             for t in range(2 * reach + 1):
-                tap = taps[t]
+                tap, row = taps[t], rows[j + t]
                 for i in range(size):
-                    quadratic += tap * padded[j + reach, i + reach] * rows[j + t, i]
+                    column[i] += tap * row[i]
+            inner = padded[j + reach]
+            for i in range(size):
+                quadratic += inner[i + reach] * column[i]
     return float(np.sqrt(max(contrast2 * quadratic / 2, 0.0)) / weight_total)
 
 
