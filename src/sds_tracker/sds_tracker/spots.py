@@ -283,6 +283,8 @@ class SpotTracker:
         self.tolerance_px = {i: max(self.settings.path_tolerance_px,
                                     (tolerances_px or {}).get(i, 0.0)) for i in self.paths}
         self.aperture_px = {i: (apertures_px or {}).get(i, 0.0) for i in self.paths}
+        # The diodes whose σ in the last frame holds the speckle their light showed.
+        self.speckle_measured: set[int] = set()
         self.previous: dict[int, np.ndarray | None] = dict.fromkeys(self.paths)
         self.last_seen: dict[int, LastSeen | None] = dict.fromkeys(self.paths)
         # All paths in one array for the batched pass; shorter ones repeat their last point
@@ -355,10 +357,12 @@ class SpotTracker:
                       estimates: dict[int, SpotEstimate]) -> dict[int, SpotEstimate]:
         """The frame's estimates with the σ that multiplicative noise (laser speckle, which
         the photons' σ does not hold) gives each spot measured in a fixed aperture clear of
-        the laser line, added in quadrature (`kernels.speckle_sigmas_px`)."""
+        the laser line, added in quadrature (`kernels.speckle_sigmas_px`); those spots are
+        `speckle_measured`."""
         s = self.settings
         ids = [i for i, e in estimates.items() if not e.flags & LOST and
                self.aperture_px[i] > 0 and not np.isfinite(e.beside_line_peak)]
+        self.speckle_measured = set(ids)
         if not ids:
             return estimates
         centres = np.array([[estimates[i].x_px, estimates[i].y_px] for i in ids]) - origin

@@ -187,7 +187,8 @@ class FrameTracker:
                 raise InputError(f"seed for laser {laser_id}, which the rig does not have")
             self.spots.previous[laser_id] = np.asarray(position, dtype=float)
         self.ids = list(self.paths)
-        # What the calibration's stills showed a single frame's σ leaves out (speckle).
+        # What the calibration's stills showed a single frame's σ leaves out (speckle), for
+        # the spots whose own light did not measure it (`SpotTracker.speckle_measured`).
         self.excess_sigma_px = float((rig.calibration or {}).get("spot_excess_sigma_px")
                                      or 0.0)
         self.hampel = None if self.config.stills else HampelBank(
@@ -218,7 +219,8 @@ class FrameTracker:
         # The line's light is kept out of the spots it passes (seen this frame, or expected).
         estimates = self.spots.update(red, offset, (self._line_rows, self._line_x))
         if self.excess_sigma_px:
-            estimates = [replace(e, sigma_px=float(np.hypot(e.sigma_px, self.excess_sigma_px)))
+            estimates = [e if e.laser_id in self.spots.speckle_measured else
+                         replace(e, sigma_px=float(np.hypot(e.sigma_px, self.excess_sigma_px)))
                          for e in estimates]
         self._pending[frame] = {e.laser_id: e for e in estimates}
         positions = np.array([[e.x_px, e.y_px] for e in estimates]).reshape(-1, 2)

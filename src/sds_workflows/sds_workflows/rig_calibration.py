@@ -240,8 +240,9 @@ def calibrated_rig_file(nominal: Rig, result: RigCalibration, found: Calibration
                         report: dict[str, Any] | None = None) -> Rig:
     """The calibrated rig as `sds calibrate rig` writes it: `calibrated_rig` (its record from
     `report` where given), and where the stills had repeated frames, the σ a single frame's
-    spots leave out in its record (`spot_excess_sigma_px`: the tracker adds it to every
-    spot's σ)."""
+    spots leave out in its record (`spot_excess_sigma_px`: the tracker adds it to the σ of
+    every spot whose own light does not measure its speckle: stills', and a video's on the
+    laser line)."""
     rig = calibrated_rig(nominal, result, report)
     if found.spot_excess_sigma_px is None:
         return rig
@@ -259,8 +260,8 @@ def write_calibration(nominal: Rig, result: RigCalibration, found: CalibrationIm
     if found.spot_excess_sigma_px is not None:
         report["spot_excess_sigma_px"] = found.spot_excess_sigma_px
         text += (f"\nspots' frame-to-frame scatter on the stills beyond their own σ: "
-                 f"{found.spot_excess_sigma_px:.3f} px per axis (added to every tracked spot's "
-                 "σ)")
+                 f"{found.spot_excess_sigma_px:.3f} px per axis (added to the σ of "
+                 "spots whose own light does not measure their speckle)")
     save_rig(rig, rig_path, comment=f"Self-calibrated by {source} ({len(images)} images):\n"
                                     f"{text}")
     stem = rig_path.with_suffix("")
