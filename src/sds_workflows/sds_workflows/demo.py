@@ -277,7 +277,8 @@ def print_summary(out: Path, scenario, simulation, outputs: ChainOutputs, result
     print(f"  frames processed   {frames} of {scenario.frame_count}; "
           f"{live_coverage(outputs.recording)}")
     print(f"  heights            RMSE {np.sqrt(np.mean(errors**2)):.3f} mm against the truth "
-          f"({len(errors)} points; their own σ RMS {np.sqrt(np.mean(sigmas**2)):.3f} mm)")
+          f"({len(errors)} points; their own σ RMS {np.sqrt(np.mean(sigmas**2)):.3f} mm, "
+          f"error/σ RMS {np.sqrt(np.mean((errors / sigmas) ** 2)):.2f})")
     flags = {name: int(np.sum(spots["flags"] & bit != 0)) for name, bit in (
         ("lost", 1), ("saturated", 2), ("reflection suspected", 4), ("off path", 8),
         ("Hampel-replaced", 16))}
