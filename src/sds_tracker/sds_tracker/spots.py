@@ -283,8 +283,6 @@ class SpotTracker:
         self.tolerance_px = {i: max(self.settings.path_tolerance_px,
                                     (tolerances_px or {}).get(i, 0.0)) for i in self.paths}
         self.aperture_px = {i: (apertures_px or {}).get(i, 0.0) for i in self.paths}
-        # The diodes whose σ in the last frame holds the speckle their light showed.
-        self.speckle_measured: set[int] = set()
         self.previous: dict[int, np.ndarray | None] = dict.fromkeys(self.paths)
         self.last_seen: dict[int, LastSeen | None] = dict.fromkeys(self.paths)
         # All paths in one array for the batched pass; shorter ones repeat their last point
@@ -356,13 +354,10 @@ class SpotTracker:
     def _with_speckle(self, image: np.ndarray, origin: np.ndarray,
                       estimates: dict[int, SpotEstimate]) -> dict[int, SpotEstimate]:
         """The frame's estimates with the σ that multiplicative noise (laser speckle, which
-        the photons' σ does not hold) gives each spot measured in a fixed aperture clear of
-        the laser line, added in quadrature (`kernels.speckle_sigmas_px`); those spots are
-        `speckle_measured`."""
+        the photons' σ does not hold) gives each spot whose light shows it
+        (`measures_own_speckle`), added in quadrature (`kernels.speckle_sigmas_px`)."""
         s = self.settings
-        ids = [i for i, e in estimates.items() if not e.flags & LOST and
-               self.aperture_px[i] > 0 and not np.isfinite(e.beside_line_peak)]
-        self.speckle_measured = set(ids)
+        ids = [i for i, e in estimates.items() if self.measures_own_speckle(e)]
         if not ids:
             return estimates
         centres = np.array([[estimates[i].x_px, estimates[i].y_px] for i in ids]) - origin
@@ -375,6 +370,13 @@ class SpotTracker:
                 estimates[laser_id] = replace(estimates[laser_id], sigma_px=float(
                     np.hypot(estimates[laser_id].sigma_px, sigma)))
         return estimates
+
+    def measures_own_speckle(self, estimate: SpotEstimate) -> bool:
+        """Whether a spot's σ holds the speckle its own light shows (`_with_speckle`): a
+        spot measured in a fixed aperture (a video's), clear of the laser line (whose σ is
+        the line's)."""
+        return not estimate.flags & LOST and self.aperture_px[estimate.laser_id] > 0 and \
+            not np.isfinite(estimate.beside_line_peak)
 
     def forget(self) -> None:
         """Every spot not yet acquired: the next image is looked at as if it were the first

@@ -188,7 +188,7 @@ class FrameTracker:
             self.spots.previous[laser_id] = np.asarray(position, dtype=float)
         self.ids = list(self.paths)
         # What the calibration's stills showed a single frame's σ leaves out (speckle), for
-        # the spots whose own light did not measure it (`SpotTracker.speckle_measured`).
+        # the spots whose own light does not measure it (`SpotTracker.measures_own_speckle`).
         self.excess_sigma_px = float((rig.calibration or {}).get("spot_excess_sigma_px")
                                      or 0.0)
         self.hampel = None if self.config.stills else HampelBank(
@@ -219,7 +219,7 @@ class FrameTracker:
         # The line's light is kept out of the spots it passes (seen this frame, or expected).
         estimates = self.spots.update(red, offset, (self._line_rows, self._line_x))
         if self.excess_sigma_px:
-            estimates = [e if e.laser_id in self.spots.speckle_measured else
+            estimates = [e if self.spots.measures_own_speckle(e) else
                          replace(e, sigma_px=float(np.hypot(e.sigma_px, self.excess_sigma_px)))
                          for e in estimates]
         self._pending[frame] = {e.laser_id: e for e in estimates}
