@@ -87,6 +87,13 @@ def step_sigma_px(step: float, lever_px: float, total: float) -> float:
 
 
 @njit(cache=True)
+def aperture_ring(radius_px: float, window_px: int) -> int:
+    """Half size [px] of the square whose border is a fixed aperture's background
+    (`ring_median`): twice the aperture's radius, within the spot's window."""
+    return min(window_px, int(np.round(2 * radius_px)))
+
+
+@njit(cache=True)
 def ring_median(window: np.ndarray, centre: int, half: int) -> float:
     """Median of the border of the square of half size `half` about (`centre`, `centre`) of
     a window: the background just outside a fixed aperture of radius half/2."""
@@ -160,7 +167,7 @@ def spot_windows(image: np.ndarray, corners: np.ndarray, half: int, prior: np.nd
         radius = apertures_px[k] if fixed else max(aperture_factor * np.sqrt(area / np.pi), 3.0)
         # The background just outside a fixed aperture; a clipped centroid's floor.
         floor = ring_median(image[y0:y0 + size, x0:x0 + size], half,
-                            min(half, int(np.round(2 * radius)))) if fixed else \
+                            aperture_ring(radius, half)) if fixed else \
             float(background + clip_fraction * peak)
         radius2 = radius * radius
         reach = int(np.ceil(radius)) + 1

@@ -15,6 +15,7 @@ from scipy.sparse.csgraph import connected_components
 from sds_tracker.kernels import (
     FIXED_APERTURE_PASSES,
     FIXED_APERTURE_SETTLED_PX,
+    aperture_ring,
     background_step,
     light_elongation,
     remove_line,
@@ -362,7 +363,7 @@ class SpotTracker:
             return estimates
         centres = np.array([[estimates[i].x_px, estimates[i].y_px] for i in ids]) - origin
         radii = np.array([self.aperture_px[i] for i in ids])
-        rings = np.minimum(s.window_px, np.round(2 * radii)).astype(np.int64)
+        rings = np.array([aperture_ring(radius, s.window_px) for radius in radii])
         speckle = speckle_sigmas_px(image, centres, radii, rings, s.read_noise,
                                     s.saturation_level, MAX_SPECKLE_CORRELATION)
         for laser_id, sigma in zip(ids, speckle, strict=True):
@@ -626,7 +627,7 @@ class SpotTracker:
             max(s.aperture_factor * np.sqrt(stats[label, cv2.CC_STAT_AREA] / np.pi), 3.0)
         # The background just outside a fixed aperture (as `spot_windows` takes it); a
         # clipped centroid's floor.
-        ring = min(s.window_px, round(2 * radius))
+        ring = aperture_ring(radius, s.window_px)
         bounds = spot_window(image.shape, origin, centre, ring) if fixed else None
         if bounds is not None:
             floor = ring_median(np.ascontiguousarray(
