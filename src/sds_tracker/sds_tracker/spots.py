@@ -92,7 +92,9 @@ LINE_SPECKLE_PEAK = 8.0
 """How far above the laser line's own speckle (robust σ of what its profile leaves on the
 rows away from the spot) a spot's light must rise once the line's light is taken away. On a
 4K drop the speckle's σ was 10-14 DN and it left peaks up to 72 DN (5 σ) where no spot was;
-a spot on the line left 246 DN (22 σ)."""
+a spot on the line left 246 DN (22 σ). Beside the line's band the same holds with the robust σ
+at that offset from the line (`line_wing_speckle`): a saturated line's wings under strong
+speckle leave grains above the threshold (the real-images bench's held-out rig 60108)."""
 LINE_BEND_SHARE = 0.8
 """A spot acquired on the laser line (`_acquire_on_line`) is no spot where the light about it
 falls below the line's profile by more than this share of its own peak beside the line
@@ -149,8 +151,9 @@ class LastSeen(NamedTuple):
 @dataclass(frozen=True)
 class SpotEstimate:
     """One spot in one frame: full-frame pixel, uncertainty [px], peak, flags; for a spot
-    measured with the laser line's light taken away, its own light's peak beside the line
-    (`LineFreeSpot.beside_line_peak`; NaN otherwise)."""
+    measured with the laser line's light taken away (on the line or beside it), its own
+    light's peak beside the line (`LineFreeSpot.beside_line_peak`; NaN otherwise), and
+    whether its light overlaps the line's, whose uncertainty its σ then is (`on_line`)."""
 
     laser_id: int
     x_px: float
@@ -159,11 +162,13 @@ class SpotEstimate:
     peak: float
     flags: int
     beside_line_peak: float = np.nan
+    on_line: bool = False
 
 
 def identity_peak(estimate: SpotEstimate) -> float:
     """The peak a spot is told from others by (DIMMED_SHARE): its brightest pixel, or, where
-    it overlaps the laser line, whose light that pixel holds, its own light beside the line."""
+    it was measured with the laser line's light taken away (the line's light can be that
+    pixel's), its own light beside the line."""
     return estimate.peak if np.isnan(estimate.beside_line_peak) else \
         estimate.beside_line_peak
 
@@ -377,7 +382,7 @@ class SpotTracker:
         spot measured in a fixed aperture (a video's), clear of the laser line (whose σ is
         the line's)."""
         return not estimate.flags & LOST and self.aperture_px[estimate.laser_id] > 0 and \
-            not np.isfinite(estimate.beside_line_peak)
+            not estimate.on_line
 
     def forget(self) -> None:
         """Every spot not yet acquired: the next image is looked at as if it were the first
@@ -519,7 +524,7 @@ class SpotTracker:
         return SpotEstimate(laser_id, float(refined.centre[0]), float(refined.centre[1]),
                             max(ON_LINE_SIGMA_PX[1], refined.line_sigma_px), peak,
                             SATURATED if peak >= s.saturation_level else 0,
-                            refined.beside_line_peak)
+                            refined.beside_line_peak, on_line=True)
 
     def _acquire_on_line(self, image: np.ndarray, origin: np.ndarray, laser_id: int,
                          path: np.ndarray, line: tuple[np.ndarray, np.ndarray]
@@ -661,20 +666,21 @@ class SpotTracker:
             refined = settled_line_free_centre(image, origin, centre, line, s)
             if refined is not None and line_bends(refined):
                 return lost
-        beside_line_peak = np.nan
+        beside_line_peak, on_line = np.nan, False
         if refined is not None:
             if not np.isfinite(refined.centre).all():
                 return lost   # the blob was the line's light alone
-            centre = refined.centre
-            if refined.clearance_px < 0:
+            # The blob's brightest pixel can be the line's: the spot is told by its own light.
+            centre, beside_line_peak = refined.centre, refined.beside_line_peak
+            on_line = bool(refined.clearance_px < 0)
+            if on_line:
                 sigma = max(sigma, ON_LINE_SIGMA_PX[1], refined.line_sigma_px)
-                beside_line_peak = refined.beside_line_peak
         if distance_to_path(centre, path) > self.tolerance_px[laser_id]:
             return SpotEstimate(laser_id, np.nan, np.nan, np.nan, 0.0, LOST | OFF_PATH)
         if peak >= s.saturation_level:
             flags |= SATURATED
         return SpotEstimate(laser_id, float(centre[0]), float(centre[1]), sigma, peak, flags,
-                            beside_line_peak)
+                            beside_line_peak, on_line)
 
     @staticmethod
     def _peaks(signal: np.ndarray, labels: np.ndarray, chosen: np.ndarray,
@@ -824,8 +830,8 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
                       s: SpotSettings) -> LineFreeSpot | None:
     """A spot's centre [window px] with the laser line's light taken away, the line's
     direction and the clearance between the two; None when the line does not reach enough of
-    the window's rows, a NaN centre when no spot is left (nothing above the threshold
-    beside the line, nothing LINE_SPECKLE_PEAK times the line's speckle on it).
+    the window's rows, a NaN centre when no spot is left (nothing LINE_SPECKLE_PEAK times
+    the line's speckle, and above the threshold, on the line or beside it).
 
     `line_x[r]` is the line's centre column on window row r (NaN where unknown); a straight
     line through it on the rows beyond half a window from the spot is used. The line's
@@ -859,10 +865,16 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
         return None
     # The line's speckle leaves light of its own within the line's band: what it leaves on
     # the profile's rows says how much.
-    band = np.abs(columns - intercept - slope * rows) <= line_half_width
-    on_line = band & ~unknown & (np.abs(rows - spot[1]) > reach)
+    offsets = np.asarray(columns - intercept - slope * rows, dtype=float)
+    band = np.abs(offsets) <= line_half_width
+    away = ~unknown & (np.abs(rows - spot[1]) > reach)
+    on_line = band & away
     speckle = 1.4826 * float(np.median(np.abs(left[on_line]))) if on_line.any() else 0.0
-    floor = max(s.threshold, LINE_SPECKLE_PEAK * speckle)
+    # Beside its band the line's speckled wings, dim on average, leave grains as bright as
+    # a dim spot: there each offset from the line has a floor of its own speckle.
+    floor = np.where(band, LINE_SPECKLE_PEAK * speckle, LINE_SPECKLE_PEAK *
+                     line_wing_speckle(left, offsets, away, reach))
+    floor = np.maximum(floor, s.threshold)
     # Two starts: `spot`, and the brightest 5×5 patch of what is left within half a window
     # of it (not another spot's or a reflection's farther away), where that is not already
     # within the search around `spot`.
@@ -885,8 +897,7 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
     near = (columns - x) ** 2 + (rows - y) ** 2 <= reach**2
     norm = float(np.hypot(slope, 1.0))
     along = np.array([slope, 1.0]) / norm
-    if not np.isfinite(mismatch) or (left[near & ~band].max(initial=0.0) <= s.threshold and
-                                     left[near & band].max(initial=0.0) <= floor):
+    if not np.isfinite(mismatch) or not (left[near] > floor[near]).any():
         return LineFreeSpot(np.full(2, np.nan), along, np.nan)
     # Clearance: the spot's reach on its side away from the line (where the line's light is
     # not) and the line's half width at the threshold, against their centres' distance.
@@ -901,6 +912,22 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
                                                   line_half_width / norm), sigma,
                         float(left[near & ~band & ~unknown].max(initial=0.0)),
                         -float(everywhere[near & ~unknown].min(initial=0.0)))
+
+
+def line_wing_speckle(left: np.ndarray, offsets_px: np.ndarray, away: np.ndarray,
+                      reach: int) -> np.ndarray:
+    """Per pixel, the robust σ [grey levels] of what the laser line's profile leaves at that
+    pixel's offset from the line (`offsets_px`, in 1 px bins up to `reach`; 0 beyond), over
+    the pixels `away` from the spot: speckle multiplies the line's light, so its wings, dim
+    on average, leave grains as bright as a spot's beside a bright line."""
+    bins = np.round(offsets_px).astype(int)
+    sigma = np.zeros(left.shape)
+    for offset in range(-reach, reach + 1):
+        at = bins == offset
+        known = left[at & away]
+        if known.size:
+            sigma[at] = 1.4826 * float(np.median(np.abs(known)))
+    return sigma
 
 
 def line_speckle_sigma_px(speckle: float, distance2_px2: np.ndarray, light: float) -> float:
