@@ -18,7 +18,10 @@ Prints, measured in one run on the same file:
   against those it sent, and the frames it shed while its decoder fell behind;
 - `--fps` sets the camera's frame rate of the real-time runs (`camera.rate` = fps / the
   video's): a number, or `half-decode`, half the decode-only rate measured in the same run,
-  so that live latency is measured where the machine can hold the rate;
+  so that live latency is measured where the machine can hold the rate (`--low-delay`: the
+  camera decodes on slice threads only, holding no frame per thread) (from when each frame
+  was played: its stamp keeps the video's time, so below 1 it runs ahead of the clock, and
+  the camera's origin on /camera/origin turns it into the time it was played);
 - with `--check-process`, one real-time play of the file beside the last `--hogs` count, then
   `sds process --mcap` on its recording against `sds process --video` on the file (the same
   spots and points: every frame the camera sent, those shed live included);
@@ -155,8 +158,8 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
               image_subscribers: int = 2, processes: dict[str, str] | None = None,
               log_file: Path | None = None, graphs: tuple[str, ...] = ("drop.yaml",)):
     """The drop graph with a probe on /recon/points and /recon/points_live: receipt times and
-    stamps of each, memory, and each process's CPU time between the first and the last
-    cloud."""
+    stamps of each, memory, each process's CPU time between the first and the last cloud, and
+    the camera's origin (the stamp of its media time 0, NaN if it never came) [s]."""
     from dataclasses import replace
 
     from sds_bringup.launcher import Launcher
@@ -169,8 +172,10 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from sds_ros.qos import live_qos, stream_qos
     from sensor_msgs.msg import PointCloud2
+    from std_msgs.msg import Header
 
     from sds_msgs.msg import LaserSpotArray
 
@@ -182,6 +187,7 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
     receipts: list[tuple[float, float]] = []
     live: list[tuple[float, float]] = []
     spots_live: list[tuple[float, float]] = []
+    origin: list[float] = []
     memory: dict[str, list[tuple[float, int]]] = {}
     cpu: dict[str, list[float]] = {}
 
@@ -207,6 +213,11 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
             LaserSpotArray, "/tracker/spots_live",
             lambda m: spots_live.append((time.time(), m.header.stamp.sec
                                          + m.header.stamp.nanosec * 1e-9)), live_qos())
+        node.create_subscription(
+            Header, "/camera/origin",
+            lambda m: origin.append(m.stamp.sec + m.stamp.nanosec * 1e-9),
+            QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.TRANSIENT_LOCAL))
         node.create_subscription(
             PointCloud2, "/recon/points_live",
             lambda m: live.append((time.time(), m.header.stamp.sec
@@ -249,7 +260,13 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
         launcher.run(on_started=threading.Thread(target=watch, daemon=True).start)
     per_frame = {name: 1e3 * (v[-1] - v[0]) / max(len(receipts) - 1, 1)
                  for name, v in cpu.items() if len(v) == 2}
-    return receipts, live, spots_live, memory, per_frame
+    return receipts, live, spots_live, memory, per_frame, origin[0] if origin else np.nan
+
+
+def played_s(stamp_s: float, origin_s: float, rate: float) -> float:
+    """When the frame stamped `stamp_s` was played [s, system clock]: its stamp keeps the
+    video's time (origin + media time), played at `rate` times real time it comes later."""
+    return origin_s + (stamp_s - origin_s) / rate
 
 
 def recorded_frames(recording: Path, fps: float, topic: str = "/camera/image"
@@ -285,6 +302,9 @@ def main() -> None:
     parser.add_argument("--fps", default="",
                         help="the camera's frame rate in the real-time runs [fps], or "
                              "half-decode (default: the video's)")
+    parser.add_argument("--low-delay", action="store_true",
+                        help="the real-time runs decode on slice threads only (camera."
+                             "low_delay: no frame held per decoding thread)")
     parser.add_argument("--check-process", action="store_true",
                         help="also compare sds process --mcap on a real-time recording with "
                              "sds process --video on the file")
@@ -322,12 +342,13 @@ def main() -> None:
           f"({decode * decode_cpu_ms / 1e3:.2f} cores busy)")
     print("stages [ms/frame, mean]: " + ", ".join(f"{k} {v:.2f}" for k, v in stages.items()))
     camera_fps = decode / 2 if args.fps == "half-decode" else float(args.fps or scenario.fps)
-    pace = [f"camera.rate={camera_fps / scenario.fps:.6f}"]
+    pace = [f"camera.rate={camera_fps / scenario.fps:.6f}",
+            f"camera.low_delay={str(args.low_delay).lower()}"]
     print(f"real-time runs: the camera at {camera_fps:.1f} fps")
     for index, layout in enumerate([] if args.no_flood else args.layouts):
         processes = LAYOUTS[layout]
         recording = scratch / f"flood_{index}.mcap"
-        receipts, _, _, memory, cpu = run_graph(
+        receipts, _, _, memory, cpu, _ = run_graph(
             [*base, f"recorder.output={recording}",
              f"camera.max_in_flight={args.in_flight}", f"tracker.image_depth={args.in_flight}"],
             frames, None, processes=processes)
@@ -351,7 +372,7 @@ def main() -> None:
         loads = [subprocess.Popen([sys.executable, "-c", "while True: pass"])
                  for _ in range(hogs)]
         try:
-            receipts, live, spots_live, memory, cpu = run_graph(
+            receipts, live, spots_live, memory, cpu, origin_s = run_graph(
                 [*base, *side, *pace, "camera.pacing=realtime", "camera.repeat=0",
                  f"recorder.output={recording}",
                  "recorder.exclude=[/tracker/spots_live,/recon/points_live"
@@ -375,7 +396,12 @@ def main() -> None:
         if len(receipts) < 60:
             print(f"{layout}, real time: only {len(receipts)} clouds arrived")
             continue
-        latency = np.array([r - s for r, s in receipts[30:]]) * 1e3
+        # From when each frame was played: at a rate below 1 its stamp runs ahead of that.
+        rate = camera_fps / scenario.fps
+        if not np.isfinite(origin_s) and rate != 1.0:
+            print(f"{layout}, real time: the camera's origin never came, no latency")
+            continue
+        latency = np.array([r - played_s(s, origin_s, rate) for r, s in receipts[30:]]) * 1e3
         median, p95 = np.median(latency), np.percentile(latency, 95)
         print(f"{layout}, real time {args.minutes:g} min: {len(receipts)} clouds, "
               f"{(len(receipts) - 1) / (receipts[-1][0] - receipts[0][0]):.2f} fps")
@@ -384,20 +410,23 @@ def main() -> None:
               f"median {median - hampel_ms:.1f}, p95 {p95 - hampel_ms:.1f}")
         if live:
             stamps = {s for _, s in receipts[30:]}
-            first = [r - s for r, s in live if s in stamps]
+            first = [r - played_s(s, origin_s, rate) for r, s in live if s in stamps]
             live_ms = np.array(first) * 1e3
             print(f"  latency frame -> first PointCloud2 (points_live) [ms]: median "
                   f"{np.median(live_ms):.1f}, p95 {np.percentile(live_ms, 95):.1f}, max "
                   f"{live_ms.max():.1f}; {len(stamps) - len(first)} of {len(stamps)} frames "
                   "without a live cloud")
-            slow = np.array([s for r, s in live if s in stamps and r - s > 0.05])
-            minutes = np.bincount(((slow - receipts[30][1]) // 60).astype(int),
+            slow = np.array([played_s(s, origin_s, rate) for r, s in live
+                             if s in stamps and r - played_s(s, origin_s, rate) > 0.05])
+            start_s = played_s(receipts[30][1], origin_s, rate)
+            minutes = np.bincount(((slow - start_s) // 60).astype(int),
                                   minlength=int(args.minutes))
             print("  live clouds later than 50 ms, per minute of the run: "
                   + " ".join(str(n) for n in minutes))
         if spots_live:
             stamps = {s for _, s in receipts[30:]}
-            spots_ms = np.array([r - s for r, s in spots_live if s in stamps]) * 1e3
+            spots_ms = np.array([r - played_s(s, origin_s, rate) for r, s in spots_live
+                                 if s in stamps]) * 1e3
             print(f"  of which frame -> live spots (camera and tracker) [ms]: median "
                   f"{np.median(spots_ms):.1f}, p95 {np.percentile(spots_ms, 95):.1f}")
         stamps = np.unique([s for _, s in receipts])
