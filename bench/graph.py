@@ -18,10 +18,10 @@ Prints, measured in one run on the same file:
   against those it sent, and the frames it shed while its decoder fell behind;
 - `--fps` sets the camera's frame rate of the real-time runs (`camera.rate` = fps / the
   video's): a number, or `half-decode`, half the decode-only rate measured in the same run,
-  so that live latency is measured where the machine can hold the rate (`--low-delay`: the
-  camera decodes on slice threads only, holding no frame per thread) (from when each frame
-  was played: its stamp keeps the video's time, so below 1 it runs ahead of the clock, and
-  the camera's origin on /camera/origin turns it into the time it was played);
+  so that live latency is measured where the machine can hold the rate. Latency counts from
+  when each frame was played: its stamp keeps the video's time, which at a rate below 1 runs
+  ahead of the clock, and the camera's origin on /camera/origin turns it into play time;
+- `--low-delay`: the real-time runs decode on slice threads only (no frame held per thread);
 - with `--check-process`, one real-time play of the file beside the last `--hogs` count, then
   `sds process --mcap` on its recording against `sds process --video` on the file (the same
   spots and points: every frame the camera sent, those shed live included);
@@ -398,9 +398,11 @@ def main() -> None:
             continue
         # From when each frame was played: at a rate below 1 its stamp runs ahead of that.
         rate = camera_fps / scenario.fps
-        if not np.isfinite(origin_s) and rate != 1.0:
-            print(f"{layout}, real time: the camera's origin never came, no latency")
-            continue
+        if not np.isfinite(origin_s):
+            if rate != 1.0:
+                print(f"{layout}, real time: the camera's origin never came, no latency")
+                continue
+            origin_s = 0.0   # at the video's own rate a stamp is when its frame was played
         latency = np.array([r - played_s(s, origin_s, rate) for r, s in receipts[30:]]) * 1e3
         median, p95 = np.median(latency), np.percentile(latency, 95)
         print(f"{layout}, real time {args.minutes:g} min: {len(receipts)} clouds, "

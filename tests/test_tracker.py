@@ -283,12 +283,16 @@ def test_a_spot_on_the_rims_edge_reports_the_error_the_edge_gives_it(seed: int) 
         assert sigmas["line", mode] < 1.1 * sigmas["flat", mode]
 
 
-def saturated_spot_and_line(spot: np.ndarray, line_x: np.ndarray, size: int) -> np.ndarray:
-    """A window where a bright spot (x, y) and a bright slanted line both clip at 255."""
+def saturated_spot_and_line(spot: np.ndarray, line_x: np.ndarray, size: int,
+                            line_sigma_px: float = 1.8, line_peak: float = 400.0,
+                            spot_peak: float = 900.0, spot_sigma_px: float = 3.0
+                            ) -> np.ndarray:
+    """A window where a bright spot (x, y) and a bright slanted line (centre column
+    `line_x[row]`) both clip at 255."""
     rows, columns = np.mgrid[0:size, 0:size].astype(float)
-    line = 400.0 * np.exp(-0.5 * ((columns - line_x[:, None]) / 1.8) ** 2)
-    light = 8.0 + line + 900.0 * np.exp(-0.5 * ((columns - spot[0]) ** 2 +
-                                                (rows - spot[1]) ** 2) / 3.0**2)
+    line = line_peak * np.exp(-0.5 * ((columns - line_x[:, None]) / line_sigma_px) ** 2)
+    light = 8.0 + line + spot_peak * np.exp(-0.5 * ((columns - spot[0]) ** 2 +
+                                                    (rows - spot[1]) ** 2) / spot_sigma_px**2)
     return np.minimum(np.round(light), 255.0).astype(np.float32)
 
 
@@ -323,12 +327,10 @@ def test_a_spot_whose_mirror_half_a_saturated_line_hides_is_not_measured(
     is measured there."""
     settings = SpotSettings()
     size = 2 * settings.window_px + 1
-    rows, columns = np.mgrid[0:size, 0:size].astype(float)
     line_x = np.full(size, 24.3)
     spot = np.array([26.3, 23.6])
-    light = 8.0 + line_peak * np.exp(-0.5 * ((columns - 24.3) / line_sigma_px) ** 2) + \
-        spot_peak * np.exp(-0.5 * ((columns - spot[0]) ** 2 + (rows - spot[1]) ** 2) / 2.0**2)
-    window = np.minimum(np.round(light), 255.0).astype(np.float32)
+    window = saturated_spot_and_line(spot, line_x, size, line_sigma_px, line_peak, spot_peak,
+                                     spot_sigma_px=2.0)
     found = spot_without_line(window, line_x, np.round(spot), settings)
     assert found is not None and not np.isfinite(found.centre).any(), found
     image = np.zeros((200, 200), np.uint8)

@@ -96,8 +96,8 @@ HIDDEN_SYMMETRY_SHARE = 0.5
 """A centre with fewer than SYMMETRY_PAIRS pairs whose mismatch is below this share of the
 chosen centre's, more than HIDDEN_SYMMETRY_PX from it, leaves the spot's centre unknown. On
 development data such centres were 0.08-0.3 of the chosen one (noise-free, and the rendered
-held-out rendered rig 61117 that showed it, under speckle: 1069 against 4511), where the
-chosen one was 1.6-3.5 px off."""
+held-out rig 61117 that showed it, under speckle: 1069 against 4511), where the chosen one
+was 1.6-3.5 px off."""
 HIDDEN_SYMMETRY_PX = 1.0
 """How far [px] the two searches' centres may differ before the spot's centre is unknown."""
 LINE_SPECKLE_PEAK = 8.0
