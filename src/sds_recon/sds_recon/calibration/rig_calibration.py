@@ -6,7 +6,10 @@
 3. Identify again with the fitted rig, in a narrow cone and gate (diodes the rig file's
    camera pose hid come back), and fit again.
 4. Spots whose residual exceeds `outlier_sigma` are left out, and a diode whose spots do not
-   fit its own beam is named unidentified, never calibrated on a wrong blob.
+   fit its own beam is named unidentified, never calibrated on a wrong blob; but where the
+   line through a diode's other spots misses one of them, that spot alone goes first (a
+   wrong blob on the second fill level bends the beam towards itself, and the right spots
+   then look like the outliers).
 5. The diodes left out are identified once more, among the blobs no calibrated diode uses,
    through the camera the others determined and from the rig file's beams (not their own
    beams of step 2, which a wrong first choice had bent towards its blobs); whatever is
@@ -42,7 +45,11 @@ from sds_recon.calibration.lasers import (
 )
 from sds_recon.calibration.model_check import PULL_FAIL, ModelCheck, check_model
 from sds_recon.calibration.rig_model import LineObservations
-from sds_recon.calibration.self_calibration import SelfCalibration, self_calibrate
+from sds_recon.calibration.self_calibration import (
+    SIGMA_FLOOR_PX,
+    SelfCalibration,
+    self_calibrate,
+)
 
 LINE_FITS = 4
 """Most joint fits spent scaling the line pixels' σ and leaving out their outliers."""
@@ -136,12 +143,18 @@ def _fit_without_outliers(rig: Rig, surfaces: list[KnownSurface], spots: _Spots,
                           outliers: list[tuple[int, int, float]]
                           ) -> tuple[SelfCalibration, _Spots]:
     """Fit, leave out the spots beyond `outlier_sigma` and the diodes whose spots do not fit
-    one beam (named in `unidentified`, the spots in `outliers`), until none is left out. A
-    diode whose spots fit a beam only with its emitter moved beyond PULL_FAIL of its declared
-    tolerance, and several times as far as the others' (EMITTER_PULL_RATIO × their median),
-    has another diode's spots (two emitters 10 mm apart: a 0.3 mm tolerance would let the fit
-    slide one onto the other's beam), and is left out too; when every emitter is pulled
-    alike, the model is wrong, not an identity, and the model check says so."""
+    one beam (named in `unidentified`, the spots in `outliers`), until none is left out. Where
+    the line through a diode's other spots misses one of them by more than `outlier_sigma`
+    (`_odd_one_out`), that spot alone is left out of that diode in this round, whatever the
+    fit's residuals say: a wrong blob on a surface few other spots reach (the second fill
+    level) bends the beam and its emitter towards itself, and the right spots then look like
+    the outliers, or the whole diode like a wrong one. A diode whose spots fit a beam only
+    with its emitter moved beyond PULL_FAIL of its declared tolerance, and several times as
+    far as the others' (EMITTER_PULL_RATIO × their median), has another diode's spots (two
+    emitters 10 mm apart: a 0.3 mm tolerance would let the fit slide one onto the other's
+    beam), and is left out too; when every emitter is pulled alike, the model is wrong, not
+    an identity, and the model check says so. Each spot left out is listed with its
+    residual in σ, or its miss where that chose it."""
     while True:
         if not spots.ids:
             raise InputError("no diode's spots fit its beam on these surfaces: "
@@ -161,16 +174,72 @@ def _fit_without_outliers(rig: Rig, surfaces: list[KnownSurface], spots: _Spots,
                       or (swapped and i == worst)]
         if keep.all() and not bad_diodes:
             return fit, spots
+        in_sigma, left_out = normalised.copy(), []
         for k, i in enumerate(spots.ids):
-            if i in bad_diodes:
+            rows = np.flatnonzero(spots.diode == k)
+            if keep[rows].all() and i not in bad_diodes:
+                continue
+            odd = _odd_one_out(fit, spots, rows)
+            if odd is not None and odd[1] / np.sqrt(max(fit.chi2_per_dof, 1.0)) > \
+                    s.outlier_sigma:
+                # One spot off the line the diode's others agree on goes, alone: it may
+                # have bent the beam (or pulled the emitter) away from all the others.
+                keep[rows] = True
+                keep[rows[odd[0]]] = False
+                in_sigma[rows[odd[0]]] = odd[1] / np.sqrt(max(fit.chi2_per_dof, 1.0))
+            elif i in bad_diodes:
                 unidentified[i] = (f"its spots do not fit one beam (RMS {rms[i]:.1f} σ)"
                                    if not (swapped and i == worst) else
                                    f"its spots fit a beam only with its emitter moved "
                                    f"{moved[i]:.0f} σ of its tolerance (another diode's)")
                 keep &= spots.diode != k
-        outliers += [(spots.ids[spots.diode[k]], int(spots.frame[k]), float(normalised[k]))
-                     for k in np.flatnonzero(~keep) if spots.ids[spots.diode[k]] not in bad_diodes]
+                left_out.append(i)
+        outliers += [(spots.ids[spots.diode[k]], int(spots.frame[k]), float(in_sigma[k]))
+                     for k in np.flatnonzero(~keep) if spots.ids[spots.diode[k]] not in left_out]
         spots = spots.kept(keep)
+
+
+def _odd_one_out(fit: SelfCalibration, spots: _Spots, rows: np.ndarray
+                 ) -> tuple[int, float] | None:
+    """Of one diode's spots (`rows`), the one without which the others lie most nearly on one
+    straight line, and how far that line misses it, in σ; None with fewer than four spots
+    (three points, each pair fits a line). The spots' points are where the fitted camera's
+    rays meet the fitted surfaces; a line is their principal axis (emitter free, so that
+    a wrong spot's pull on the joint fit's beam and emitter is not inherited); the miss is
+    between the spot and where that line meets its surface, projected, in the spot's σ and
+    the line's there in quadrature (a straight line's prediction σ: the others' spread along
+    it sets how well it is known away from them). A spot that bent the joint fit's beam
+    towards itself hides in that fit's residuals, and every other spot's line passes near
+    it too; without it the others agree."""
+    if len(rows) < 4:
+        return None
+    surfaces = [fit.surfaces[f] for f in spots.frame[rows]]
+    points = points_on_surfaces(fit.rig, spots.pixels[rows], surfaces)
+    variance_px2 = np.maximum(np.trace(spots.covariance[rows], axis1=1, axis2=2) / 2,
+                              SIGMA_FLOOR_PX**2)
+    px_per_mm = fit.rig.surface_px_per_mm()
+    spread = np.full(len(rows), np.inf)
+    lines = []
+    for j in range(len(rows)):
+        others = np.delete(points, j, axis=0)
+        centre = others.mean(axis=0)
+        axis = np.linalg.svd(others - centre)[2][0]
+        offsets = others - centre
+        across_px = np.linalg.norm(offsets - np.outer(offsets @ axis, axis), axis=1) * px_per_mm
+        spread[j] = float(np.mean(across_px**2 / np.delete(variance_px2, j)))
+        lines.append((centre, axis, offsets @ axis))
+    odd = int(np.argmin(spread))
+    centre, axis, along = lines[odd]
+    both_ways = surfaces[odd].intersect(centre, np.array([axis, -axis]))
+    hit = both_ways[np.isfinite(both_ways[:, 0])]
+    if not len(hit):
+        return None
+    reach = float((hit[0] - centre) @ axis)
+    line_variance_px2 = float(np.mean(np.delete(variance_px2, odd))) * (
+        1 / len(along) + reach**2 / max(float(along @ along), 1e-12))
+    miss_px = float(np.linalg.norm(spots.pixels[rows[odd]] - fit.rig.project(hit[:1])[0]))
+    return odd, miss_px / float(np.sqrt(variance_px2[odd] + line_variance_px2))
+
 
 
 def _emitter_pulls(fit: SelfCalibration, laser_ids: list[int]) -> dict[int, float]:
