@@ -162,7 +162,8 @@ def _fit_without_outliers(rig: Rig, surfaces: list[KnownSurface], spots: _Spots,
                                          sorted(unidentified.items())[:3]))
         fit = self_calibrate(rig, spots.ids, surfaces, spots.diode, spots.frame, spots.pixels,
                              spots.covariance, s.fit_emitters, s.fit_camera)
-        normalised = fit.spot_residuals_sigma / np.sqrt(max(fit.chi2_per_dof, 1.0))
+        chi_scale = np.sqrt(max(fit.chi2_per_dof, 1.0))
+        normalised = fit.spot_residuals_sigma / chi_scale
         keep = normalised <= s.outlier_sigma
         rms = {i: float(np.sqrt(np.mean(normalised[spots.diode == k] ** 2)))
                for k, i in enumerate(spots.ids)}
@@ -180,13 +181,12 @@ def _fit_without_outliers(rig: Rig, surfaces: list[KnownSurface], spots: _Spots,
             if keep[rows].all() and i not in bad_diodes:
                 continue
             odd = _odd_one_out(fit, spots, rows)
-            if odd is not None and odd[1] / np.sqrt(max(fit.chi2_per_dof, 1.0)) > \
-                    s.outlier_sigma:
+            if odd is not None and odd[1] / chi_scale > s.outlier_sigma:
                 # One spot off the line the diode's others agree on goes, alone: it may
                 # have bent the beam (or pulled the emitter) away from all the others.
                 keep[rows] = True
                 keep[rows[odd[0]]] = False
-                in_sigma[rows[odd[0]]] = odd[1] / np.sqrt(max(fit.chi2_per_dof, 1.0))
+                in_sigma[rows[odd[0]]] = odd[1] / chi_scale
             elif i in bad_diodes:
                 unidentified[i] = (f"its spots do not fit one beam (RMS {rms[i]:.1f} σ)"
                                    if not (swapped and i == worst) else
@@ -203,7 +203,7 @@ def _odd_one_out(fit: SelfCalibration, spots: _Spots, rows: np.ndarray
                  ) -> tuple[int, float] | None:
     """Of one diode's spots (`rows`), the one without which the others lie most nearly on one
     straight line, and how far that line misses it, in σ; None with fewer than four spots
-    (three points, each pair fits a line). The spots' points are where the fitted camera's
+    (of three, any two left fit a line). The spots' points are where the fitted camera's
     rays meet the fitted surfaces; a line is their principal axis (emitter free, so that
     a wrong spot's pull on the joint fit's beam and emitter is not inherited); the miss is
     between the spot and where that line meets its surface, projected, in the spot's σ and
