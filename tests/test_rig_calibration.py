@@ -12,7 +12,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from sds_model.rig import load_rig, save_rig
+from sds_model.rig import Tolerances, load_rig, save_rig
 from sds_recon.calibration.identification import IdentificationSettings, identify_spots
 from sds_recon.calibration.lasers import KnownSurface
 from sds_recon.calibration.parameters import CAMERA_ROTATION
@@ -309,10 +309,7 @@ def test_one_wrong_spot_on_the_second_fill_level_is_left_out_not_the_right_ones(
     0.58° off (17 σ), valid. Here the demo's surfaces and one diode's spot 3 px off there:
     before, the diode was left out whole (its spots' RMS beyond the limit); now that spot
     alone is, and the beam is right."""
-    from sds_model.rig import Tolerances
-
-    readings = (np.radians(0.05), np.radians(0.2887), np.radians(0.15))
-    level, about, across = readings
+    level, about, across = np.radians(0.05), np.radians(0.2887), np.radians(0.15)
     surfaces = ([KnownSurface(0.0, 0.0, 0.0, level, level)]
                 + [KnownSurface(0.0, np.radians(a), 0.0, about, across)
                    for a in (5, 10, 15, 20, 25, 30, 35)]
@@ -345,7 +342,6 @@ def test_what_the_protocol_determines_is_fitted_however_noisy_the_spots() -> Non
     camera's pose: with spots 8× noisier than their σ says (χ²/dof near 60; speckle made
     them 3× noisier), the pose is still fitted, not kept from the rig file (it was: its σ,
     scaled by the χ², passed the limit), and the fit's σ grows with its χ²."""
-    from sds_model.rig import Tolerances
     from sds_workflows.calibration_trial import protocol_readings
 
     rng = np.random.default_rng(21)

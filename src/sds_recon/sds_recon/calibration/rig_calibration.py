@@ -40,6 +40,7 @@ from sds_recon.calibration.lasers import (
     OUTLIER_MM,
     KnownSurface,
     PlaneFitResult,
+    fit_beam,
     fit_plane_robust,
     points_on_surfaces,
 )
@@ -203,43 +204,48 @@ def _odd_one_out(fit: SelfCalibration, spots: _Spots, rows: np.ndarray
                  ) -> tuple[int, float] | None:
     """Of one diode's spots (`rows`), the one without which the others lie most nearly on one
     straight line, and how far that line misses it, in σ; None with fewer than four spots
-    (of three, any two left fit a line). The spots' points are where the fitted camera's
-    rays meet the fitted surfaces; a line is their principal axis (emitter free, so that
-    a wrong spot's pull on the joint fit's beam and emitter is not inherited); the miss is
-    between the spot and where that line meets its surface, projected, in the spot's σ and
-    the line's there in quadrature (a straight line's prediction σ: the others' spread along
-    it sets how well it is known away from them). A spot that bent the joint fit's beam
-    towards itself hides in that fit's residuals, and every other spot's line passes near
-    it too; without it the others agree."""
+    (of three, any two left fit a line) or a spot whose ray misses its surface. The spots'
+    points are where the fitted camera's rays meet the fitted surfaces; a line is their free
+    beam (`lasers.fit_beam`, emitter free, so that a wrong spot's pull on the joint fit's
+    beam and emitter is not inherited); the miss is between the spot and where that line
+    meets its surface, projected, in the spot's σ and the line's there in quadrature (a
+    straight line's prediction σ: the others' spread along it sets how well it is known away
+    from them). A spot that bent the joint fit's beam towards itself hides in that fit's
+    residuals, and every other spot's line passes near it too; without it the others
+    agree."""
     if len(rows) < 4:
         return None
     surfaces = [fit.surfaces[f] for f in spots.frame[rows]]
     points = points_on_surfaces(fit.rig, spots.pixels[rows], surfaces)
+    if not np.isfinite(points).all():
+        return None
     variance_px2 = np.maximum(np.trace(spots.covariance[rows], axis1=1, axis2=2) / 2,
                               SIGMA_FLOOR_PX**2)
     px_per_mm = fit.rig.surface_px_per_mm()
+    laser_id = spots.ids[spots.diode[rows[0]]]
     spread = np.full(len(rows), np.inf)
     lines = []
     for j in range(len(rows)):
         others = np.delete(points, j, axis=0)
-        centre = others.mean(axis=0)
-        axis = np.linalg.svd(others - centre)[2][0]
-        offsets = others - centre
-        across_px = np.linalg.norm(offsets - np.outer(offsets @ axis, axis), axis=1) * px_per_mm
+        # Placed at the others' centroid, the free beam's point is that centroid.
+        line = fit_beam(laser_id, others, others.mean(axis=0), fit_emitter=True)
+        offsets = others - line.emitter_mm
+        along = offsets @ line.direction
+        across_px = np.linalg.norm(offsets - np.outer(along, line.direction), axis=1) * px_per_mm
         spread[j] = float(np.mean(across_px**2 / np.delete(variance_px2, j)))
-        lines.append((centre, axis, offsets @ axis))
+        lines.append((line, along))
     odd = int(np.argmin(spread))
-    centre, axis, along = lines[odd]
-    both_ways = surfaces[odd].intersect(centre, np.array([axis, -axis]))
+    line, along = lines[odd]
+    both_ways = surfaces[odd].intersect(line.emitter_mm,
+                                        np.array([line.direction, -line.direction]))
     hit = both_ways[np.isfinite(both_ways[:, 0])]
     if not len(hit):
         return None
-    reach = float((hit[0] - centre) @ axis)
+    reach = float((hit[0] - line.emitter_mm) @ line.direction)
     line_variance_px2 = float(np.mean(np.delete(variance_px2, odd))) * (
         1 / len(along) + reach**2 / max(float(along @ along), 1e-12))
     miss_px = float(np.linalg.norm(spots.pixels[rows[odd]] - fit.rig.project(hit[:1])[0]))
     return odd, miss_px / float(np.sqrt(variance_px2[odd] + line_variance_px2))
-
 
 
 def _emitter_pulls(fit: SelfCalibration, laser_ids: list[int]) -> dict[int, float]:
