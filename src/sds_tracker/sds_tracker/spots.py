@@ -397,9 +397,10 @@ class SpotTracker:
         peaks = {i: e.peak for i, e in estimates.items()
                  if not e.flags & LOST and np.isnan(e.beside_line_peak)}
         for laser_id, peak in peaks.items():
+            if self.previous[laser_id] is not None or self.last_seen[laser_id] is not None:
+                continue   # vouched for: judged against its own peak (DIMMED_SHARE)
             others = [p for i, p in peaks.items() if i != laser_id]
-            unvouched = self.previous[laser_id] is None and self.last_seen[laser_id] is None
-            if unvouched and len(others) >= MIN_SPOTS_FOR_FAINT and \
+            if len(others) >= MIN_SPOTS_FOR_FAINT and \
                     peak < FAINT_SHARE * float(np.median(others)):
                 estimates[laser_id] = SpotEstimate(laser_id, np.nan, np.nan, np.nan, 0.0, LOST)
         return estimates
