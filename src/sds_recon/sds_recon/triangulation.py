@@ -108,14 +108,18 @@ def plane_height_sigma(rig: Rig, pixels: ArrayLike, sigma_px: ArrayLike) -> np.n
     return _height_sigma(lambda p: triangulate_plane(rig, p)[:, 2], pixels, sigma_px)
 
 
-def beam_image_path(rig: Rig, laser_id: int, heights_mm: ArrayLike) -> np.ndarray:
-    """The diode's spot in the image for surface heights Z (world, mm): its path (N×2 px)."""
+def beam_points_mm(rig: Rig, laser_id: int, heights_mm: ArrayLike) -> np.ndarray:
+    """The diode's beam at surface heights Z (world, mm): its points there (N×3 mm)."""
     diode = rig.diode(laser_id)
     heights = np.asarray(heights_mm, dtype=float)
     if abs(diode.direction[2]) < 1e-9:
         raise InputError(f"diode {laser_id}'s beam is horizontal: it has no height path")
-    distance = (heights - diode.emitter_mm[2]) / diode.direction[2]
-    return rig.project(diode.point_at(distance))
+    return diode.point_at((heights - diode.emitter_mm[2]) / diode.direction[2])
+
+
+def beam_image_path(rig: Rig, laser_id: int, heights_mm: ArrayLike) -> np.ndarray:
+    """The diode's spot in the image for surface heights Z (world, mm): its path (N×2 px)."""
+    return rig.project(beam_points_mm(rig, laser_id, heights_mm))
 
 
 def line_image_path(rig: Rig, height_mm: float, samples: int = 400) -> np.ndarray:

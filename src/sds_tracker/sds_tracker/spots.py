@@ -25,6 +25,7 @@ from sds_tracker.kernels import (
     step_sigma_px,
     symmetric_centre,
 )
+from sds_tracker.surface_consistency import beam_points_at, fit_robust_surface
 
 LOST, SATURATED, REFLECTION_SUSPECTED, OFF_PATH, HAMPEL_REPLACED, NOT_FILTERED, AMBIGUOUS = \
     1, 2, 4, 8, 16, 32, 64
@@ -87,6 +88,19 @@ demo's drop on eight rigs, each diode hidden in turn in a first frame; 0.20-0.23
 stills), 0.22-0.30 on the held-out rig that showed it (61305: the rim 67 px away, valid)."""
 MIN_SPOTS_FOR_FAINT = 3
 """Fewest other spots in a frame whose median peak FAINT_SHARE is judged against."""
+SURFACE_TOLERANCE_MM = 5.0
+"""Farthest [mm] a spot acquired with nothing to vouch for it may stand above or below the
+surface the frame's spots show (`surface_consistency`), or SURFACE_SPREAD × that surface's
+own spread, the larger. The simulator's true surfaces (the shipped drops and the 1 g kick)
+leave at most 0.8 mm from the fitted form, right spots in the protocol's stills at most 1.2
+mm (development rigs 7101-7116; 99th percentile 0.37 mm); blobs taken for a diode's spot
+there (a wall's reflection, a glint while the spot was hidden) stood for points 14-58 mm
+off (development rig 7101)."""
+SURFACE_SPREAD = 5.0
+"""The tolerance's least multiple of the surface's spread (1.4826 × the median |height
+above it| of the frame's spots): a rougher surface than the fitted form widens it."""
+MIN_SPOTS_FOR_SURFACE = 8
+"""Fewest spots in a frame whose surface an acquired spot is judged against."""
 MAX_ELONGATION = 2.5
 """Most elongated light (`kernels.light_elongation` within half a window, above the
 threshold) that can be a spot: a spot is round, or an ellipse on a tilted surface or blurred
@@ -299,7 +313,8 @@ class SpotTracker:
     def __init__(self, paths: dict[int, np.ndarray], settings: SpotSettings | None = None,
                  tolerances_px: dict[int, float] | None = None, exclusive: bool = True,
                  max_elongation: float = MAX_ELONGATION,
-                 apertures_px: dict[int, float] | None = None) -> None:
+                 apertures_px: dict[int, float] | None = None,
+                 beams_mm: dict[int, np.ndarray] | None = None) -> None:
         """`tolerances_px`: a path's own gate [px] where it is known less well than
         `path_tolerance_px` (a weakly calibrated beam); the others use that. `exclusive`
         (diodes): a blob is one path's spot at most (`_one_blob_one_diode`); off, where the
@@ -309,8 +324,12 @@ class SpotTracker:
         diode's fixed centroid aperture [px], with nothing of the peak taken off (a video's,
         where a speckled spot's every grain counts); a diode without one takes
         `aperture_factor` × its blob's radius with `clip_fraction` of the peak taken off
-        (stills, whose averaged frames keep the liquid's mirrored surroundings as wings)."""
+        (stills, whose averaged frames keep the liquid's mirrored surroundings as wings).
+        `beams_mm`: per path, the beam's points (M×3 mm) its M path points are the images of;
+        with them, a spot acquired with nothing to vouch for it must agree with the surface
+        the frame's spots show (`_on_the_surface`)."""
         self.settings = settings or SpotSettings()
+        self.beams_mm = beams_mm
         self.exclusive = exclusive
         self.max_elongation = max_elongation
         self.paths = {i: np.asarray(p, dtype=float) for i, p in paths.items()}
@@ -366,6 +385,7 @@ class SpotTracker:
             estimates[laser_id] = estimate
         if self.exclusive:
             estimates = self._one_blob_one_diode(image, origin, estimates, line)
+        estimates = self._on_the_surface(image, origin, estimates, line)
         estimates = self._with_speckle(image, origin, estimates)
         estimates = self._without_faint_acquisitions(estimates)
         for laser_id, estimate in estimates.items():
@@ -385,6 +405,43 @@ class SpotTracker:
                 self.previous[laser_id] = position
                 self.last_seen[laser_id] = LastSeen(position, 1, identity_peak(estimate))
         return list(estimates.values())
+
+    def _on_the_surface(self, image: np.ndarray, origin: np.ndarray,
+                        estimates: dict[int, SpotEstimate],
+                        line: tuple[np.ndarray, np.ndarray] | None) -> dict[int, SpotEstimate]:
+        """The frame's estimates with every spot acquired with nothing to vouch for it (no
+        previous position, not seen within REACQUIRE_FRAMES) on the surface the frame's
+        spots show: its point on its beam (`beam_points_at`) within SURFACE_TOLERANCE_MM of
+        the robust surface through all of them (`fit_robust_surface`), or its next
+        candidate on its path that is (`_candidates`, without the other diodes' blobs), or
+        none: lost. Needs `beams_mm` and MIN_SPOTS_FOR_SURFACE spots."""
+        found = [i for i, e in estimates.items() if not e.flags & LOST]
+        beams = self.beams_mm
+        if beams is None or len(found) < MIN_SPOTS_FOR_SURFACE or all(
+                self.previous[i] is not None or self.last_seen[i] is not None for i in found):
+            return estimates
+        positions = np.array([[estimates[i].x_px, estimates[i].y_px] for i in found])
+        points = np.array([beam_points_at(self.paths[i], beams[i], position[None])[0]
+                           for i, position in zip(found, positions, strict=True)])
+        surface = fit_robust_surface(points, SURFACE_TOLERANCE_MM)
+        above = surface.heights_above_mm(points)
+        tolerance = max(SURFACE_TOLERANCE_MM,
+                        SURFACE_SPREAD * 1.4826 * float(np.median(np.abs(above))))
+        for k, laser_id in enumerate(found):
+            if abs(above[k]) <= tolerance or self.previous[laser_id] is not None or \
+                    self.last_seen[laser_id] is not None:
+                continue
+            held = [p for j, p in enumerate(positions) if j != k]
+            replacement = SpotEstimate(laser_id, np.nan, np.nan, np.nan, 0.0, LOST)
+            for candidate in self._candidates(image, origin, laser_id, estimates[laser_id],
+                                              line, held)[1:]:
+                point = beam_points_at(self.paths[laser_id], beams[laser_id],
+                                       np.array([[candidate.x_px, candidate.y_px]]))
+                if abs(surface.heights_above_mm(point)[0]) <= tolerance:
+                    replacement = candidate
+                    break
+            estimates[laser_id] = replacement
+        return estimates
 
     def _without_faint_acquisitions(self, estimates: dict[int, SpotEstimate]
                                     ) -> dict[int, SpotEstimate]:

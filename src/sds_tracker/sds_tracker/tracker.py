@@ -11,7 +11,7 @@ from scipy.spatial.transform import Rotation
 from sds_model.errors import InputError
 from sds_model.rig import Rig
 from sds_recon.calibration.rig_model import across_axes
-from sds_recon.triangulation import beam_image_path, line_image_path
+from sds_recon.triangulation import beam_image_path, beam_points_mm, line_image_path
 
 from sds_tracker.hampel import BankOutput, HampelBank
 from sds_tracker.kernels import warm_up
@@ -180,8 +180,10 @@ class FrameTracker:
         # its averaged frames hold the liquid's mirrored surroundings as wings (bench/README).
         apertures = None if self.config.stills or self.config.aperture_mm <= 0 else \
             spot_apertures_px(rig, self.config.aperture_mm)
+        beams = {d.laser_id: beam_points_mm(rig, d.laser_id, heights)
+                 for d in rig.tracked_diodes}
         self.spots = SpotTracker(self.paths, self.config.spots, widened,
-                                 apertures_px=apertures)
+                                 apertures_px=apertures, beams_mm=beams)
         for laser_id, position in (seeds or {}).items():
             if laser_id not in self.paths:
                 raise InputError(f"seed for laser {laser_id}, which the rig does not have")

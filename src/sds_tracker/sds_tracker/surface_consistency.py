@@ -1,0 +1,93 @@
+"""Whether a spot's place on its beam agrees with the surface the other spots show.
+
+A diode's spot can only be where its beam meets the liquid: a pixel on the beam's image path
+is a point on the beam (`beam_points_at`). The diodes' points lie on one smooth surface;
+a wall's reflection, a glint or the container's rim on a diode's path stands for a point
+tens of mm above or below it. The surface is fitted robustly (least median of squares over
+minimal sets, then least squares on its inliers) as z = a + b·x + c·y + d·(x² + y²): a tilted
+plane with a round bulge, which holds a still's plane and a sloshing surface's first mode
+(`fit_robust_surface`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+SURFACE_TERMS = 4
+"""Coefficients of the fitted surface (a, b, c, d); also the points of a minimal set."""
+SURFACE_SAMPLES = 200
+"""Minimal sets tried for the least median of squares: with 3 wrong points of 20 half of
+all sets are free of them, so a clean one is missed with probability 2⁻²⁰⁰."""
+SURFACE_RANDOM_SEED = 0
+"""The minimal sets are drawn with this seed: one frame always gives the same answer."""
+DEGENERATE = 1e-9
+"""Singular values below this share of the largest are a term the points do not determine
+(x and y are scaled to about 1, so the terms' columns are alike in size)."""
+
+
+def beam_points_at(path_px: np.ndarray, beam_mm: np.ndarray, pixels: np.ndarray
+                   ) -> np.ndarray:
+    """The beam's points [mm] (N×3) that the `pixels` (N×2) stand for: each pixel's nearest
+    point on the beam's image path (`path_px`, M×2, the images of `beam_mm`, M×3, points on
+    the beam), carried to the beam by the same share of that segment. Linear between the
+    path's samples; beyond its ends, its end points."""
+    start, segment = path_px[:-1], path_px[1:] - path_px[:-1]
+    length2 = np.maximum(np.sum(segment**2, axis=1), 1e-12)
+    share = np.clip(np.einsum("nmk,mk->nm", pixels[:, None] - start, segment) / length2,
+                    0.0, 1.0)
+    closest = start + share[..., None] * segment
+    nearest = np.argmin(np.linalg.norm(closest - pixels[:, None], axis=2), axis=1)
+    rows = np.arange(len(pixels))
+    beam_start, beam_step = beam_mm[:-1][nearest], (beam_mm[1:] - beam_mm[:-1])[nearest]
+    return beam_start + share[rows, nearest][:, None] * beam_step
+
+
+@dataclass(frozen=True)
+class RobustSurface:
+    """z = a + b·x + c·y + d·(x² + y² − `mean_square`) [mm] with x and y in units of
+    `scale_mm` (the points' reach, so that the terms' columns are alike in size) and the
+    bulge taken about the fitted points' mean square distance from the axis (where they are
+    all at one distance, its column is zero and the fit a plane), as `fit_robust_surface`
+    fits it."""
+
+    coefficients: np.ndarray
+    scale_mm: float
+    mean_square: float
+
+    def heights_above_mm(self, points_mm: np.ndarray) -> np.ndarray:
+        """Each point's height above the surface [mm] (N×3 points → N)."""
+        design = _design(points_mm, self.scale_mm, self.mean_square)
+        return points_mm[:, 2] - design @ self.coefficients
+
+
+def _design(points_mm: np.ndarray, scale_mm: float, mean_square: float) -> np.ndarray:
+    """The surface's design matrix for points (…×3 mm): 1, x, y, x² + y² − `mean_square`
+    (x, y in units of `scale_mm`)."""
+    x, y = points_mm[..., 0] / scale_mm, points_mm[..., 1] / scale_mm
+    return np.stack([np.ones_like(x), x, y, x**2 + y**2 - mean_square], axis=-1)
+
+
+def fit_robust_surface(points_mm: np.ndarray, inlier_mm: float) -> RobustSurface:
+    """The surface (N×3 points [mm], N > SURFACE_TERMS) that most points lie on: of
+    SURFACE_SAMPLES minimal sets (SURFACE_TERMS points each), the one whose surface has the
+    least median squared residual, refitted by least squares to the points within
+    `inlier_mm` of it. Where the points do not determine every term (all at one distance
+    from the axis: no bulge; on one line: no tilt across it), the least-norm solution,
+    which leaves that term out."""
+    count = len(points_mm)
+    scale_mm = max(float(np.abs(points_mm[:, :2]).max()), 1e-9)
+    draws = np.random.default_rng(SURFACE_RANDOM_SEED).random((SURFACE_SAMPLES, count))
+    sets = np.argsort(draws, axis=1)[:, :SURFACE_TERMS]   # each row: distinct points
+    mean_square = float(np.mean(np.sum((points_mm[:, :2] / scale_mm) ** 2, axis=1)))
+    design, heights = _design(points_mm, scale_mm, mean_square), points_mm[:, 2]
+    solvers = np.linalg.pinv(design[sets], rtol=DEGENERATE)
+    coefficients = np.einsum("skn,sn->sk", solvers, heights[sets])
+    residuals = heights - coefficients @ design.T
+    best = int(np.argmin(np.median(residuals**2, axis=1)))
+    inliers = np.abs(residuals[best]) <= inlier_mm
+    if inliers.sum() <= SURFACE_TERMS:
+        return RobustSurface(coefficients[best], scale_mm, mean_square)
+    fitted, *_ = np.linalg.lstsq(design[inliers], heights[inliers], rcond=DEGENERATE)
+    return RobustSurface(fitted, scale_mm, mean_square)
