@@ -100,7 +100,9 @@ SURFACE_SPREAD = 5.0
 """The tolerance's least multiple of the surface's spread (1.4826 × the median |height
 above it| of the frame's spots): a rougher surface than the fitted form widens it."""
 MIN_SPOTS_FOR_SURFACE = 8
-"""Fewest spots in a frame whose surface an acquired spot is judged against."""
+"""Fewest spots in a frame whose surface an acquired spot is judged against: twice the
+surface's terms (`surface_consistency.SURFACE_TERMS`), so that the median the robust fit
+minimises is set by points beyond the minimal set's own."""
 MAX_ELONGATION = 2.5
 """Most elongated light (`kernels.light_elongation` within half a window, above the
 threshold) that can be a spot: a spot is round, or an ellipse on a tilted surface or blurred
