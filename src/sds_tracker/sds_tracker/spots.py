@@ -91,11 +91,11 @@ MIN_SPOTS_FOR_FAINT = 3
 SURFACE_TOLERANCE_MM = 5.0
 """Farthest [mm] a spot acquired with nothing to vouch for it may stand above or below the
 surface the frame's spots show (`surface_consistency`), or SURFACE_SPREAD × that surface's
-own spread, the larger. The simulator's true surfaces (the shipped drops and the 1 g kick)
-leave at most 0.8 mm from the fitted form, right spots in the protocol's stills at most 1.2
-mm (development rigs 7101-7116; 99th percentile 0.37 mm); blobs taken for a diode's spot
-there (a wall's reflection, a glint while the spot was hidden) stood for points 14-58 mm
-off (development rig 7101)."""
+own spread, the larger; judged where the tracker is given the beams (`FrameTracker` does in
+stills, whose surfaces are planes). Right spots in the protocol's stills lie at most 1.2
+mm from it (development rigs 7101-7116; 99th percentile 0.37 mm); blobs taken for a
+diode's spot there (a wall's reflection, a glint while the spot was hidden) stood for
+points 14-58 mm off (development rig 7101)."""
 SURFACE_SPREAD = 5.0
 """The tolerance's least multiple of the surface's spread (1.4826 × the median |height
 above it| of the frame's spots): a rougher surface than the fitted form widens it."""

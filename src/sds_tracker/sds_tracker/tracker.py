@@ -180,8 +180,13 @@ class FrameTracker:
         # its averaged frames hold the liquid's mirrored surroundings as wings (bench/README).
         apertures = None if self.config.stills or self.config.aperture_mm <= 0 else \
             spot_apertures_px(rig, self.config.aperture_mm)
+        # A still's spots must lie on the surface the others show (`_on_the_surface`): a
+        # still is a plane (a tilt table, a fill level), which the robust fit's form holds
+        # exactly. Not a video's: a sloshing surface's higher modes leave it by several mm
+        # (modes of 2 mm: 31 right points of 4000 beyond the limit, synthetic), and a spot
+        # refused there stays unvouched, so refused again in the frames after.
         beams = {d.laser_id: beam_points_mm(rig, d.laser_id, heights)
-                 for d in rig.tracked_diodes}
+                 for d in rig.tracked_diodes} if self.config.stills else None
         self.spots = SpotTracker(self.paths, self.config.spots, widened,
                                  apertures_px=apertures, beams_mm=beams)
         for laser_id, position in (seeds or {}).items():
