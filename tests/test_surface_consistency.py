@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from sds_tracker.surface_consistency import beam_points_at, fit_robust_surface
+from sds_tracker.spots import beam_points_at
+from sds_tracker.surface_consistency import fit_robust_surface
 
 
 def bulging_points(rng: np.random.Generator, count: int) -> np.ndarray:

@@ -25,7 +25,7 @@ from sds_tracker.kernels import (
     step_sigma_px,
     symmetric_centre,
 )
-from sds_tracker.surface_consistency import beam_points_at, fit_robust_surface
+from sds_tracker.surface_consistency import fit_robust_surface
 
 LOST, SATURATED, REFLECTION_SUSPECTED, OFF_PATH, HAMPEL_REPLACED, NOT_FILTERED, AMBIGUOUS = \
     1, 2, 4, 8, 16, 32, 64
@@ -287,14 +287,36 @@ def distance_to_path(point: np.ndarray, path: np.ndarray) -> float:
     return float(distances_to_paths(point[None], path[None])[0])
 
 
-def distances_to_paths(points: np.ndarray, paths: np.ndarray) -> np.ndarray:
-    """Shortest distance [px] from each point (N×2) to its polyline (N×M×2)."""
+def nearest_on_paths(points: np.ndarray, paths: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For each point (N×2) the nearest place on its polyline (N×M×2): that segment's index,
+    the share along it (0-1) and the distance [px]."""
     a, b = paths[:, :-1], paths[:, 1:]
     segment = b - a
     length2 = np.maximum(np.sum(segment * segment, axis=2), 1e-12)
     t = np.clip(np.sum((points[:, None] - a) * segment, axis=2) / length2, 0.0, 1.0)
     closest = a + t[..., None] * segment
-    return np.min(np.linalg.norm(closest - points[:, None], axis=2), axis=1)
+    distances = np.linalg.norm(closest - points[:, None], axis=2)
+    nearest = np.argmin(distances, axis=1)
+    rows = np.arange(len(points))
+    return nearest, t[rows, nearest], distances[rows, nearest]
+
+
+def distances_to_paths(points: np.ndarray, paths: np.ndarray) -> np.ndarray:
+    """Shortest distance [px] from each point (N×2) to its polyline (N×M×2)."""
+    return nearest_on_paths(points, paths)[2]
+
+
+def beam_points_at(path_px: np.ndarray, beam_mm: np.ndarray, pixels: np.ndarray
+                   ) -> np.ndarray:
+    """The beam's points [mm] (N×3) that the `pixels` (N×2) stand for: a diode's spot can
+    only be where its beam meets the liquid, so each pixel's nearest place on the beam's
+    image path (`path_px`, M×2, the images of `beam_mm`, M×3, points on the beam) is carried
+    to the beam by the same share of that segment. Linear between the path's samples;
+    beyond its ends, its end points."""
+    segment, share, _ = nearest_on_paths(pixels, np.broadcast_to(path_px,
+                                                                 (len(pixels), *path_px.shape)))
+    return beam_mm[segment] + share[:, None] * (beam_mm[segment + 1] - beam_mm[segment])
 
 
 class SpotTracker:
@@ -408,6 +430,11 @@ class SpotTracker:
                 self.last_seen[laser_id] = LastSeen(position, 1, identity_peak(estimate))
         return list(estimates.values())
 
+    def _vouched_for(self, laser_id: int) -> bool:
+        """Whether something vouches for a diode's spot in this frame: its position in the
+        frame before, or a sighting within REACQUIRE_FRAMES."""
+        return self.previous[laser_id] is not None or self.last_seen[laser_id] is not None
+
     def _on_the_surface(self, image: np.ndarray, origin: np.ndarray,
                         estimates: dict[int, SpotEstimate],
                         line: tuple[np.ndarray, np.ndarray] | None) -> dict[int, SpotEstimate]:
@@ -420,7 +447,7 @@ class SpotTracker:
         found = [i for i, e in estimates.items() if not e.flags & LOST]
         beams = self.beams_mm
         if beams is None or len(found) < MIN_SPOTS_FOR_SURFACE or all(
-                self.previous[i] is not None or self.last_seen[i] is not None for i in found):
+                self._vouched_for(i) for i in found):
             return estimates
         positions = np.array([[estimates[i].x_px, estimates[i].y_px] for i in found])
         points = np.array([beam_points_at(self.paths[i], beams[i], position[None])[0]
@@ -430,8 +457,7 @@ class SpotTracker:
         tolerance = max(SURFACE_TOLERANCE_MM,
                         SURFACE_SPREAD * 1.4826 * float(np.median(np.abs(above))))
         for k, laser_id in enumerate(found):
-            if abs(above[k]) <= tolerance or self.previous[laser_id] is not None or \
-                    self.last_seen[laser_id] is not None:
+            if abs(above[k]) <= tolerance or self._vouched_for(laser_id):
                 continue
             held = [p for j, p in enumerate(positions) if j != k]
             replacement = SpotEstimate(laser_id, np.nan, np.nan, np.nan, 0.0, LOST)
@@ -456,8 +482,8 @@ class SpotTracker:
         peaks = {i: e.peak for i, e in estimates.items()
                  if not e.flags & LOST and np.isnan(e.beside_line_peak)}
         for laser_id, peak in peaks.items():
-            if self.previous[laser_id] is not None or self.last_seen[laser_id] is not None:
-                continue   # vouched for: judged against its own peak (DIMMED_SHARE)
+            if self._vouched_for(laser_id):
+                continue   # judged against its own peak (DIMMED_SHARE)
             others = [p for i, p in peaks.items() if i != laser_id]
             if len(others) >= MIN_SPOTS_FOR_FAINT and \
                     peak < FAINT_SHARE * float(np.median(others)):

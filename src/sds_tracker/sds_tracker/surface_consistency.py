@@ -1,17 +1,17 @@
-"""Whether a spot's place on its beam agrees with the surface the other spots show.
+"""The surface most of a frame's points lie on, found whatever a few far-off ones say.
 
-A diode's spot can only be where its beam meets the liquid: a pixel on the beam's image path
-is a point on the beam (`beam_points_at`). The diodes' points lie on one smooth surface;
-a wall's reflection, a glint or the container's rim on a diode's path stands for a point
-tens of mm above or below it. The surface is fitted robustly (least median of squares over
-minimal sets, then least squares on its inliers) as z = a + b·x + c·y + d·(x² + y²): a tilted
-plane with a round bulge, which holds a still's plane and a sloshing surface's first mode
-(`fit_robust_surface`). Not the reconstruction's outlier rule
-(`sds_recon.surface_fit.surface_outliers`, leave-one-out against the plane and three modes,
-one point at a time): that rule judges points already told apart, and several ghosts at
-once mask each other in it (four of 20 points moved 14-40 mm, two draws: with a 5 mm limit
-it rejected 2 and 0 of them, and in the first two right points as well); the least median
-of squares finds all four (tests/test_surface_consistency.py).
+A diode's spot can only be where its beam meets the liquid (`spots.beam_points_at`): a
+wall's reflection, a glint or the container's rim on a diode's path stands for a point tens
+of mm above or below the surface the other spots show. The surface is fitted robustly
+(least median of squares over minimal sets, then least squares on its inliers) as
+z = a + b·x + c·y + d·(x² + y²), which holds a still's plane exactly (`fit_robust_surface`;
+the tracker judges stills' spots against it, `SpotTracker._on_the_surface`). Not the
+reconstruction's outlier rule (`sds_recon.surface_fit.surface_outliers`, leave-one-out
+against the plane and three modes, one point at a time): that rule judges points already
+told apart, and several ghosts at once mask each other in it (four of 20 points moved 14-40
+mm, two draws: with a 5 mm limit it rejected 2 and 0 of them, and in the first two right
+points as well); the least median of squares finds all four
+(tests/test_surface_consistency.py).
 """
 
 from __future__ import annotations
@@ -31,23 +31,6 @@ SURFACE_RANDOM_SEED = 0
 DEGENERATE = 1e-9
 """Singular values below this share of the largest are a term the points do not determine
 (x and y are scaled to about 1, so the terms' columns are alike in size)."""
-
-
-def beam_points_at(path_px: np.ndarray, beam_mm: np.ndarray, pixels: np.ndarray
-                   ) -> np.ndarray:
-    """The beam's points [mm] (N×3) that the `pixels` (N×2) stand for: each pixel's nearest
-    point on the beam's image path (`path_px`, M×2, the images of `beam_mm`, M×3, points on
-    the beam), carried to the beam by the same share of that segment. Linear between the
-    path's samples; beyond its ends, its end points."""
-    start, segment = path_px[:-1], path_px[1:] - path_px[:-1]
-    length2 = np.maximum(np.sum(segment**2, axis=1), 1e-12)
-    share = np.clip(np.einsum("nmk,mk->nm", pixels[:, None] - start, segment) / length2,
-                    0.0, 1.0)
-    closest = start + share[..., None] * segment
-    nearest = np.argmin(np.linalg.norm(closest - pixels[:, None], axis=2), axis=1)
-    rows = np.arange(len(pixels))
-    beam_start, beam_step = beam_mm[:-1][nearest], (beam_mm[1:] - beam_mm[:-1])[nearest]
-    return beam_start + share[rows, nearest][:, None] * beam_step
 
 
 @dataclass(frozen=True)
