@@ -20,6 +20,7 @@ from sds_tracker.spots import (
     LOST,
     ON_LINE_SIGMA_PX,
     REACQUIRE_FRAMES,
+    REFLECTION_SUSPECTED,
     SpotSettings,
     SpotTracker,
     spot_without_line,
@@ -1022,3 +1023,45 @@ def test_a_still_takes_the_spot_on_the_surface_not_a_brighter_ghost_on_its_path(
             else:
                 assert np.hypot(spot.x_px - spots[k][0], spot.y_px - spots[k][1]) < 0.3, \
                     (k, spot)
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_still_spot_joined_to_its_own_wall_reflection_is_lost_not_pulled(seed: int) -> None:
+    """The protocol's stills of development rigs (7101-7116): a spot whose own wall
+    reflection lay 5-20 px from it, their light joined above the threshold, was measured
+    2-9 px towards it (10 of the 16 spots more than 2 px off). Here ten beams see a tilted
+    surface; diode 3's reflection, half as bright as its spot, lies 10 px from it, their
+    light joined; diode 6's 17 px from its spot, apart. The reflections are where the model
+    given to the tracker puts them from the points where the beams meet the fitted surface:
+    9 and 16 px along and 5 px across the paths from the images of those points (the
+    paths give them: x = 30 + 3 (z + 40) px). Diode 3 is lost, flagged as a reflection;
+    diode 6 and the others are measured. Without the model diode 3 is measured more than
+    1 px towards its reflection."""
+    paths, beams, places = surface_paths(10)
+    heights = 3.0 + 0.15 * places[:, 0] - 0.1 * places[:, 1]
+    spots = [(30.0 + 3.0 * (height + 40.0), 20.0 + 26.0 * k, 400.0)
+             for k, height in enumerate(heights)]
+    beside_px = {3: 9.0, 6: 16.0}
+    reflections = [(spots[k][0] + offset, spots[k][1] + 5.0, 200.0)
+                   for k, offset in beside_px.items()]
+    image = blobs_image([*spots, *reflections], seed, size=300)
+
+    def reflections_px(laser_ids: list[int], points_mm: np.ndarray,
+                       normals: np.ndarray) -> np.ndarray:
+        assert np.all(normals[:, 2] > 0.9)
+        pixels = np.full((len(laser_ids), 2), np.nan)
+        for row, (laser_id, point) in enumerate(zip(laser_ids, points_mm, strict=True)):
+            if laser_id in beside_px:
+                pixels[row] = (30.0 + 3.0 * (point[2] + 40.0) + beside_px[laser_id],
+                               20.0 + 26.0 * laser_id + 5.0)
+        return pixels
+
+    found = SpotTracker(paths, beams_mm=beams, reflections_px=reflections_px).update(image)
+    for k, spot in enumerate(found):
+        if k == 3:
+            assert spot.flags & LOST and spot.flags & REFLECTION_SUSPECTED, spot
+            assert np.isnan(spot.x_px)
+        else:
+            assert np.hypot(spot.x_px - spots[k][0], spot.y_px - spots[k][1]) < 0.3, (k, spot)
+    pulled = SpotTracker(paths, beams_mm=beams).update(image)[3]
+    assert np.hypot(pulled.x_px - spots[3][0], pulled.y_px - spots[3][1]) > 1.0, pulled

@@ -25,7 +25,7 @@ from sds_tracker.kernels import (
     step_sigma_px,
     symmetric_centre,
 )
-from sds_tracker.surface_consistency import fit_robust_surface
+from sds_tracker.surface_consistency import RobustSurface, fit_robust_surface
 
 LOST, SATURATED, REFLECTION_SUSPECTED, OFF_PATH, HAMPEL_REPLACED, NOT_FILTERED, AMBIGUOUS = \
     1, 2, 4, 8, 16, 32, 64
@@ -92,17 +92,33 @@ SURFACE_TOLERANCE_MM = 5.0
 """Farthest [mm] a spot acquired with nothing to vouch for it may stand above or below the
 surface the frame's spots show (`surface_consistency`), or SURFACE_SPREAD × that surface's
 own spread, the larger; judged where the tracker is given the beams (`FrameTracker` does in
-stills, whose surfaces are planes). Right spots in the protocol's stills lie at most 1.2
-mm from it (development rigs 7101-7116; 99th percentile 0.37 mm); blobs taken for a
+stills, whose surfaces are planes). Right spots in the protocol's stills lie at most 0.66
+mm from it (development rigs 7101-7116; 99th percentile 0.22 mm); blobs taken for a
 diode's spot there (a wall's reflection, a glint while the spot was hidden) stood for
 points 14-58 mm off (development rig 7101)."""
 SURFACE_SPREAD = 5.0
 """The tolerance's least multiple of the surface's spread (1.4826 × the median |height
 above it| of the frame's spots): a rougher surface than the fitted form widens it."""
 MIN_SPOTS_FOR_SURFACE = 8
-"""Fewest spots in a frame whose surface an acquired spot is judged against: twice the
-surface's terms (`surface_consistency.SURFACE_TERMS`), so that the median the robust fit
+"""Fewest spots in a frame whose plane an acquired spot is judged against: well over twice
+the plane's terms (`surface_consistency.SURFACE_TERMS`), so that the median the robust fit
 minimises is set by points beyond the minimal set's own."""
+REFLECTION_REACH_PX = 3.0
+"""How near [px] the light joined to a still's spot (above the threshold) must come to where
+its own wall reflection is predicted (`SpotTracker._apart_from_reflections`) for the two to
+be one blob: on the development stills (rigs 7101-7116) the prediction from the fitted
+plane's normal was 1.0-3.7 px from the rendered reflection where the two merged, and a
+merged blob reaches that far past it."""
+REFLECTION_NORMAL_SPREAD_DEG = 1.0
+"""How far [deg] from the fitted plane's normal a still's wall reflections are also
+predicted from (eight normals about it, `reflection_normals`): the plane through the spots
+is off by a few tenths of a degree, and for a spot within a mm of the wall the mirrored beam
+meets the wall at a grazing angle, where that moves the reflection tens of px (development
+rig 7112, a level still: 0.4° off, the reflection predicted 29 px from where it was)."""
+ReflectionsPx = Callable[[list[int], np.ndarray, np.ndarray], np.ndarray]
+"""Where diodes' wall reflections appear [px] (N×2, NaN: none) from their spots on the
+surface (laser ids, N×3 points [mm] and the surface's N×3 unit normals there):
+`sds_recon.wall_reflection.wall_reflections_px` with the rig."""
 MAX_ELONGATION = 2.5
 """Most elongated light (`kernels.light_elongation` within half a window, above the
 threshold) that can be a spot: a spot is round, or an ellipse on a tilted surface or blurred
@@ -338,7 +354,8 @@ class SpotTracker:
                  tolerances_px: dict[int, float] | None = None, exclusive: bool = True,
                  max_elongation: float = MAX_ELONGATION,
                  apertures_px: dict[int, float] | None = None,
-                 beams_mm: dict[int, np.ndarray] | None = None) -> None:
+                 beams_mm: dict[int, np.ndarray] | None = None,
+                 reflections_px: ReflectionsPx | None = None) -> None:
         """`tolerances_px`: a path's own gate [px] where it is known less well than
         `path_tolerance_px` (a weakly calibrated beam); the others use that. `exclusive`
         (diodes): a blob is one path's spot at most (`_one_blob_one_diode`); off, where the
@@ -351,9 +368,11 @@ class SpotTracker:
         (stills, whose averaged frames keep the liquid's mirrored surroundings as wings).
         `beams_mm`: per path, the beam's points (M×3 mm) its M path points are the images of;
         with them, a spot acquired with nothing to vouch for it must agree with the surface
-        the frame's spots show (`_on_the_surface`)."""
+        the frame's spots show (`_on_the_surface`), and with `reflections_px` also, a spot
+        whose light is joined to its own wall reflection's is lost (`_apart_from_reflections`)."""
         self.settings = settings or SpotSettings()
         self.beams_mm = beams_mm
+        self.reflections_px = reflections_px
         self.exclusive = exclusive
         self.max_elongation = max_elongation
         self.paths = {i: np.asarray(p, dtype=float) for i, p in paths.items()}
@@ -409,7 +428,10 @@ class SpotTracker:
             estimates[laser_id] = estimate
         if self.exclusive:
             estimates = self._one_blob_one_diode(image, origin, estimates, line)
-        estimates = self._on_the_surface(image, origin, estimates, line)
+        surface = self._frame_surface(estimates)
+        if surface is not None:
+            estimates = self._on_the_surface(image, origin, estimates, line, surface)
+            estimates = self._apart_from_reflections(image, origin, estimates, surface)
         estimates = self._with_speckle(image, origin, estimates)
         estimates = self._without_faint_acquisitions(estimates)
         for laser_id, estimate in estimates.items():
@@ -435,24 +457,39 @@ class SpotTracker:
         frame before, or a sighting within REACQUIRE_FRAMES."""
         return self.previous[laser_id] is not None or self.last_seen[laser_id] is not None
 
+    def _frame_surface(self, estimates: dict[int, SpotEstimate]) -> RobustSurface | None:
+        """The surface the frame's spots show: the robust fit through their points on their
+        beams (`beam_points_at`, `fit_robust_surface`); None without `beams_mm` or with
+        fewer than MIN_SPOTS_FOR_SURFACE spots."""
+        found = [i for i, e in estimates.items() if not e.flags & LOST]
+        if self.beams_mm is None or len(found) < MIN_SPOTS_FOR_SURFACE:
+            return None
+        return fit_robust_surface(self._beam_points(estimates, found), SURFACE_TOLERANCE_MM)
+
+    def _beam_points(self, estimates: dict[int, SpotEstimate], laser_ids: list[int]
+                     ) -> np.ndarray:
+        """The points on their beams (N×3 mm, `beam_points_at`) that the diodes' estimates
+        stand for."""
+        assert self.beams_mm is not None
+        return np.array([beam_points_at(self.paths[i], self.beams_mm[i],
+                                        np.array([[estimates[i].x_px, estimates[i].y_px]]))[0]
+                         for i in laser_ids])
+
     def _on_the_surface(self, image: np.ndarray, origin: np.ndarray,
                         estimates: dict[int, SpotEstimate],
-                        line: tuple[np.ndarray, np.ndarray] | None) -> dict[int, SpotEstimate]:
+                        line: tuple[np.ndarray, np.ndarray] | None,
+                        surface: RobustSurface) -> dict[int, SpotEstimate]:
         """The frame's estimates with every spot acquired with nothing to vouch for it (no
-        previous position, not seen within REACQUIRE_FRAMES) on the surface the frame's
-        spots show: its point on its beam (`beam_points_at`) within SURFACE_TOLERANCE_MM of
-        the robust surface through all of them (`fit_robust_surface`), or its next
-        candidate on its path that is (`_candidates`, without the other diodes' blobs), or
-        none: lost. Needs `beams_mm` and MIN_SPOTS_FOR_SURFACE spots."""
+        previous position, not seen within REACQUIRE_FRAMES) on the frame's `surface`
+        (`_frame_surface`): its point on its beam within SURFACE_TOLERANCE_MM of it, or its
+        next candidate on its path that is (`_candidates`, without the other diodes'
+        blobs), or none: lost."""
         found = [i for i, e in estimates.items() if not e.flags & LOST]
         beams = self.beams_mm
-        if beams is None or len(found) < MIN_SPOTS_FOR_SURFACE or all(
-                self._vouched_for(i) for i in found):
+        if beams is None or all(self._vouched_for(i) for i in found):
             return estimates
         positions = np.array([[estimates[i].x_px, estimates[i].y_px] for i in found])
-        points = np.array([beam_points_at(self.paths[i], beams[i], position[None])[0]
-                           for i, position in zip(found, positions, strict=True)])
-        surface = fit_robust_surface(points, SURFACE_TOLERANCE_MM)
+        points = self._beam_points(estimates, found)
         above = surface.heights_above_mm(points)
         tolerance = max(SURFACE_TOLERANCE_MM,
                         SURFACE_SPREAD * 1.4826 * float(np.median(np.abs(above))))
@@ -469,6 +506,33 @@ class SpotTracker:
                     replacement = candidate
                     break
             estimates[laser_id] = replacement
+        return estimates
+
+    def _apart_from_reflections(self, image: np.ndarray, origin: np.ndarray,
+                                estimates: dict[int, SpotEstimate], surface: RobustSurface
+                                ) -> dict[int, SpotEstimate]:
+        """The frame's estimates with every spot whose light is joined to its own wall
+        reflection's (`joined_light`) lost and flagged REFLECTION_SUSPECTED: the centroid
+        of the two is pulled towards the reflection (2-9 px in the development stills, at
+        5-20 px from it), and the light cannot be told apart. The reflection is predicted
+        (`reflections_px`) from where the diode's beam meets the frame's `surface` and the
+        surface's normal there (and from normals about it, REFLECTION_NORMAL_SPREAD_DEG),
+        not from the spot, which the reflection pulls."""
+        found = [i for i, e in estimates.items() if not e.flags & LOST]
+        if self.reflections_px is None or self.beams_mm is None or not found:
+            return estimates
+        crossings = np.array([surface.beam_crossing_mm(self.beams_mm[i]) for i in found])
+        normals = reflection_normals(surface.normal(), REFLECTION_NORMAL_SPREAD_DEG)
+        count = len(normals)
+        predicted = self.reflections_px(
+            [i for i in found for _ in range(count)], np.repeat(crossings, count, axis=0),
+            np.tile(normals, (len(found), 1))).reshape(len(found), count, 2)
+        for laser_id, reflections in zip(found, predicted, strict=True):
+            estimate = estimates[laser_id]
+            if joined_light(image, origin, np.array([estimate.x_px, estimate.y_px]),
+                            reflections[np.isfinite(reflections).all(axis=1)], self.settings):
+                estimates[laser_id] = SpotEstimate(laser_id, np.nan, np.nan, np.nan, 0.0,
+                                                   LOST | REFLECTION_SUSPECTED)
         return estimates
 
     def _without_faint_acquisitions(self, estimates: dict[int, SpotEstimate]
@@ -947,6 +1011,45 @@ def window_without_line(image: np.ndarray, origin: np.ndarray,
         return None
     return LineFreeSpot(local.centre + origin + (x0, y0), local.along, local.clearance_px,
                         local.line_sigma_px, local.beside_line_peak, local.line_deficit)
+
+
+def reflection_normals(normal: np.ndarray, spread_deg: float) -> np.ndarray:
+    """A unit normal and eight more `spread_deg` from it, every 45° about it (9×3)."""
+    across = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
+    across /= np.linalg.norm(across)
+    other = np.cross(normal, across)
+    angles = np.radians(45.0) * np.arange(8)
+    spread = np.radians(spread_deg)
+    tilted = np.cos(spread) * normal + np.sin(spread) * (
+        np.cos(angles)[:, None] * across + np.sin(angles)[:, None] * other)
+    return np.vstack([normal, tilted])
+
+
+def joined_light(image: np.ndarray, origin: np.ndarray, spot_px: np.ndarray,
+                 others_px: np.ndarray, s: SpotSettings) -> bool:
+    """Whether the light above the threshold joined to a spot's centre (full-frame px) comes
+    within REFLECTION_REACH_PX of any of the other points (K×2 full-frame px) no farther
+    than a window (`window_px`) from it: over the box holding them and half a window around
+    them, the background being the median of its border."""
+    others_px = others_px[np.hypot(*(others_px - spot_px).T) <= s.window_px]
+    if not len(others_px):
+        return False
+    margin = s.window_px // 2
+    low = np.floor(np.minimum(spot_px, others_px.min(axis=0)) - origin).astype(int) - margin
+    high = np.ceil(np.maximum(spot_px, others_px.max(axis=0)) - origin).astype(int) + \
+        margin + 1
+    low, high = np.maximum(low, 0), np.minimum(high, [image.shape[1], image.shape[0]])
+    box = image[low[1]:high[1], low[0]:high[0]].astype(np.float32)
+    border = np.concatenate([box[0], box[-1], box[:, 0], box[:, -1]])
+    _, labels = cv2.connectedComponents((box - np.median(border) > s.threshold)
+                                        .astype(np.uint8))
+    column, row = np.round(spot_px - origin).astype(int) - low
+    if not (0 <= row < box.shape[0] and 0 <= column < box.shape[1]) or not labels[row, column]:
+        return False
+    rows, columns = np.nonzero(labels == labels[row, column])
+    targets = others_px - origin - low
+    return bool((np.hypot(columns[:, None] - targets[:, 0], rows[:, None] - targets[:, 1])
+                 <= REFLECTION_REACH_PX).any())
 
 
 def spot_window(shape: tuple[int, ...], offset: np.ndarray, centre: np.ndarray, half: int

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -12,6 +13,7 @@ from sds_model.errors import InputError
 from sds_model.rig import Rig
 from sds_recon.calibration.rig_model import across_axes
 from sds_recon.triangulation import beam_image_path, beam_points_mm, line_image_path
+from sds_recon.wall_reflection import wall_reflections_px
 
 from sds_tracker.hampel import BankOutput, HampelBank
 from sds_tracker.kernels import warm_up
@@ -185,10 +187,14 @@ class FrameTracker:
         # exactly. Not a video's: a sloshing surface's higher modes leave it by several mm
         # (modes of 2 mm: 31 right points of 4000 beyond the limit, synthetic), and a spot
         # refused there stays unvouched, so refused again in the frames after.
+        # Its spots are also kept apart from their own wall reflections: a still's clipped
+        # centroid takes in a reflection its blob reaches (`_apart_from_reflections`).
         beams = {d.laser_id: beam_points_mm(rig, d.laser_id, heights)
                  for d in rig.tracked_diodes} if self.config.stills else None
+        reflections = partial(wall_reflections_px, rig) if self.config.stills else None
         self.spots = SpotTracker(self.paths, self.config.spots, widened,
-                                 apertures_px=apertures, beams_mm=beams)
+                                 apertures_px=apertures, beams_mm=beams,
+                                 reflections_px=reflections)
         for laser_id, position in (seeds or {}).items():
             if laser_id not in self.paths:
                 raise InputError(f"seed for laser {laser_id}, which the rig does not have")
