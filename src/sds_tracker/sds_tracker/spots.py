@@ -133,17 +133,6 @@ PROFILE_STEP_PX = 0.25
 """Bin width [px] of the laser line's cross profile that is subtracted from a spot."""
 SYMMETRY_SEARCH_PX = 4
 """How far [px] from each start the centre of a spot's symmetry is searched."""
-SYMMETRY_REACH_SHARE = 0.75
-"""Share of the window's half size (`window_px`) within which the symmetry of a spot
-saturated beside the line is judged about each centre tried (others: half of it): from
-every centre it tries, the search must see the spot's edges all round. Half a window missed
-them for the largest spots (the protocol's high fill-level stills at 4K: saturated spots
-about 24 px across, on the saturated line): 4 spots 2.4-4.2 px off on the development
-stills of 7101-7116, a centre 5 px away looking more symmetric, where more of the clipped
-core and less of the far edge fell within reach. None at 0.75. Not for unsaturated light:
-there the wider reach took in more of the line's speckle, and in one frame of 90 its light
-beside a hidden spot was taken for it
-(`test_the_speckled_lines_light_beside_a_hidden_spot_is_not_it`)."""
 SYMMETRY_PAIRS = 20
 """Fewest mirrored pixel pairs that make a centre of symmetry."""
 HIDDEN_SYMMETRY_PAIRS = 4
@@ -1090,9 +1079,8 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
     and loses the line's, a spot beside it no longer leans towards it. A saturated pixel the
     line lights holds an unknown share of the spot's light, so the centre is not a centroid
     but the point about which what is left is most nearly symmetric, over the known pixels
-    within half a window (SYMMETRY_REACH_SHARE of one for a spot saturated beside the line;
-    `kernels.symmetric_centre`): a spot's own light is point-symmetric (a Gaussian, or an
-    ellipse on a tilted surface), the line's ragged remainder is not.
+    within half a window (`kernels.symmetric_centre`): a spot's own light is point-symmetric
+    (a Gaussian, or an ellipse on a tilted surface), the line's ragged remainder is not.
     """
     rows, columns = np.indices(window.shape)
     border = np.concatenate([window[0], window[-1], window[:, 0], window[:, -1]])
@@ -1140,10 +1128,7 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
     starts = [(float(spot[0]), float(spot[1]))]
     if np.hypot(column - spot[0], row - spot[1]) > SYMMETRY_SEARCH_PX / 2:
         starts.append((float(column), float(row)))
-    # A spot saturated beside the line is wide: its edges lie beyond half a window.
-    saturated = bool(((window >= s.saturation_level) & ~unknown & (joined > 0)).any())
-    symmetry_reach = int(SYMMETRY_REACH_SHARE * s.window_px) if saturated else reach
-    x, y, mismatch = min((symmetric_centre(left, unknown, x, y, symmetry_reach, s.threshold,
+    x, y, mismatch = min((symmetric_centre(left, unknown, x, y, reach, s.threshold,
                                            SYMMETRY_SEARCH_PX, SYMMETRY_PAIRS)
                           for x, y in starts), key=lambda found: found[2])
     # A spot centred within the saturated line's band that does not reach across it has its
@@ -1151,7 +1136,7 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
     # enough is off by a spot's radius. Where a centre with fewer pairs is far more nearly
     # symmetric and elsewhere, the spot's centre is not known.
     hidden_x, hidden_y, hidden_mismatch = min(
-        (symmetric_centre(left, unknown, x, y, symmetry_reach, s.threshold, SYMMETRY_SEARCH_PX,
+        (symmetric_centre(left, unknown, x, y, reach, s.threshold, SYMMETRY_SEARCH_PX,
                           HIDDEN_SYMMETRY_PAIRS) for x, y in starts), key=lambda found: found[2])
     centre = np.array([x, y])
     near = (columns - x) ** 2 + (rows - y) ** 2 <= reach**2
