@@ -743,8 +743,12 @@ class SpotTracker:
         starts = np.column_stack([np.interp(along, lengths, path[:, 0]),
                                   np.interp(along, lengths, path[:, 1])])
         line_x = np.interp(starts[:, 1], line[0], line[1], left=np.nan, right=np.nan)
+        # The line's light is taken away as the same profile on every row of the window: a
+        # window that holds the line's end (at the rim) holds rows without it.
+        inside = (starts[:, 1] - line[0].min() >= s.window_px) & \
+            (line[0].max() - starts[:, 1] >= s.window_px)
         found: list[SpotEstimate] = []
-        for start in starts[np.abs(starts[:, 0] - line_x) <= s.window_px]:
+        for start in starts[(np.abs(starts[:, 0] - line_x) <= s.window_px) & inside]:
             refined = settled_line_free_centre(image, origin, start, line, s)
             estimate = None if refined is None or line_bends(refined) else \
                 self._track_on_line(image, origin, laser_id, path, refined, beside_too=True)
