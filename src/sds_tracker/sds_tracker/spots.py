@@ -792,8 +792,7 @@ class SpotTracker:
         if x1 - x0 < 4 or y1 - y0 < 4:
             return lost
         window = image[y0:y1 + 1, x0:x1 + 1].astype(np.float32)
-        border = np.concatenate([window[0], window[-1], window[:, 0], window[:, -1]])
-        background = float(np.median(border))
+        background = border_median(window)
         signal = window - background
         count, labels, stats, centroids = cv2.connectedComponentsWithStats(
             (signal > s.threshold).astype(np.uint8), connectivity=8)
@@ -1017,6 +1016,13 @@ def window_without_line(image: np.ndarray, origin: np.ndarray,
                         local.line_sigma_px, local.beside_line_peak, local.line_deficit)
 
 
+def border_median(window: np.ndarray) -> float:
+    """The median of a window's border pixels (its outermost rows and columns): the local
+    background under a spot the window holds."""
+    return float(np.median(np.concatenate([window[0], window[-1], window[:, 0],
+                                           window[:, -1]])))
+
+
 def reflection_normals(normal: np.ndarray, spread_deg: float) -> np.ndarray:
     """A unit normal and eight more `spread_deg` from it, every 45° about it (9×3)."""
     across = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
@@ -1044,8 +1050,7 @@ def joined_light(image: np.ndarray, origin: np.ndarray, spot_px: np.ndarray,
         margin + 1
     low, high = np.maximum(low, 0), np.minimum(high, [image.shape[1], image.shape[0]])
     box = image[low[1]:high[1], low[0]:high[0]].astype(np.float32)
-    border = np.concatenate([box[0], box[-1], box[:, 0], box[:, -1]])
-    _, labels = cv2.connectedComponents((box - np.median(border) > s.threshold)
+    _, labels = cv2.connectedComponents((box - border_median(box) > s.threshold)
                                         .astype(np.uint8))
     column, row = np.round(spot_px - origin).astype(int) - low
     if not (0 <= row < box.shape[0] and 0 <= column < box.shape[1]) or not labels[row, column]:
@@ -1087,8 +1092,7 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
     (a Gaussian, or an ellipse on a tilted surface), the line's ragged remainder is not.
     """
     rows, columns = np.indices(window.shape)
-    border = np.concatenate([window[0], window[-1], window[:, 0], window[:, -1]])
-    background = float(np.median(border))
+    background = border_median(window)
     reach = s.window_px // 2
     # The line's own centre is pulled towards a spot on its rows: a straight line through
     # its centres on the rows away from the spot stands for it on every row.
