@@ -17,7 +17,8 @@ LARGE_IMAGE_TRANSPORT = {
     "MALLOC_TRIM_THRESHOLD_": "536870912",
 }
 FASTDDS_PROFILES = Path(__file__).with_name("fastdds_profiles.xml")
-"""Reliable writers' heartbeat every 100 ms (Fast DDS: 3 s), for quick repair of a lost sample."""
+"""Reliable writers' heartbeat every 100 ms (Fast DDS: 3 s), for quick repair of a lost sample;
+histories that free each message's buffer once it is gone (the file says why)."""
 MAX_DOMAIN_ID = 101
 
 
@@ -59,6 +60,9 @@ def graph_environment(domain_id: int, base: Mapping[str, str] | None = None,
                          "SUBNET to meet every machine of the subnet")
     env.update(LARGE_IMAGE_TRANSPORT)
     env["FASTDDS_DEFAULT_PROFILES_FILE"] = str(FASTDDS_PROFILES)
+    # Without it rmw_fastrtps replaces the profile's history memory policy with its own, whose
+    # pools grow for as long as a video repeats (fastdds_profiles.xml).
+    env["RMW_FASTRTPS_USE_QOS_FROM_XML"] = "1"
     env["ROS_DOMAIN_ID"] = str(domain_id)
     env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     env["PYTHONUNBUFFERED"] = "1"
