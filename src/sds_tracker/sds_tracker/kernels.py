@@ -112,9 +112,10 @@ def spot_windows(image: np.ndarray, corners: np.ndarray, half: int, prior: np.nd
                  threshold: float, min_competitor: float, aperture_factor: float,
                  clip_fraction: float, read_noise: float, max_elongation: float,
                  apertures_px: np.ndarray
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per window (top-left `corners`, size 2·half + 1): the spot-core centroid in window pixels,
-    its σ [px], the raw peak, and whether one clear blob settled it.
+    its σ [px], the raw peak, the blob's light (its mass above `threshold`), and whether one
+    clear blob settled it.
 
     Background: median of the window's border. Blob: the prior-weighted brightest pixel, its
     area and mass above `threshold` within half/2 px; another blob with `min_competitor` of that
@@ -131,6 +132,7 @@ def spot_windows(image: np.ndarray, corners: np.ndarray, half: int, prior: np.nd
     centres = np.zeros((count, 2))
     sigmas = np.full(count, np.nan)
     peaks = np.zeros(count)
+    lights = np.zeros(count)
     settled = np.zeros(count, np.bool_)
     border = np.empty(4 * size)
     near2 = (0.5 * half) ** 2
@@ -208,8 +210,9 @@ def spot_windows(image: np.ndarray, corners: np.ndarray, half: int, prior: np.nd
                              lever, total)
         sigmas[k] = np.sqrt(variance / 2 / total**2 + step**2)
         peaks[k] = top
+        lights[k] = main
         settled[k] = True
-    return centres, sigmas, peaks, settled
+    return centres, sigmas, peaks, lights, settled
 
 
 @njit(cache=True, fastmath=True)

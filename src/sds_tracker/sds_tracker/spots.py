@@ -73,6 +73,20 @@ On development rigs (four random rigs as built, 30 frames each, every imaging ef
 camera's codec), spots tracked on the line kept 0.42 of their peak there at the least (0.62
 at the 1st percentile); where a spot dropped out for five frames, the residue of a line that
 widened threefold over 40 rows had 0.17-0.19 and was taken for it (valid, 26 px off)."""
+SMALLER_LIGHT_SHARE = 0.2
+"""A blob whose light (its summed signal above the threshold, `SpotEstimate.light`) is below
+this share of the spot's when it was last seen (within REACQUIRE_FRAMES) is not that spot,
+even where its peak passes DIMMED_SHARE: a one-frame glint can be as bright as a spot at its
+centre but is a few pixels across, and where a saturated spot dropped out, one lit 1.5 px
+away was measured as the spot (held-out rig 65106: 2x2 px above 75 grey levels, peak 0.45
+of the spot's). Judged where both lights are the spot's own (not where the laser line's
+light is part of the blob). Measured on development rigs 7001-7004 (30 frames each, every
+imaging effect alone, the codec, and all together): true spots kept 0.71 of their light from
+one frame to the next at the least (under speckle; 0.80 with every effect); one-frame glints
+had 0.026-0.047 of the frame's median spot light (median; 95 % below 0.11, those above lay on
+other light). Set below the middle of the two because a spot's light above the threshold
+falls faster than its peak near the threshold: an unsaturated spot whose peak falls to 0.4
+of the frame before, as DIMMED_SHARE allows, keeps 0.29 of it."""
 FAINT_SHARE = 0.5
 """A blob whose diode has nothing to vouch for it (not measured within REACQUIRE_FRAMES, nor
 placed by a seed: the first frame, a spot back after a long dropout, a still) and whose
@@ -200,11 +214,13 @@ class SpotSettings:
 
 class LastSeen(NamedTuple):
     """Where a spot was last seen [px, full frame], the frames since (1: the frame before),
-    and its peak then (`identity_peak`; REACQUIRE_FRAMES, DIMMED_SHARE)."""
+    its peak then (`identity_peak`; REACQUIRE_FRAMES, DIMMED_SHARE) and its light then
+    (`SpotEstimate.light`; SMALLER_LIGHT_SHARE)."""
 
     position_px: np.ndarray
     frames_since: int
     peak: float
+    light: float
 
 
 @dataclass(frozen=True)
@@ -212,7 +228,9 @@ class SpotEstimate:
     """One spot in one frame: full-frame pixel, uncertainty [px], peak, flags; for a spot
     measured with the laser line's light taken away (on the line or beside it), its own
     light's peak beside the line (`LineFreeSpot.beside_line_peak`; NaN otherwise), and
-    whether its light overlaps the line's, whose uncertainty its σ then is (`on_line`)."""
+    whether its light overlaps the line's, whose uncertainty its σ then is (`on_line`); the
+    blob's light (its summed signal above the search's threshold, NaN where the laser line's
+    light is part of it or it was not measured)."""
 
     laser_id: int
     x_px: float
@@ -222,6 +240,7 @@ class SpotEstimate:
     flags: int
     beside_line_peak: float = np.nan
     on_line: bool = False
+    light: float = np.nan
 
 
 def identity_peak(estimate: SpotEstimate) -> float:
@@ -438,6 +457,7 @@ class SpotTracker:
             seen, reach = self.last_seen[laser_id], self._reach(laser_id)
             if not estimate.flags & LOST and seen is not None and reach is not None and (
                     identity_peak(estimate) < DIMMED_SHARE * seen.peak or
+                    estimate.light < SMALLER_LIGHT_SHARE * seen.light or
                     np.hypot(estimate.x_px - reach[0][0], estimate.y_px - reach[0][1]) > reach[1]):
                 estimate = SpotEstimate(laser_id, np.nan, np.nan, np.nan, 0.0, LOST)
                 estimates[laser_id] = estimate
@@ -449,7 +469,8 @@ class SpotTracker:
             else:
                 position = np.array([estimate.x_px, estimate.y_px])
                 self.previous[laser_id] = position
-                self.last_seen[laser_id] = LastSeen(position, 1, identity_peak(estimate))
+                self.last_seen[laser_id] = LastSeen(position, 1, identity_peak(estimate),
+                                                    estimate.light)
         return list(estimates.values())
 
     def _vouched_for(self, laser_id: int) -> bool:
@@ -687,7 +708,7 @@ class SpotTracker:
         if not ids:
             return {}
         corner = corner[inside]
-        centre, sigma, peak_raw, ok = spot_windows(
+        centre, sigma, peak_raw, light, ok = spot_windows(
             image, corner, half, self._prior, s.threshold, s.min_competitor, s.aperture_factor,
             s.clip_fraction, s.read_noise, self.max_elongation,
             np.array([self.aperture_px[i] for i in ids]))
@@ -700,7 +721,8 @@ class SpotTracker:
                 continue
             flags = SATURATED if peak_raw[k] >= s.saturation_level else 0
             settled[laser_id] = SpotEstimate(laser_id, float(full[k, 0]), float(full[k, 1]),
-                                             float(sigma[k]), float(peak_raw[k]), flags)
+                                             float(sigma[k]), float(peak_raw[k]), flags,
+                                             light=float(light[k]))
         return settled
 
     def _track_on_line(self, image: np.ndarray, origin: np.ndarray, laser_id: int,
@@ -866,8 +888,9 @@ class SpotTracker:
             refined = settled_line_free_centre(image, origin, centre, line, s)
             if refined is not None and line_bends(refined):
                 return lost
-        beside_line_peak, on_line = np.nan, False
+        beside_line_peak, on_line, light = np.nan, False, mass
         if refined is not None:
+            light = np.nan   # the blob's light can be the line's
             if not np.isfinite(refined.centre).all():
                 return lost   # the blob was the line's light alone, or hides the spot
             # The blob's brightest pixel can be the line's: the spot is told by its own light.
@@ -880,7 +903,7 @@ class SpotTracker:
         if peak >= s.saturation_level:
             flags |= SATURATED
         return SpotEstimate(laser_id, float(centre[0]), float(centre[1]), sigma, peak, flags,
-                            beside_line_peak, on_line)
+                            beside_line_peak, on_line, light)
 
     @staticmethod
     def _peaks(signal: np.ndarray, labels: np.ndarray, chosen: np.ndarray,
