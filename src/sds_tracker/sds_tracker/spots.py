@@ -165,7 +165,7 @@ SATURATED_BESIDE_LINE_PX = 25
 (SYMMETRY_REACH_SHARE). A saturated bulge of the line itself has a few: held-out video rig
 63107, where the wider reach on any saturated pixel took such a bulge for a hidden spot,
 had 5-14 (124 measurements). Spots with saturated pixels beside the band in the development
-stills 7101-7116: 313, 29 with fewer than 15, 18 with 15-24, the rest 25-239; those half a
+stills 7101-7116: 313, 29 with fewer than 15, 18 with 15-24, the rest 25 or more; those half a
 window left 2.4-4.2 px off had 41-239. Set near the geometric middle of 14 and 41.
 Development stills: 4 wrong spots -> 1 (2.1 px); the rig 63107 video: none wrong."""
 SYMMETRY_PAIRS = 20
