@@ -22,6 +22,10 @@ Prints, measured in one run on the same file:
   when each frame was played: its stamp keeps the video's time, which at a rate below 1 runs
   ahead of the clock, and the camera's origin on /camera/origin turns it into play time;
 - `--low-delay`: the real-time runs decode on slice threads only (no frame held per thread);
+- the stream's own reordering (how long a B-frame waits for the later frame it refers to,
+  before any decoder can give it out) is measured on the file and given apart from the live
+  latency; `--stream live` plays the drop as a live camera streams it instead (no B-frames,
+  several slices per frame), decode-only rate included;
 - with `--check-process`, one real-time play of the file beside the last `--hogs` count, then
   `sds process --mcap` on its recording against `sds process --video` on the file (the same
   spots and points: every frame the camera sent, those shed live included);
@@ -52,6 +56,7 @@ import psutil
 REPO = Path(__file__).resolve().parents[1]
 SCENARIO = REPO / "config" / "scenarios" / "drop_4p7s.yaml"
 HAMPEL_DELAY_FRAMES = 2
+LIVE_SLICES = 4
 IDLE_S = 10.0
 LAYOUTS = {
     "own processes": {"camera": "camera", "tracker": "tracker", "recon": "recon",
@@ -82,6 +87,47 @@ def simulate_once(out: Path, seconds: float, lateral: bool = False):
     if not video.is_file():
         simulate(scenario, folder, progress=False)
     return scenario, video
+
+
+def live_stream(video: Path) -> Path:
+    """The drop as a live camera streams it (x264's zerolatency: no B-frames, so no frame waits
+    for a later one; `LIVE_SLICES` slices per frame, which slice threads decode side by side),
+    at the file's own mean bit rate; made once per --out."""
+    import av
+    import imageio_ffmpeg
+
+    live = video.with_name("live_stream.mp4")
+    if live.is_file():
+        return live
+    with av.open(str(video)) as container:
+        stream = container.streams.video[0]
+        assert stream.duration is not None and stream.time_base is not None
+        bit_s = round(8 * video.stat().st_size / float(stream.duration * stream.time_base))
+    partial = live.with_suffix(".partial.mp4")
+    subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-y", "-loglevel", "error",
+                    "-i", str(video), "-c:v", "libx264", "-preset", "veryfast",
+                    "-tune", "zerolatency", "-x264-params", f"slices={LIVE_SLICES}",
+                    "-b:v", str(bit_s), "-maxrate", str(bit_s), "-bufsize", str(bit_s),
+                    "-pix_fmt", "yuv420p", "-threads", "1", str(partial)], check=True)
+    partial.rename(live)
+    return live
+
+
+def reorder_delays_s(video: Path, fps: float) -> np.ndarray:
+    """Per frame of the file (presentation order), how long after it is played the decoder
+    can first give it out [s, media time]: the stream's own reordering (a B-frame waits for
+    the later frame it refers to), decoded on slice threads so that no thread holds a frame.
+    NaN for the last frames, which only the end of the file (or its next repeat) lets out."""
+    from sds_camera.compressed_video import PacketDecoder, VideoFilePackets
+
+    packets = VideoFilePackets(video)
+    decoder = PacketDecoder(packets.format, low_delay=True)
+    delays_s = np.full(packets.announced_frames, np.nan)
+    for packet in packets.packets():
+        for frame in decoder.decode(packet):
+            delays_s[round(frame.time_ns * 1e-9 * fps)] = (packet.due_ns - frame.time_ns) * 1e-9
+    packets.close()
+    return delays_s
 
 
 def stage_times(video: Path, rig) -> dict[str, float]:
@@ -305,6 +351,10 @@ def main() -> None:
     parser.add_argument("--low-delay", action="store_true",
                         help="the real-time runs decode on slice threads only (camera."
                              "low_delay: no frame held per decoding thread)")
+    parser.add_argument("--stream", choices=("file", "live"), default="file",
+                        help="what the camera plays: the simulated file (x264 with B-frames, "
+                             "one slice per frame), or the same drop as a live camera streams "
+                             "it (no B-frames, LIVE_SLICES slices per frame)")
     parser.add_argument("--check-process", action="store_true",
                         help="also compare sds process --mcap on a real-time recording with "
                              "sds process --video on the file")
@@ -316,6 +366,8 @@ def main() -> None:
     sys.stdout.reconfigure(line_buffering=True)   # each result shows as soon as measured
     args.out.mkdir(parents=True, exist_ok=True)
     scenario, video = simulate_once(args.out, args.seconds, args.lateral)
+    if args.stream == "live":
+        video = live_stream(video)
     rig, rig_file = scenario.rig, scenario.rig_file.resolve()
     region = list(rig.container_region_px(rig.camera))
     base = [f"camera.source={video}", f"camera.roi={region}", f"tracker.rig={rig_file}",
@@ -341,6 +393,10 @@ def main() -> None:
     print(f"decode-only: {decode:.1f} fps, {decode_cpu_ms:.1f} ms CPU per frame "
           f"({decode * decode_cpu_ms / 1e3:.2f} cores busy)")
     print("stages [ms/frame, mean]: " + ", ".join(f"{k} {v:.2f}" for k, v in stages.items()))
+    reorder_s = reorder_delays_s(video, scenario.fps)
+    print(f"{args.stream} stream: a frame waits for later packets (B-frames) "
+          f"{1e3 * np.nanmedian(reorder_s):.1f} ms of media time (median; at most "
+          f"{1e3 * np.nanmax(reorder_s):.1f}) before any decoder can give it out")
     camera_fps = decode / 2 if args.fps == "half-decode" else float(args.fps or scenario.fps)
     pace = [f"camera.rate={camera_fps / scenario.fps:.6f}",
             f"camera.low_delay={str(args.low_delay).lower()}"]
@@ -425,6 +481,14 @@ def main() -> None:
                                   minlength=int(args.minutes))
             print("  live clouds later than 50 ms, per minute of the run: "
                   + " ".join(str(n) for n in minutes))
+            # The stream's own wait comes before any decoding: what is left is the graph's.
+            waits = [reorder_s[round((s - origin_s) * scenario.fps) % len(reorder_s)] / rate
+                     for r, s in live if s in stamps]
+            graph_ms = live_ms - np.array(waits) * 1e3
+            if np.isfinite(graph_ms).any():
+                print(f"  of which after the stream's reordering (the graph's own) [ms]: "
+                      f"median {np.nanmedian(graph_ms):.1f}, p95 "
+                      f"{np.nanpercentile(graph_ms, 95):.1f}")
         if spots_live:
             stamps = {s for _, s in receipts[30:]}
             spots_ms = np.array([r - played_s(s, origin_s, rate) for r, s in spots_live
@@ -446,7 +510,7 @@ def main() -> None:
         said = [line.strip() for line in (args.out / f"real_time_{index}.log").read_text()
                 .splitlines() if "shed" in line or "missing before" in line]
         print(f"  the console said, {len(said)} lines" + "".join(
-            f"\n    {line}" for line in said[:2] + said[-2:]))
+            f"\n    {line}" for line in (said if len(said) <= 4 else said[:2] + said[-2:])))
         print("  CPU per frame [ms]: " + ", ".join(f"{k} {v:.1f}" for k, v in cpu.items()))
         for name, samples in memory.items():
             if name.endswith(" peak") or len(samples) < 4:
