@@ -1084,7 +1084,9 @@ def joined_light(image: np.ndarray, origin: np.ndarray, spot_px: np.ndarray,
     """Whether the light above the threshold joined to a spot's centre (full-frame px) comes
     within REFLECTION_REACH_PX of any of the other points (K×2 full-frame px) no farther
     than a window (`window_px`) from it: over the box holding them and half a window around
-    them, the background being the median of its border."""
+    them, the background being the median of its border. The spot's light is every blob
+    that comes within REFLECTION_REACH_PX of its centre: the centroid of a spot and its
+    reflection joined by a faint neck may lie on no lit pixel."""
     others_px = others_px[np.hypot(*(others_px - spot_px).T) <= s.window_px]
     if not len(others_px):
         return False
@@ -1096,10 +1098,11 @@ def joined_light(image: np.ndarray, origin: np.ndarray, spot_px: np.ndarray,
     box = image[low[1]:high[1], low[0]:high[0]].astype(np.float32)
     _, labels = cv2.connectedComponents((box - border_median(box) > s.threshold)
                                         .astype(np.uint8))
-    column, row = np.round(spot_px - origin).astype(int) - low
-    if not (0 <= row < box.shape[0] and 0 <= column < box.shape[1]) or not labels[row, column]:
-        return False
-    rows, columns = np.nonzero(labels == labels[row, column])
+    column, row = spot_px - origin - low
+    rows, columns = np.nonzero(labels)
+    near = np.hypot(columns - column, rows - row) <= REFLECTION_REACH_PX
+    own = np.isin(labels[rows, columns], labels[rows[near], columns[near]])
+    rows, columns = rows[own], columns[own]
     targets = others_px - origin - low
     return bool((np.hypot(columns[:, None] - targets[:, 0], rows[:, None] - targets[:, 1])
                  <= REFLECTION_REACH_PX).any())
