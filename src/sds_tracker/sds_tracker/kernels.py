@@ -416,18 +416,20 @@ def warm_up() -> None:
     symmetric_centre(np.zeros((9, 9)), np.zeros((9, 9), np.bool_), 4.0, 4.0, 3, 30.0, 1, 1)
     remove_line(np.zeros((49, 49), np.float32), 0.0, 0.0, 24.0, 24.0, 12, 0.25, 30.0, 250.0)
     speckle_sigmas_px(image, np.full((1, 2), 32.0), np.full(1, 12.0), np.full(1, 24), 2.0,
-                      250.0, 0.95)
+                      250.0, 0.95, np.full(1, np.nan))
 
 
 @njit(cache=True, fastmath=True)
 def speckle_light(image: np.ndarray, cx: float, cy: float, radius: float, floor: float,
-                  read_noise: float, saturation: float
-                  ) -> tuple[int, int, float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                  read_noise: float, saturation: float, weight_floor: float
+                  ) -> tuple[int, int, float, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                             np.ndarray]:
     """A spot's light within `radius` of (`cx`, `cy`) [image px], as the speckle estimates
     read it: its top-left corner (`x0`, `y0`) of a box, the centroid's weight W (all the
-    light above `floor` in the aperture), and per pixel of the box (0 outside the aperture,
-    off the image, and where the pixel or its opposite is saturated, at or above
-    `saturation`: no fluctuation is seen there):
+    light above `weight_floor` in the aperture: `floor` for a fixed aperture's centroid, the
+    clipped level for a still's), and per pixel of the box (0 outside the aperture, off the
+    image, and where the pixel or its opposite is saturated, at or above `saturation`: no
+    fluctuation is seen there):
 
     - odd: half the pixel's difference from the light at the opposite point (bilinear).
       Only the odd part of a spot's light moves its centroid.
@@ -435,6 +437,8 @@ def speckle_light(image: np.ndarray, cx: float, cy: float, radius: float, floor:
       four interpolated ones', one grey level per electron as the photon σ counts it).
     - even: the light above `floor` the speckle multiplies: the mean of the pixel and its
       opposite, less `floor`, at least 0.
+    - weighed: `even` where the pixel is above `weight_floor` (the centroid weighs it, and
+      the speckle on all of its light above `floor` moves it), else 0.
     - usable: the pixels that tell the speckle (`speckle_sums`): on rings (1 px wide about
       the centre) whose mean light is within a third of saturation and none of whose
       pixels is saturated. A ring, not each pixel by its own light: choosing dark pixels
@@ -449,6 +453,7 @@ def speckle_light(image: np.ndarray, cx: float, cy: float, radius: float, floor:
     odd = np.zeros((size, size))
     white = np.zeros((size, size))
     even = np.zeros((size, size))
+    weighed = np.zeros((size, size))
     seen = np.zeros((size, size), np.bool_)
     total, count = np.zeros(rings), np.zeros(rings)
     tainted = np.zeros(rings, np.bool_)
@@ -469,7 +474,7 @@ def speckle_light(image: np.ndarray, cx: float, cy: float, radius: float, floor:
                 tainted[ring] = True
                 continue
             here = float(image[y, x])
-            weight_total += max(here - floor, 0.0)
+            weight_total += max(here - weight_floor, 0.0)
             tx, ty = ox - left, oy - top
             corners = (float(image[top, left]), float(image[top, left + 1]),
                        float(image[top + 1, left]), float(image[top + 1, left + 1]))
@@ -484,6 +489,8 @@ def speckle_light(image: np.ndarray, cx: float, cy: float, radius: float, floor:
             seen[j, i] = True
             odd[j, i] = (here - opposite) / 2
             even[j, i] = max((here + opposite) / 2 - floor, 0.0)
+            if here > weight_floor:
+                weighed[j, i] = even[j, i]
             white[j, i] = variance / 4
             total[ring] += (here + opposite) / 2 - floor
             count[ring] += 1
@@ -495,7 +502,7 @@ def speckle_light(image: np.ndarray, cx: float, cy: float, radius: float, floor:
                 ring = int(np.sqrt((x0 + i - cx) ** 2 + (y0 + j - cy) ** 2))
                 usable[j, i] = not tainted[ring] and mean[ring] > 0 and \
                     mean[ring] + floor < saturation / 3
-    return x0, y0, weight_total, odd, white, even, usable
+    return x0, y0, weight_total, odd, white, even, weighed, usable
 
 
 @njit(cache=True, fastmath=True)
@@ -574,11 +581,13 @@ def speckle_sigma_px(x0: int, y0: int, cx: float, cy: float, weight_total: float
 @njit(cache=True)   # NaN marks a spot too near the edge: no fastmath
 def speckle_sigmas_px(image: np.ndarray, centres: np.ndarray, radii: np.ndarray,
                       rings: np.ndarray, read_noise: float, saturation: float,
-                      max_correlation: float) -> np.ndarray:
-    """Per spot measured in a fixed aperture (`centres` N×2 image px, `radii` px), the σ [px]
+                      max_correlation: float, weight_floors: np.ndarray) -> np.ndarray:
+    """Per spot measured in an aperture (`centres` N×2 image px, `radii` px), the σ [px]
     laser speckle gives its centroid (`speckle_sigma_px`): the light above the median of
-    the square of half size `rings` about it (as the aperture's centroid takes it). The
-    speckle's squared contrast and its correlation between neighbouring pixels are the
+    the square of half size `rings` about it, where the pixel is above the spot's
+    `weight_floors` (NaN: all of it, as a fixed aperture's centroid takes it; a still's
+    clipped centroid weighs only the pixels above its clipped level). The speckle's squared
+    contrast and its correlation between neighbouring pixels are the
     optics', the same for every spot: the medians over the spots of what each one's light
     says (`speckle_sums`), the correlation at most `max_correlation`. 0 where the spots show
     no speckle, NaN for a spot too near the image's edge."""
@@ -596,10 +605,13 @@ def speckle_sigmas_px(image: np.ndarray, centres: np.ndarray, radii: np.ndarray,
             continue
         floors[k] = ring_median(image[y - half:y + half + 1, x - half:x + half + 1], half,
                                 half)
-        x0, y0, weight_totals[k], odd, white, even, usable = speckle_light(
-            image, centres[k, 0], centres[k, 1], radii[k], floors[k], read_noise, saturation)
+        weight_floor = floors[k] if np.isnan(weight_floors[k]) else weight_floors[k]
+        x0, y0, weight_totals[k], odd, white, even, weighed, usable = speckle_light(
+            image, centres[k, 0], centres[k, 1], radii[k], floors[k], read_noise, saturation,
+            weight_floor)
         corners[k, 0], corners[k, 1] = x0, y0
-        evens[k, :even.shape[0], :even.shape[1]] = even
+        lever_light = even if np.isnan(weight_floors[k]) else weighed
+        evens[k, :even.shape[0], :even.shape[1]] = lever_light
         sums[k] = speckle_sums(x0, y0, centres[k, 0], centres[k, 1], odd, white, even, usable)
     sigmas = np.where(np.isfinite(floors), 0.0, np.nan)
     usable_spots = np.isfinite(floors) & (sums[:, 1] > 0) & (sums[:, 3] > 0)

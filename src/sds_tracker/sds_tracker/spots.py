@@ -251,7 +251,9 @@ class SpotEstimate:
     light's peak beside the line (`LineFreeSpot.beside_line_peak`; NaN otherwise), and
     whether its light overlaps the line's, whose uncertainty its σ then is (`on_line`); the
     blob's light (its summed signal above the search's threshold, NaN where the laser line's
-    light is part of it or it was not measured)."""
+    light is part of it or it was not measured); for a centre clipped from its own blob (a
+    still's), the aperture's radius [px] and the level its weights start at (0 and NaN
+    otherwise)."""
 
     laser_id: int
     x_px: float
@@ -262,6 +264,8 @@ class SpotEstimate:
     beside_line_peak: float = np.nan
     on_line: bool = False
     light: float = np.nan
+    clipped_aperture_px: float = 0.0
+    clipped_floor: float = np.nan
 
 
 def identity_peak(estimate: SpotEstimate) -> float:
@@ -606,10 +610,12 @@ class SpotTracker:
         if not ids:
             return estimates
         centres = np.array([[estimates[i].x_px, estimates[i].y_px] for i in ids]) - origin
-        radii = np.array([self.aperture_px[i] for i in ids])
+        radii = np.array([self.aperture_px[i] or estimates[i].clipped_aperture_px
+                          for i in ids])
         rings = np.array([aperture_ring(radius, s.window_px) for radius in radii])
         speckle = speckle_sigmas_px(image, centres, radii, rings, s.read_noise,
-                                    s.saturation_level, MAX_SPECKLE_CORRELATION)
+                                    s.saturation_level, MAX_SPECKLE_CORRELATION,
+                                    np.array([estimates[i].clipped_floor for i in ids]))
         for laser_id, sigma in zip(ids, speckle, strict=True):
             if np.isfinite(sigma):
                 estimates[laser_id] = replace(estimates[laser_id], sigma_px=float(
@@ -618,10 +624,10 @@ class SpotTracker:
 
     def measures_own_speckle(self, estimate: SpotEstimate) -> bool:
         """Whether a spot's σ holds the speckle its own light shows (`_with_speckle`): a
-        spot measured in a fixed aperture (a video's), clear of the laser line (whose σ is
-        the line's)."""
-        return not estimate.flags & LOST and self.aperture_px[estimate.laser_id] > 0 and \
-            not estimate.on_line
+        spot measured in an aperture (a video's fixed one, or a still's clipped centroid),
+        clear of the laser line (whose σ is the line's)."""
+        return not estimate.flags & LOST and not estimate.on_line and (
+            self.aperture_px[estimate.laser_id] > 0 or estimate.clipped_aperture_px > 0)
 
     def forget(self) -> None:
         """Every spot not yet acquired: the next image is looked at as if it were the first
@@ -923,8 +929,12 @@ class SpotTracker:
             return SpotEstimate(laser_id, np.nan, np.nan, np.nan, 0.0, LOST | OFF_PATH)
         if peak >= s.saturation_level:
             flags |= SATURATED
+        # A clipped centroid's speckle is judged with the frame's other spots (`_with_speckle`);
+        # a centre measured without the line's light is not that centroid.
+        clipped = not fixed and refined is None
         return SpotEstimate(laser_id, float(centre[0]), float(centre[1]), sigma, peak, flags,
-                            beside_line_peak, on_line, light)
+                            beside_line_peak, on_line, light, radius if clipped else 0.0,
+                            floor if clipped else np.nan)
 
     @staticmethod
     def _peaks(signal: np.ndarray, labels: np.ndarray, chosen: np.ndarray,
