@@ -603,10 +603,12 @@ class SpotTracker:
     def _with_speckle(self, image: np.ndarray, origin: np.ndarray,
                       estimates: dict[int, SpotEstimate]) -> dict[int, SpotEstimate]:
         """The frame's estimates with the σ that multiplicative noise (laser speckle, which
-        the photons' σ does not hold) gives each spot whose light shows it
-        (`measures_own_speckle`), added in quadrature (`kernels.speckle_sigmas_px`)."""
+        the photons' σ does not hold) gives each spot whose light shows it, added in
+        quadrature (`kernels.speckle_sigmas_px`): measured in a fixed aperture
+        (`measures_own_speckle`), or by a still's clipped centroid, clear of the line."""
         s = self.settings
-        ids = [i for i, e in estimates.items() if self.measures_own_speckle(e)]
+        ids = [i for i, e in estimates.items() if self.measures_own_speckle(e) or (
+            not e.flags & LOST and not e.on_line and e.clipped_aperture_px > 0)]
         if not ids:
             return estimates
         centres = np.array([[estimates[i].x_px, estimates[i].y_px] for i in ids]) - origin
@@ -623,11 +625,13 @@ class SpotTracker:
         return estimates
 
     def measures_own_speckle(self, estimate: SpotEstimate) -> bool:
-        """Whether a spot's σ holds the speckle its own light shows (`_with_speckle`): a
-        spot measured in an aperture (a video's fixed one, or a still's clipped centroid),
-        clear of the laser line (whose σ is the line's)."""
-        return not estimate.flags & LOST and not estimate.on_line and (
-            self.aperture_px[estimate.laser_id] > 0 or estimate.clipped_aperture_px > 0)
+        """Whether a spot's σ holds all the speckle on it (`_with_speckle`): a spot measured
+        in a fixed aperture (a video's), clear of the laser line (whose σ is the line's). A
+        still's clipped centroid holds what its own light shows, but its wings are often
+        its bloom: what repeated frames show beyond that is the rig's calibrated excess
+        (`FrameTracker.excess_sigma_px`)."""
+        return not estimate.flags & LOST and self.aperture_px[estimate.laser_id] > 0 and \
+            not estimate.on_line
 
     def forget(self) -> None:
         """Every spot not yet acquired: the next image is looked at as if it were the first
