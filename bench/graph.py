@@ -354,7 +354,8 @@ def main() -> None:
     parser.add_argument("--stream", choices=("file", "live"), default="file",
                         help="what the camera plays: the simulated file (x264 with B-frames, "
                              "one slice per frame), or the same drop as a live camera streams "
-                             "it (no B-frames, LIVE_SLICES slices per frame)")
+                             "it (no B-frames, LIVE_SLICES slices per frame; re-encoded, "
+                             "so for latency, not for the spots)")
     parser.add_argument("--check-process", action="store_true",
                         help="also compare sds process --mcap on a real-time recording with "
                              "sds process --video on the file")
