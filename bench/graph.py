@@ -469,14 +469,15 @@ def main() -> None:
               f"median {median - hampel_ms:.1f}, p95 {p95 - hampel_ms:.1f}")
         if live:
             stamps = {s for _, s in receipts[30:]}
-            first = [r - played_s(s, origin_s, rate) for r, s in live if s in stamps]
+            measured = [(r, s) for r, s in live if s in stamps]
+            first = [r - played_s(s, origin_s, rate) for r, s in measured]
             live_ms = np.array(first) * 1e3
             print(f"  latency frame -> first PointCloud2 (points_live) [ms]: median "
                   f"{np.median(live_ms):.1f}, p95 {np.percentile(live_ms, 95):.1f}, max "
                   f"{live_ms.max():.1f}; {len(stamps) - len(first)} of {len(stamps)} frames "
                   "without a live cloud")
-            slow = np.array([played_s(s, origin_s, rate) for r, s in live
-                             if s in stamps and r - played_s(s, origin_s, rate) > 0.05])
+            slow = np.array([played_s(s, origin_s, rate) for r, s in measured
+                             if r - played_s(s, origin_s, rate) > 0.05])
             start_s = played_s(receipts[30][1], origin_s, rate)
             minutes = np.bincount(((slow - start_s) // 60).astype(int),
                                   minlength=int(args.minutes))
@@ -484,7 +485,7 @@ def main() -> None:
                   + " ".join(str(n) for n in minutes))
             # The stream's own wait comes before any decoding: what is left is the graph's.
             waits = [reorder_s[round((s - origin_s) * scenario.fps) % len(reorder_s)] / rate
-                     for r, s in live if s in stamps]
+                     for _, s in measured]
             graph_ms = live_ms - np.array(waits) * 1e3
             if np.isfinite(graph_ms).any():
                 print(f"  of which after the stream's reordering (the graph's own) [ms]: "

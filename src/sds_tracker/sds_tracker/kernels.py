@@ -605,12 +605,12 @@ def speckle_sigmas_px(image: np.ndarray, centres: np.ndarray, radii: np.ndarray,
             continue
         floors[k] = ring_median(image[y - half:y + half + 1, x - half:x + half + 1], half,
                                 half)
-        weight_floor = floors[k] if np.isnan(weight_floors[k]) else weight_floors[k]
+        clipped = not np.isnan(weight_floors[k])
         x0, y0, weight_totals[k], odd, white, even, weighed, usable = speckle_light(
             image, centres[k, 0], centres[k, 1], radii[k], floors[k], read_noise, saturation,
-            weight_floor)
+            weight_floors[k] if clipped else floors[k])
         corners[k, 0], corners[k, 1] = x0, y0
-        lever_light = even if np.isnan(weight_floors[k]) else weighed
+        lever_light = weighed if clipped else even
         evens[k, :even.shape[0], :even.shape[1]] = lever_light
         sums[k] = speckle_sums(x0, y0, centres[k, 0], centres[k, 1], odd, white, even, usable)
     sigmas = np.where(np.isfinite(floors), 0.0, np.nan)

@@ -607,13 +607,12 @@ class SpotTracker:
         quadrature (`kernels.speckle_sigmas_px`): measured in a fixed aperture
         (`measures_own_speckle`), or by a still's clipped centroid, clear of the line."""
         s = self.settings
-        ids = [i for i, e in estimates.items() if self.measures_own_speckle(e) or (
-            not e.flags & LOST and not e.on_line and e.clipped_aperture_px > 0)]
+        apertures = {i: self._own_light_aperture_px(e) for i, e in estimates.items()}
+        ids = [i for i, radius in apertures.items() if radius > 0]
         if not ids:
             return estimates
         centres = np.array([[estimates[i].x_px, estimates[i].y_px] for i in ids]) - origin
-        radii = np.array([self.aperture_px[i] or estimates[i].clipped_aperture_px
-                          for i in ids])
+        radii = np.array([apertures[i] for i in ids])
         rings = np.array([aperture_ring(radius, s.window_px) for radius in radii])
         speckle = speckle_sigmas_px(image, centres, radii, rings, s.read_noise,
                                     s.saturation_level, MAX_SPECKLE_CORRELATION,
@@ -624,14 +623,22 @@ class SpotTracker:
                     np.hypot(estimates[laser_id].sigma_px, sigma)))
         return estimates
 
+    def _own_light_aperture_px(self, estimate: SpotEstimate) -> float:
+        """The radius [px] of the aperture a spot's centroid took its own light in: its fixed
+        aperture (a video's) or its clipped centroid's (a still's); 0 for a spot lost or
+        overlapping the laser line (whose σ is the line's)."""
+        if estimate.flags & LOST or estimate.on_line:
+            return 0.0
+        return self.aperture_px[estimate.laser_id] or estimate.clipped_aperture_px
+
     def measures_own_speckle(self, estimate: SpotEstimate) -> bool:
         """Whether a spot's σ holds all the speckle on it (`_with_speckle`): a spot measured
         in a fixed aperture (a video's), clear of the laser line (whose σ is the line's). A
         still's clipped centroid holds what its own light shows, but its wings are often
         its bloom: what repeated frames show beyond that is the rig's calibrated excess
         (`FrameTracker.excess_sigma_px`)."""
-        return not estimate.flags & LOST and self.aperture_px[estimate.laser_id] > 0 and \
-            not estimate.on_line
+        return self.aperture_px[estimate.laser_id] > 0 and \
+            self._own_light_aperture_px(estimate) > 0
 
     def forget(self) -> None:
         """Every spot not yet acquired: the next image is looked at as if it were the first
