@@ -887,8 +887,9 @@ def test_a_centre_still_moving_after_its_rounds_is_not_known(monkeypatch: pytest
     """A spot's measurement without the line's light is made again from where it lands until
     it settles (`settled_line_free_centre`). On the development stills (rig 7113) the third
     of three measurements, each 10-18 px from the last, was given as a saturated spot on the
-    line: 2.1 px off with σ 0.13 px. A centre still moving after the last round is not known;
-    one that lands where it was started is given."""
+    line: 2.1 px off with σ 0.13 px. A centre that moved more than a pixel in the last round
+    is not known; one that lands where it was started is given, and so is one of two centres
+    0.6 px apart that the rounds alternate between (a speckled spot beside the line)."""
     image = np.zeros((100, 100), np.uint8)
     line = (np.arange(100.0), np.full(100, 50.0))
     along = np.array([0.0, 1.0])
@@ -910,6 +911,15 @@ def test_a_centre_still_moving_after_its_rounds_is_not_known(monkeypatch: pytest
                                        SpotSettings())
     assert settled is not None and np.allclose(settled.centre, [60.0, 50.0])
 
+    def alternating(image: np.ndarray, origin: np.ndarray, centre: np.ndarray,
+                    line: tuple[np.ndarray, np.ndarray], s: SpotSettings) -> LineFreeSpot:
+        return LineFreeSpot(np.array([60.6 if centre[0] == 60.0 else 60.0, 50.0]), along, -1.0)
+
+    monkeypatch.setattr(spots_module, "line_free_centre", alternating)
+    jittering = settled_line_free_centre(image, np.zeros(2), np.array([20.0, 50.0]), line,
+                                         SpotSettings())
+    assert jittering is not None and np.isfinite(jittering.centre).all()
+
 
 def test_the_speckled_lines_light_beside_a_hidden_spot_is_not_it() -> None:
     """The real-images bench's held-out rig 60108 (speckle): a spot tracked 4 px beside a
@@ -920,10 +930,12 @@ def test_the_speckled_lines_light_beside_a_hidden_spot_is_not_it() -> None:
     only where it rises LINE_SPECKLE_PEAK times above what the line's speckle leaves at that
     offset from the line. Here, 30 such spots in a video's fixed aperture, each seen once and
     hidden for three frames: before, 24 of the 90 hidden frames gave a spot (7 with the first
-    change alone); now none, and every spot is found while it is there."""
+    change alone); now none. While it is there, 29 of the 30 are found; seed 7's measurement
+    without the line's light alternates between two centres, 1.2 px off and 3.3 px off on
+    the line, and so is not known (`settled_line_free_centre`; it was found before)."""
     size, line_x = 160, 80.3
     line = (np.arange(float(size)), np.full(size, line_x))
-    fabricated = []
+    fabricated, found = [], 0
     for seed in range(30):
         rng = np.random.default_rng(seed)
         spot = np.array([line_x + 4.0, 81.0]) + rng.uniform(-0.5, 0.5, 2)
@@ -932,12 +944,15 @@ def test_the_speckled_lines_light_beside_a_hidden_spot_is_not_it() -> None:
         (seen,) = tracker.update(speckled_line_and_spot(rng, spot, line_x), (0, 0), line)
         # Found in the spot's own light (within 2 σ of its profile): acquired this close to
         # a line this bright and speckled, it is 0.85-3.9 px off (as before this change).
-        assert np.hypot(seen.x_px - spot[0], seen.y_px - spot[1]) < 5.0, (seed, seen)
+        if not seen.flags & LOST:
+            assert np.hypot(seen.x_px - spot[0], seen.y_px - spot[1]) < 5.0, (seed, seen)
+            found += 1
         for frame in range(3):
             (gone,) = tracker.update(speckled_line_and_spot(rng, None, line_x), (0, 0), line)
             if not gone.flags & LOST:
                 fabricated.append((seed, frame, gone))
     assert not fabricated, fabricated
+    assert found >= 29
 
 
 def bent_line_frame(seed: int, spot: tuple[float, float] | None, bend_px: float,
