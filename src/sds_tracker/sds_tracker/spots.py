@@ -958,6 +958,10 @@ class SpotTracker:
             refined = settled_line_free_centre(image, origin, centre, line, s)
             if refined is not None and line_bends(refined):
                 return lost
+        if refined is not None and refined.clearance_px > radius:
+            # The line's light lies beyond the aperture (its edge a spot's reach beyond it):
+            # the centroid holds none of it, and keeps its own noise, which σ describes.
+            refined = None
         beside_line_peak, on_line, light = np.nan, False, mass
         if refined is not None:
             light = np.nan   # the blob's light can be the line's
