@@ -958,9 +958,9 @@ class SpotTracker:
             refined = settled_line_free_centre(image, origin, centre, line, s)
             if refined is not None and line_bends(refined):
                 return lost
-        if refined is not None and refined.clearance_px > radius:
-            # The line's light lies beyond the aperture (its edge a spot's reach beyond it):
-            # the centroid holds none of it, and keeps its own noise, which σ describes.
+        if refined is not None and refined.line_edge_px > radius:
+            # The line's light above the threshold lies beyond the aperture: the centroid
+            # holds little of it and is the less noisy of the two (docs/tracking.md).
             refined = None
         beside_line_peak, on_line, light = np.nan, False, mass
         if refined is not None:
@@ -1054,7 +1054,9 @@ class LineFreeSpot:
     spot's, beside it little is; a spot within the band, or all saturated there, has none.
     `line_deficit` is the most the known light within half a window of the centre falls
     below the line's profile [grey levels]: a spot only adds light, a line that bends or
-    shifts there leaves a trough beside its crest (LINE_BEND_SHARE)."""
+    shifts there leaves a trough beside its crest (LINE_BEND_SHARE).
+    `line_edge_px` is the distance from the centre to the line's edge at the threshold [px]
+    (NaN with the centre)."""
 
     centre: np.ndarray
     along: np.ndarray
@@ -1062,6 +1064,7 @@ class LineFreeSpot:
     line_sigma_px: float = 0.0
     beside_line_peak: float = np.nan
     line_deficit: float = np.nan
+    line_edge_px: float = np.nan
 
 
 def line_bends(found: LineFreeSpot) -> bool:
@@ -1128,8 +1131,7 @@ def window_without_line(image: np.ndarray, origin: np.ndarray,
                               centre - origin - (x0, y0), s)
     if local is None:
         return None
-    return LineFreeSpot(local.centre + origin + (x0, y0), local.along, local.clearance_px,
-                        local.line_sigma_px, local.beside_line_peak, local.line_deficit)
+    return replace(local, centre=local.centre + origin + (x0, y0))
 
 
 def border_median(window: np.ndarray) -> float:
@@ -1290,7 +1292,8 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
     return LineFreeSpot(centre, along, _clearance(spot_pixels, centre, to_line * across, along,
                                                   line_half_width / norm), sigma,
                         float(left[near & ~band & ~unknown].max(initial=0.0)),
-                        -float(everywhere[near & ~unknown].min(initial=0.0)))
+                        -float(everywhere[near & ~unknown].min(initial=0.0)),
+                        abs(to_line) - line_half_width / norm)
 
 
 def line_wing_speckle(left: np.ndarray, offsets_px: np.ndarray, away: np.ndarray,
