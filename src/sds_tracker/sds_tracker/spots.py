@@ -958,9 +958,12 @@ class SpotTracker:
             refined = settled_line_free_centre(image, origin, centre, line, s)
             if refined is not None and line_bends(refined):
                 return lost
-        if refined is not None and refined.line_edge_px > radius:
-            # The line's light above the threshold lies beyond the aperture: the centroid
-            # holds little of it and is the less noisy of the two (docs/tracking.md).
+        if refined is not None and \
+                refined.line_edge_px - float(np.hypot(*(centre - refined.centre))) > radius:
+            # The line's light above the threshold lies beyond the aperture about the
+            # centroid (the line-free centre's distance to it, less how far the centroid lies
+            # from that centre: a centroid the line's light pulled is nearer to it): the
+            # centroid holds little of it and is the less noisy of the two (docs/tracking.md).
             refined = None
         beside_line_peak, on_line, light = np.nan, False, mass
         if refined is not None:
