@@ -12,7 +12,7 @@ from scipy import stats
 from scipy.ndimage import gaussian_filter
 from sds_camera.frame_source import Region, select
 from sds_model.rig import load_rig
-from sds_sim.render import FrameRenderer
+from sds_sim.render import FrameRenderer, FrameTruth
 from sds_sim.scenario import load_scenario
 from sds_tracker.hampel import HampelBank
 from sds_tracker.spots import (
@@ -30,6 +30,7 @@ from sds_tracker.spots import (
 from sds_tracker.tracker import (
     TRACKING_PARAMETERS,
     FrameTracker,
+    TrackedSpot,
     TrackerConfig,
     flat_line_px,
     is_lost,
@@ -573,29 +574,15 @@ def test_a_spot_acquired_beside_the_line_keeps_its_line_free_centre(repo: Path) 
     from sds_sim.imaging import draw_imaging, merged
 
     seed = 73109
-    _, true = rig_as_built(load_rig(repo / "config" / "rigs" / "stelium.yaml"), AsBuilt(),
-                           np.random.default_rng(seed))
-    overrides = merged({"duration_s": 0.4, "scale": 0.5, "seed": seed},
-                       draw_imaging(np.random.default_rng(seed), ("speckle",)))
-    scenario = load_scenario(repo / "config" / "scenarios" / "ground_kick.yaml", overrides)
-    renderer = FrameRenderer(replace(scenario, rig=true))
-    rig = replace(true, camera=true.camera.scaled(0.5))
-    tracker = FrameTracker(rig)
-    ids = [d.laser_id for d in rig.diodes]
-    truths, outputs = {}, []
-    for index in range(12):
-        image, truths[index] = renderer.render(index)
-        outputs += tracker.process(index, image[..., 2], (0, 0))[0]
-    outputs += tracker.flush()
+    imaging = draw_imaging(np.random.default_rng(seed), ("speckle",))
+    ids, truths, outputs = track_a_rendered_rig_as_built(
+        repo, seed, merged({"duration_s": 0.4}, imaging), 12)
     measured = 0
     for index, spots in outputs:
-        for spot in spots:
-            if is_lost(spot) or not truths[index].visible[ids.index(spot.laser_id)]:
-                continue
-            measured += 1
-            expected = truths[index].spot_exposure_px[ids.index(spot.laser_id)]
-            assert np.hypot(spot.x_raw_px - expected[0], spot.y_raw_px - expected[1]) < 2.0, \
-                (index, spot)
+        for spot, error_px, visible in errors_px(spots, truths[index], ids):
+            if visible:
+                measured += 1
+                assert error_px < 2.0, (index, spot)
     assert measured >= 228
 
 
@@ -702,6 +689,38 @@ def test_a_blob_two_diodes_claim_alike_is_neither_diodes(seed: int) -> None:
     assert spots[1].flags & LOST and not spots[1].flags & AMBIGUOUS
 
 
+def track_a_rendered_rig_as_built(repo: Path, seed: int, overrides: dict, frames: int
+                                  ) -> tuple[list[int], dict[int, FrameTruth], list]:
+    """The ground kick (half scale, `overrides` on top) of the rig as built for `seed`,
+    rendered and tracked with the true rig: its diodes' ids in the truth's row order, each
+    frame's truth and the tracker's output."""
+    _, true = rig_as_built(load_rig(repo / "config" / "rigs" / "stelium.yaml"), AsBuilt(),
+                           np.random.default_rng(seed))
+    scenario = load_scenario(repo / "config" / "scenarios" / "ground_kick.yaml",
+                             {"scale": 0.5, "seed": seed, **overrides})
+    renderer = FrameRenderer(replace(scenario, rig=true))
+    tracker = FrameTracker(replace(true, camera=true.camera.scaled(0.5)))
+    truths, outputs = {}, []
+    for index in range(frames):
+        image, truths[index] = renderer.render(index)
+        outputs += tracker.process(index, image[..., 2], (0, 0))[0]
+    return [d.laser_id for d in true.diodes], truths, outputs + tracker.flush()
+
+
+def errors_px(spots: list[TrackedSpot], truth: FrameTruth, ids: list[int]
+              ) -> list[tuple[TrackedSpot, float, bool]]:
+    """Each measured spot (not lost) with its raw position's distance [px] from its diode's
+    truth, and whether the truth has that spot visible."""
+    found = []
+    for spot in spots:
+        if is_lost(spot):
+            continue
+        k = ids.index(spot.laser_id)
+        error = np.array([spot.x_raw_px, spot.y_raw_px]) - truth.spot_exposure_px[k]
+        found.append((spot, float(np.hypot(*error)), bool(truth.visible[k])))
+    return found
+
+
 def test_two_diodes_whose_own_searches_take_each_others_spots_are_not_swapped(repo: Path
                                                                               ) -> None:
     """The real-images bench's held-out rig 59126 (clean images, half scale): the paths of
@@ -710,27 +729,11 @@ def test_two_diodes_whose_own_searches_take_each_others_spots_are_not_swapped(re
     frame 24 they took each other's, no blob was shared, and both were swapped and valid
     (21 px off) to the end, the prior holding them there. Two diodes whose spots each lie in
     the other's path gate are now assigned jointly: ambiguous, both lost, in every frame."""
-    _, true = rig_as_built(load_rig(repo / "config" / "rigs" / "stelium.yaml"), AsBuilt(),
-                           np.random.default_rng(59126))
-    scenario = load_scenario(repo / "config" / "scenarios" / "ground_kick.yaml",
-                             {"duration_s": 1.0, "scale": 0.5, "seed": 59126})
-    renderer = FrameRenderer(replace(scenario, rig=true))
-    rig = replace(true, camera=true.camera.scaled(0.5))
-    tracker = FrameTracker(rig)
-    ids = [d.laser_id for d in rig.diodes]
-    truths, outputs = {}, []
-    for index in range(30):
-        image, truths[index] = renderer.render(index)
-        outputs += tracker.process(index, image[..., 2], (0, 0))[0]
-    outputs += tracker.flush()
+    ids, truths, outputs = track_a_rendered_rig_as_built(repo, 59126, {"duration_s": 1.0}, 30)
     assert len(outputs) == 30
     for index, spots in outputs:
-        for spot in spots:
-            if is_lost(spot):
-                continue
-            expected = truths[index].spot_exposure_px[ids.index(spot.laser_id)]
-            assert np.hypot(spot.x_raw_px - expected[0], spot.y_raw_px - expected[1]) < 2.0, \
-                (index, spot)
+        for spot, error_px, _ in errors_px(spots, truths[index], ids):
+            assert error_px < 2.0, (index, spot)
 
 
 def test_a_rig_as_built_whose_diode_took_anothers_spot_now_finds_its_own(repo: Path) -> None:
