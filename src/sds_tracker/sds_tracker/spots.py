@@ -212,13 +212,14 @@ the method, eight held out): 95 such spots, 0.066 and 0.132 px RMS (max 0.31 and
 diode under the line keeps its bias in every frame), against 0.058 px for the other 3424."""
 
 HALO_GRAIN_SHARE = 0.01
-"""A blob with less than this share of a heavier blob's light, lying within that blob's
-radius (√(area/π)), is a grain of its halo, not a spot: speckle breaks a blooming spot's halo
-into islands, and one can lie on a diode's path where the spot's own centroid does not. On a
-held-out still (71019) such a grain (one pixel, 0.03 % of the light) was taken for the spot
-11 px from it. On development stills a blob on the path was chosen over a heavier one off it
-with under 1 % of its light 27 times (0.9 px off at the median below 0.1 %, 6.5 px between 0.1
-and 1 %), never between 1 and 10 %, and from 10 % up 0.09 px off."""
+"""A blob with less than this share of a heavier blob's light, lying within two of that
+blob's radii (√(area/π); `halo_grains`), is a grain of its halo, not a spot: speckle breaks a
+blooming spot's halo into islands, and one can lie on a diode's path where the spot's own
+centroid does not. On a held-out still (71019) such a grain (one pixel, 0.03 % of the light)
+was taken for the spot 11 px from it. On development stills a blob on the path was chosen
+over a heavier one off it with under 1 % of its light 27 times (0.9 px off at the median
+below 0.1 %, 6.5 px between 0.1 and 1 %), never between 1 and 10 %, and from 10 % up 0.09
+px off."""
 
 
 def is_measured(flags: int) -> bool:
@@ -1002,8 +1003,8 @@ class SpotTracker:
         """Whether the light around a blob's brightest pixel `peak` (region px) can be a
         spot: no more elongated than `max_elongation` (`kernels.light_elongation` within half
         a window, above the threshold over the search's `background`), unless the laser line
-        runs within that reach (a spot on or beside the line is the line-free measurement's
-        to judge)."""
+        runs near it (`_near_line`: a spot on or beside the line is the line-free
+        measurement's to judge)."""
         if not np.isfinite(self.max_elongation):
             return True
         if line is not None and self._near_line(origin, peak, line):
