@@ -268,23 +268,25 @@ def line_rows(image: np.ndarray, rows: np.ndarray, starts: np.ndarray, width: in
 @njit(cache=True, fastmath=True)
 def remove_line(window: np.ndarray, background: float, slope: float, intercept: float,
                 spot_row: float, reach: int, step_px: float, threshold: float,
-                saturation_level: float) -> tuple[np.ndarray, np.ndarray, float, int]:
+                saturation_level: float, first_row: int, last_row: int
+                ) -> tuple[np.ndarray, np.ndarray, float, int]:
     """The window's signal with a straight laser line's light taken away.
 
-    The line's centre on row y is at column intercept + slope·y; its cross profile (signal
-    against the column's offset from that centre, in bins of `step_px`) is the median of each
-    bin over the pixels within `reach` of the centre on the rows farther than `reach` from
-    `spot_row`, and is subtracted (interpolated) from every pixel within `reach` of the line.
-    Returns what is left (0 on the unknown pixels), the unknown pixels (saturated where the
-    line alone is above `threshold`), the line's half width at `threshold` [px, along the
-    row], and how many pixels the profile rests on."""
+    The line lies on the window's rows `first_row` to `last_row` (a window can hold the
+    line's end); its centre on row y is at column intercept + slope·y; its cross profile
+    (signal against the column's offset from that centre, in bins of `step_px`) is the median
+    of each bin over the pixels within `reach` of the centre on its rows farther than `reach`
+    from `spot_row`, and is subtracted (interpolated) from every pixel of its rows within
+    `reach` of the line. Returns what is left (0 on the unknown pixels), the unknown pixels
+    (saturated where the line alone is above `threshold`), the line's half width at
+    `threshold` [px, along the row], and how many pixels the profile rests on."""
     height, width = window.shape
     bins = 2 * int(np.round(reach / step_px)) + 1
     middle = bins // 2
     bin_of = np.empty(height * width, np.int64)
     value_of = np.empty(height * width)
     count = 0
-    for y in range(height):
+    for y in range(max(first_row, 0), min(last_row + 1, height)):
         if abs(y - spot_row) <= reach:
             continue
         for x in range(width):
@@ -322,7 +324,7 @@ def remove_line(window: np.ndarray, background: float, slope: float, intercept: 
             signal = window[y, x] - background
             offset = x - (intercept + slope * y)
             light = 0.0
-            if abs(offset) <= reach:
+            if abs(offset) <= reach and first_row <= y <= last_row:
                 position = min(max(offset / step_px + middle, 0.0), bins - 1.0)
                 lower = int(position)
                 light = profile[lower] + (position - lower) * (profile[lower + 1] -
@@ -414,7 +416,8 @@ def warm_up() -> None:
     light_elongation(image, 32.0, 32.0, 12.0, 0.0, 30.0)
     line_rows(image, np.zeros(1, np.int64), np.zeros(1, np.int64), 61, 6, 10, 0.15, 30.0, 2.0)
     symmetric_centre(np.zeros((9, 9)), np.zeros((9, 9), np.bool_), 4.0, 4.0, 3, 30.0, 1, 1)
-    remove_line(np.zeros((49, 49), np.float32), 0.0, 0.0, 24.0, 24.0, 12, 0.25, 30.0, 250.0)
+    remove_line(np.zeros((49, 49), np.float32), 0.0, 0.0, 24.0, 24.0, 12, 0.25, 30.0, 250.0,
+                0, 48)
     speckle_sigmas_px(image, np.full((1, 2), 32.0), np.full(1, 12.0), np.full(1, 24), 2.0,
                       250.0, 0.95, np.full(1, np.nan))
 

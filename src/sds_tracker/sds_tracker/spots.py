@@ -1080,10 +1080,12 @@ def line_bends(found: LineFreeSpot) -> bool:
 
 def line_free_centre(image: np.ndarray, origin: np.ndarray, centre: np.ndarray,
                      line: tuple[np.ndarray, np.ndarray], s: SpotSettings) -> LineFreeSpot | None:
-    """The spot in the window around `centre` (full-frame px) with the laser line's light
-    subtracted (`spot_without_line`); None where the line (full-frame rows, ascending, and
-    columns) does not cross the window or the window leaves the image."""
-    window = spot_window(image.shape, origin, centre, s.window_px)
+    """The spot in the window around `centre` (full-frame px; moved inside the image where
+    the spot lies within a window of its edge) with the laser line's light subtracted
+    (`spot_without_line`) on the rows between the line's ends; None where the line
+    (full-frame rows, ascending, and columns) does not cross the window or the image is
+    smaller than a window."""
+    window = spot_window_inside(image.shape, origin, centre, s.window_px)
     if window is None:
         return None
     x0, y0, _, y1 = window
@@ -1095,7 +1097,10 @@ def line_free_centre(image: np.ndarray, origin: np.ndarray, centre: np.ndarray,
         origin[0] - x0
     if not np.any(np.abs(line_x - s.window_px) <= 1.5 * s.window_px):
         return None
-    return window_without_line(image, origin, window, line_x, centre, s)
+    # Beyond its ends (the container's rim) the line has no light to take away: a spot
+    # there keeps all of its own.
+    span = (int(measured[0] - origin[1] - y0), int(measured[-1] - origin[1] - y0))
+    return window_without_line(image, origin, window, line_x, centre, s, span)
 
 
 def settled_line_free_centre(image: np.ndarray, origin: np.ndarray, centre: np.ndarray,
@@ -1127,12 +1132,14 @@ def settled_line_free_centre(image: np.ndarray, origin: np.ndarray, centre: np.n
 
 def window_without_line(image: np.ndarray, origin: np.ndarray,
                         window: tuple[int, int, int, int], line_x: np.ndarray,
-                        centre: np.ndarray, s: SpotSettings) -> LineFreeSpot | None:
+                        centre: np.ndarray, s: SpotSettings,
+                        line_span: tuple[int, int] | None = None) -> LineFreeSpot | None:
     """`spot_without_line` on a window of the region (`spot_window` bounds; `line_x` in
-    window columns per window row), started at `centre`, in full-frame px."""
+    window columns per window row, the line on the window rows `line_span`, first and last,
+    or on every row), started at `centre`, in full-frame px."""
     x0, y0, x1, y1 = window
     local = spot_without_line(image[y0:y1, x0:x1].astype(np.float32), line_x,
-                              centre - origin - (x0, y0), s)
+                              centre - origin - (x0, y0), s, line_span)
     if local is None:
         return None
     return replace(local, centre=local.centre + origin + (x0, y0))
@@ -1186,6 +1193,19 @@ def joined_light(image: np.ndarray, origin: np.ndarray, spot_px: np.ndarray,
                  <= REFLECTION_REACH_PX).any())
 
 
+def spot_window_inside(shape: tuple[int, ...], offset: np.ndarray, centre: np.ndarray,
+                       half: int) -> tuple[int, int, int, int] | None:
+    """`spot_window`, moved inside the image where it would leave it (the centre is then off
+    the window's middle), or None where the image is smaller than the window."""
+    size = 2 * half + 1
+    if shape[0] < size or shape[1] < size:
+        return None
+    cx, cy = np.round(centre - offset).astype(int)
+    x0 = int(np.clip(cx - half, 0, shape[1] - size))
+    y0 = int(np.clip(cy - half, 0, shape[0] - size))
+    return x0, y0, x0 + size, y0 + size
+
+
 def spot_window(shape: tuple[int, ...], offset: np.ndarray, centre: np.ndarray, half: int
                 ) -> tuple[int, int, int, int] | None:
     """Region-pixel bounds (x0, y0, x1, y1; end exclusive) of the window of half size `half`
@@ -1198,15 +1218,17 @@ def spot_window(shape: tuple[int, ...], offset: np.ndarray, centre: np.ndarray, 
 
 
 def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
-                      s: SpotSettings) -> LineFreeSpot | None:
+                      s: SpotSettings, line_span: tuple[int, int] | None = None
+                      ) -> LineFreeSpot | None:
     """A spot's centre [window px] with the laser line's light taken away, the line's
     direction and the clearance between the two; None when the line does not reach enough of
     the window's rows, a NaN centre when no spot is left (nothing LINE_SPECKLE_PEAK times
     the line's speckle, and above the threshold, on the line or beside it) or where its
     centre cannot be told (a saturated line hides its mirror half: HIDDEN_SYMMETRY_SHARE).
 
-    `line_x[r]` is the line's centre column on window row r (NaN where unknown); a straight
-    line through it on the rows beyond half a window from the spot is used. The line's
+    `line_x[r]` is the line's centre column on window row r (NaN where unknown); the line
+    lies on the rows `line_span` (first and last; None: every row) and a straight line through
+    it on the rows beyond half a window from the spot is used. The line's
     cross profile (signal against the column's offset from that line, in PROFILE_STEP_PX
     bins) is the median over the rows that lie beyond half a window from the spot, and is
     subtracted from every row, the spot's included: a spot on the line keeps its own light
@@ -1220,6 +1242,7 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
     rows, columns = np.indices(window.shape)
     background = border_median(window)
     reach = s.window_px // 2
+    first_row, last_row = line_span or (0, window.shape[0] - 1)
     # The line's own centre is pulled towards a spot on its rows: a straight line through
     # its centres on the rows away from the spot stands for it on every row.
     row_index = np.arange(len(line_x))
@@ -1232,21 +1255,22 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
     intercept = float(fit_columns.mean() - slope * fit_rows.mean())
     left, unknown, line_half_width, profile_pixels = remove_line(
         window, background, slope, intercept, spot[1], reach, PROFILE_STEP_PX, s.threshold,
-        s.saturation_level)
+        s.saturation_level, first_row, last_row)
     if profile_pixels < 3 * (2 * reach + 1):
         return None
     # The line's speckle leaves light of its own within the line's band: what it leaves on
     # the profile's rows says how much.
     offsets = np.asarray(columns - intercept - slope * rows, dtype=float)
-    band = np.abs(offsets) <= line_half_width
-    away = ~unknown & (np.abs(rows - spot[1]) > reach)
+    lit = (rows >= first_row) & (rows <= last_row)
+    band = (np.abs(offsets) <= line_half_width) & lit
+    away = ~unknown & (np.abs(rows - spot[1]) > reach) & lit
     on_line = band & away
     speckle = 1.4826 * float(np.median(np.abs(left[on_line]))) if on_line.any() else 0.0
     # Beside its band the line's speckled wings, dim on average, leave grains as bright as
     # a dim spot: there each offset from the line has a floor of its own speckle.
     floor = np.where(band, LINE_SPECKLE_PEAK * speckle, LINE_SPECKLE_PEAK *
                      line_wing_speckle(left, offsets, away, reach))
-    floor = np.maximum(floor, s.threshold)
+    floor = np.maximum(np.where(lit, floor, 0.0), s.threshold)
     # Two starts: `spot`, and the brightest 5×5 patch of what is left within half a window
     # of it (not another spot's or a reflection's farther away), where that is not already
     # within the search around `spot`.

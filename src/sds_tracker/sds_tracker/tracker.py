@@ -17,7 +17,7 @@ from sds_recon.wall_reflection import wall_reflections_px
 
 from sds_tracker.hampel import BankOutput, HampelBank
 from sds_tracker.kernels import warm_up
-from sds_tracker.line import LineProfile, LineSettings, seek_line, track_line
+from sds_tracker.line import LineProfile, LineSettings, joined_within, seek_line, track_line
 from sds_tracker.spots import (
     HAMPEL_REPLACED,
     LOST,
@@ -103,21 +103,24 @@ def flat_line_px(rig: Rig) -> tuple[np.ndarray, np.ndarray]:
     return rows, np.interp(rows, pixels[order, 1], pixels[order, 0])
 
 
-def line_reach_px(rig: Rig, rows: np.ndarray, band_px: int) -> tuple[np.ndarray, np.ndarray]:
-    """Per row of `rows`, the columns between which the line can lie on any surface whose
-    heights stay within the container's radius of the fill level (a surface tilted by up to
-    45°): its image on level surfaces at −R, 0 and +R (each held at its end column beyond its
-    ends), `band_px` wider on either side; empty for a rig without a line laser."""
+def line_reach_px(rig: Rig, band_px: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The rows the line can cross on any surface whose heights stay within the container's
+    radius of the fill level (a surface tilted by up to 45°, a higher or lower fill), and on
+    each the columns between which it can lie there: its image on level surfaces at −R, 0
+    and +R (each held at its end column beyond its ends), `band_px` wider on either side;
+    empty for a rig without a line laser."""
     if rig.line_laser is None:
-        return np.zeros(0), np.zeros(0)
-    columns = []
+        return np.zeros(0, int), np.zeros(0), np.zeros(0)
     radius_mm = rig.container.radius_mm
+    images = []
     for height_mm in (-radius_mm, 0.0, radius_mm):
         pixels = line_image_path(rig, height_mm)
         pixels = pixels[np.isfinite(pixels).all(axis=1)]
-        order = np.argsort(pixels[:, 1])
-        columns.append(np.interp(rows, pixels[order, 1], pixels[order, 0]))
-    return np.min(columns, axis=0) - band_px, np.max(columns, axis=0) + band_px
+        images.append(pixels[np.argsort(pixels[:, 1])])
+    rows = np.arange(int(np.ceil(min(p[0, 1] for p in images))),
+                     int(max(p[-1, 1] for p in images)) + 1)
+    columns = [np.interp(rows, p[:, 1], p[:, 0]) for p in images]
+    return rows, np.min(columns, axis=0) - band_px, np.max(columns, axis=0) + band_px
 
 
 SEEK_PERIOD_FRAMES = 30
@@ -207,8 +210,13 @@ class FrameTracker:
         self.hampel = None if self.config.stills else HampelBank(
             self.config.hampel_window, self.config.hampel_k, self.config.hampel_floor_px)
         self._pending: dict[int, dict[int, SpotEstimate]] = {}
-        self._line_rows, self._line_x = flat_line_px(rig)
-        self._line_reach = line_reach_px(rig, self._line_rows, self.config.line.band_px)
+        # The line is looked for around the flat surface's line first, on every row it can
+        # cross (beyond the flat line's ends on a tilted surface or at another fill level).
+        self._flat_rows, flat_x = flat_line_px(rig)
+        self._line_rows, low_x, high_x = line_reach_px(rig, self.config.line.band_px)
+        self._line_reach = (low_x, high_x)
+        self._line_x = np.interp(self._line_rows, self._flat_rows, flat_x) \
+            if len(self._flat_rows) else np.zeros(0)
         self._line_followed = False
         self._frames_since_seek = SEEK_PERIOD_FRAMES
         warm_up()
@@ -221,16 +229,22 @@ class FrameTracker:
         and this frame's line profile.
         """
         line = self._find_line(red, offset)
-        found = len(line.x_px) > len(self._line_rows) // 4
+        found = len(line.x_px) > len(self._flat_rows) // 4
         if found:
             # Follow the line: next frame looks around where it is now.
             self._line_x = np.interp(self._line_rows, line.y_px, line.x_px)
+            # Between its ends only: beyond them (the container's rim) it has no light.
+            rows = np.arange(int(line.y_px[0]), int(line.y_px[-1]) + 1)
+            spots_line = (rows, np.interp(rows, line.y_px, line.x_px))
+        else:
+            spots_line = (self._flat_rows,
+                          np.interp(self._flat_rows, self._line_rows, self._line_x))
         # A still's line says nothing of the next image's.
         self._line_followed = found and self.hampel is not None
         if self.hampel is None:   # a still: where the spots were says nothing of this image
             self.spots.forget()
         # The line's light is kept out of the spots it passes (seen this frame, or expected).
-        estimates = self.spots.update(red, offset, (self._line_rows, self._line_x))
+        estimates = self.spots.update(red, offset, spots_line)
         if self.excess_sigma_px:
             estimates = [e if self.spots.measures_own_speckle(e) else
                          replace(e, sigma_px=float(np.hypot(e.sigma_px, self.excess_sigma_px)))
@@ -250,15 +264,23 @@ class FrameTracker:
         reach, the one found on more rows kept: on a tilted surface the line moves off the
         level surface's line with the height, beyond the band searched around it."""
         settings, noise = self.config.line, self.config.spots.read_noise
-        line = track_line(red, offset, self._line_x, self._line_rows, settings, noise)
+        line = self._joined(track_line(red, offset, self._line_x, self._line_rows, settings,
+                                       noise))
         self._frames_since_seek += 1
         if self._line_followed or (self.hampel is not None
                                    and self._frames_since_seek < SEEK_PERIOD_FRAMES):
             return line
         self._frames_since_seek = 0
         low_x, high_x = self._line_reach
-        sought = seek_line(red, offset, self._line_rows, low_x, high_x, settings, noise)
+        sought = self._joined(seek_line(red, offset, self._line_rows, low_x, high_x, settings,
+                                        noise))
         return sought if len(sought.x_px) > len(line.x_px) else line
+
+    def _joined(self, line: LineProfile) -> LineProfile:
+        """`line.joined_within` the flat surface's line's rows."""
+        if not len(self._flat_rows):
+            return line
+        return joined_within(line, self._flat_rows[0], self._flat_rows[-1], self.config.line)
 
     def unfiltered(self, frame: int) -> list[TrackedSpot]:
         """A frame's spots as measured, before its Hampel window closes (for a live view):

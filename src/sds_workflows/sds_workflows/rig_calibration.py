@@ -31,7 +31,7 @@ from sds_recon.calibration.rig_model import LineObservations
 from sds_recon.calibration.rig_report import calibrated_rig, report_text, rig_report
 from sds_recon.triangulation import beam_image_path
 from sds_tracker.discovery import SpotCandidates, averaged, excess_sigma_px, find_spots
-from sds_tracker.line import LineSettings, seek_line
+from sds_tracker.line import LineSettings, joined_within, seek_line
 from sds_tracker.plateaus import Plateau, changed_pixels, find_plateaus
 from sds_tracker.tracker import flat_line_px, line_reach_px
 
@@ -179,17 +179,18 @@ def observe(rig: Rig, images: list[np.ndarray],
     each image's are averaged with (`sds_tracker.discovery.averaged`)."""
     margin = int(np.ceil(REGION_MARGIN_MM * rig.surface_px_per_mm()))
     region = Region(*rig.container_region_px(rig.camera, margin))
-    rows, _ = flat_line_px(rig)
+    flat_rows, _ = flat_line_px(rig)
     settings = LineSettings()
-    low_x, high_x = line_reach_px(rig, rows, settings.band_px)
+    rows, low_x, high_x = line_reach_px(rig, settings.band_px)
     spots, line_frame, line_pixels, line_sigma = [], [], [], []
     for index, image in enumerate(images):
         region.check_inside(image.shape[1], image.shape[0])
         red = select(image, region, "red")
-        profile = seek_line(red, (region.x, region.y), rows, low_x, high_x, settings) \
+        profile = joined_within(seek_line(red, (region.x, region.y), rows, low_x, high_x,
+                                          settings), flat_rows[0], flat_rows[-1], settings) \
             if len(rows) else None
         line_px = (profile.y_px, profile.x_px) if profile is not None and \
-            len(profile.y_px) > len(rows) // 4 else None
+            len(profile.y_px) > len(flat_rows) // 4 else None
         found = find_spots(red, (region.x, region.y), line=line_px)
         if repeats and repeats[index]:
             found = averaged([found, *(find_spots(select(frame, region, "red"),
