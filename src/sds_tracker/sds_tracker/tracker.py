@@ -17,7 +17,7 @@ from sds_recon.wall_reflection import wall_reflections_px
 
 from sds_tracker.hampel import BankOutput, HampelBank
 from sds_tracker.kernels import warm_up
-from sds_tracker.line import LineProfile, LineSettings, joined_within, seek_line, track_line
+from sds_tracker.line import LineProfile, LineSettings, continued_within, seek_line, track_line
 from sds_tracker.spots import (
     HAMPEL_REPLACED,
     LOST,
@@ -233,8 +233,10 @@ class FrameTracker:
         if found:
             # Follow the line: next frame looks around where it is now.
             self._line_x = np.interp(self._line_rows, line.y_px, line.x_px)
-            # Between its ends only: beyond them (the container's rim) it has no light.
-            rows = np.arange(int(line.y_px[0]), int(line.y_px[-1]) + 1)
+            # Over the flat surface's line's rows (a spot can hide the line's end) and on to
+            # its ends where it runs beyond them; past its ends it has no light to take away.
+            rows = np.arange(int(min(line.y_px[0], self._flat_rows[0])),
+                             int(max(line.y_px[-1], self._flat_rows[-1])) + 1)
             spots_line = (rows, np.interp(rows, line.y_px, line.x_px))
         else:
             spots_line = (self._flat_rows,
@@ -264,7 +266,7 @@ class FrameTracker:
         reach, the one found on more rows kept: on a tilted surface the line moves off the
         level surface's line with the height, beyond the band searched around it."""
         settings, noise = self.config.line, self.config.spots.read_noise
-        line = self._joined(track_line(red, offset, self._line_x, self._line_rows, settings,
+        line = self._continued(track_line(red, offset, self._line_x, self._line_rows, settings,
                                        noise))
         self._frames_since_seek += 1
         if self._line_followed or (self.hampel is not None
@@ -272,15 +274,15 @@ class FrameTracker:
             return line
         self._frames_since_seek = 0
         low_x, high_x = self._line_reach
-        sought = self._joined(seek_line(red, offset, self._line_rows, low_x, high_x, settings,
+        sought = self._continued(seek_line(red, offset, self._line_rows, low_x, high_x, settings,
                                         noise))
         return sought if len(sought.x_px) > len(line.x_px) else line
 
-    def _joined(self, line: LineProfile) -> LineProfile:
-        """`line.joined_within` the flat surface's line's rows."""
+    def _continued(self, line: LineProfile) -> LineProfile:
+        """`line.continued_within` the flat surface's line's rows."""
         if not len(self._flat_rows):
             return line
-        return joined_within(line, self._flat_rows[0], self._flat_rows[-1], self.config.line)
+        return continued_within(line, self._flat_rows[0], self._flat_rows[-1], self.config.line)
 
     def unfiltered(self, frame: int) -> list[TrackedSpot]:
         """A frame's spots as measured, before its Hampel window closes (for a live view):

@@ -31,7 +31,7 @@ from sds_recon.calibration.rig_model import LineObservations
 from sds_recon.calibration.rig_report import calibrated_rig, report_text, rig_report
 from sds_recon.triangulation import beam_image_path
 from sds_tracker.discovery import SpotCandidates, averaged, excess_sigma_px, find_spots
-from sds_tracker.line import LineSettings, joined_within, seek_line
+from sds_tracker.line import LineSettings, continued_within, seek_line
 from sds_tracker.plateaus import Plateau, changed_pixels, find_plateaus
 from sds_tracker.tracker import flat_line_px, line_reach_px
 
@@ -186,7 +186,7 @@ def observe(rig: Rig, images: list[np.ndarray],
     for index, image in enumerate(images):
         region.check_inside(image.shape[1], image.shape[0])
         red = select(image, region, "red")
-        profile = joined_within(seek_line(red, (region.x, region.y), rows, low_x, high_x,
+        profile = continued_within(seek_line(red, (region.x, region.y), rows, low_x, high_x,
                                           settings), flat_rows[0], flat_rows[-1], settings) \
             if len(rows) else None
         line_px = (profile.y_px, profile.x_px) if profile is not None and \
