@@ -133,8 +133,8 @@ def continued_within(line: LineProfile, first_row: float, last_row: float,
     straight line through the 2 `continuity_rows` + 1 samples before it; the walk stops at
     the first that is not. Beyond where the line usually ends it is taken only as its own
     continuation, not from a spot on its way past its end (the development stills' rig 7109:
-    a saturated spot 20 rows past the line's end and 3.6 px beside it, its rows taken for the
-    line's) or a reflection there."""
+    the line measured 20 rows past its end, over a saturated spot there) or a reflection
+    there."""
     s = settings or LineSettings()
     rows, x = line.y_px, line.x_px
     inside = np.flatnonzero((rows >= first_row) & (rows <= last_row))
