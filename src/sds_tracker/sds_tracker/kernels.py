@@ -266,6 +266,31 @@ def line_rows(image: np.ndarray, rows: np.ndarray, starts: np.ndarray, width: in
 
 
 @njit(cache=True, fastmath=True)
+def continues_line(rows: np.ndarray, x: np.ndarray, sample: int, first: int, last: int,
+                   gap_rows: float, off_px: float) -> bool:
+    """Whether line sample `sample` (its row and centre column in `rows`, `x`) continues the
+    samples `first` to `last`: within `gap_rows` rows of the nearer end of them, and within
+    `off_px` of the least-squares straight line (column against row) through them."""
+    nearest = first if abs(rows[first] - rows[sample]) < abs(rows[last] - rows[sample]) \
+        else last
+    if abs(rows[sample] - rows[nearest]) > gap_rows:
+        return False
+    count = last - first + 1
+    mean_row = 0.0
+    mean_x = 0.0
+    for k in range(first, last + 1):
+        mean_row += rows[k] / count
+        mean_x += x[k] / count
+    covariance = 0.0
+    variance = 0.0
+    for k in range(first, last + 1):
+        covariance += (rows[k] - mean_row) * (x[k] - mean_x)
+        variance += (rows[k] - mean_row) ** 2
+    slope = covariance / variance if variance > 0 else 0.0
+    return abs(x[sample] - (mean_x + slope * (rows[sample] - mean_row))) <= off_px
+
+
+@njit(cache=True, fastmath=True)
 def remove_line(window: np.ndarray, background: float, slope: float, intercept: float,
                 spot_row: float, reach: int, step_px: float, threshold: float,
                 saturation_level: float, first_row: int, last_row: int
@@ -418,6 +443,7 @@ def warm_up() -> None:
     symmetric_centre(np.zeros((9, 9)), np.zeros((9, 9), np.bool_), 4.0, 4.0, 3, 30.0, 1, 1)
     remove_line(np.zeros((49, 49), np.float32), 0.0, 0.0, 24.0, 24.0, 12, 0.25, 30.0, 250.0,
                 0, 48)
+    continues_line(np.arange(3.0), np.zeros(3), 2, 0, 1, 8.0, 2.0)
     speckle_sigmas_px(image, np.full((1, 2), 32.0), np.full(1, 12.0), np.full(1, 24), 2.0,
                       250.0, 0.95, np.full(1, np.nan))
 

@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 from scipy.ndimage import median_filter
 
-from sds_tracker.kernels import line_rows
+from sds_tracker.kernels import continues_line, line_rows
 
 INTERPOLATED, SATURATED_LINE, LOW_SIGNAL = 1, 2, 4
 """Flag bits, the same as sds_msgs/LaserLineProfile's."""
@@ -142,29 +142,18 @@ def continued_within(line: LineProfile, first_row: float, last_row: float,
         return LineProfile(x[inside], rows[inside], line.sigma_px[inside], line.peak[inside],
                            line.flags[inside])
     fit_samples = 2 * s.continuity_rows + 1
+    gap_rows = float(s.continuity_rows + 1)
     low, high = int(inside[0]), int(inside[-1])
-    while low > 0 and _continues(rows, x, low - 1, range(low, min(low + fit_samples, high + 1)),
-                                 s):
+    while low > 0 and continues_line(rows, x, low - 1, low, min(low + fit_samples, high + 1) - 1,
+                                     gap_rows, s.continuity_px):
         low -= 1
-    while high < len(rows) - 1 and _continues(rows, x, high + 1,
-                                              range(max(high + 1 - fit_samples, low), high + 1),
-                                              s):
+    while high < len(rows) - 1 and continues_line(rows, x, high + 1,
+                                                  max(high + 1 - fit_samples, low), high,
+                                                  gap_rows, s.continuity_px):
         high += 1
     kept = slice(low, high + 1)
     return LineProfile(x[kept], rows[kept], line.sigma_px[kept], line.peak[kept],
                        line.flags[kept])
-
-
-def _continues(rows: np.ndarray, x: np.ndarray, sample: int, before: range,
-               s: LineSettings) -> bool:
-    """Whether `sample` continues the samples `before` it (a neighbour within
-    `continuity_rows` + 1 rows, and within `continuity_px` of their straight line)."""
-    fit = np.array(before)
-    nearest = fit[np.argmin(np.abs(rows[fit] - rows[sample]))]
-    if abs(rows[sample] - rows[nearest]) > s.continuity_rows + 1:
-        return False
-    slope, intercept = np.polyfit(rows[fit], x[fit], 1)
-    return bool(abs(x[sample] - (intercept + slope * rows[sample])) <= s.continuity_px)
 
 
 def redness(bgr: np.ndarray) -> np.ndarray:

@@ -217,6 +217,7 @@ class FrameTracker:
         self._line_reach = (low_x, high_x)
         self._line_x = np.interp(self._line_rows, self._flat_rows, flat_x) \
             if len(self._flat_rows) else np.zeros(0)
+        self._followed_rows = self._near_rows(self._flat_rows)
         self._line_followed = False
         self._frames_since_seek = SEEK_PERIOD_FRAMES
         warm_up()
@@ -231,8 +232,10 @@ class FrameTracker:
         line = self._find_line(red, offset)
         found = len(line.x_px) > len(self._flat_rows) // 4
         if found:
-            # Follow the line: next frame looks around where it is now.
+            # Follow the line: next frame looks around where it is now, on the level
+            # surface's rows and on to `band_px` rows beyond its ends where it runs past them.
             self._line_x = np.interp(self._line_rows, line.y_px, line.x_px)
+            self._followed_rows = self._near_rows(line.y_px)
             # Over the flat surface's line's rows (a spot can hide the line's end) and on to
             # its ends where it runs beyond them; past its ends it has no light to take away.
             rows = np.arange(int(min(line.y_px[0], self._flat_rows[0])),
@@ -266,8 +269,9 @@ class FrameTracker:
         reach, the one found on more rows kept: on a tilted surface the line moves off the
         level surface's line with the height, beyond the band searched around it."""
         settings, noise = self.config.line, self.config.spots.read_noise
-        line = self._continued(track_line(red, offset, self._line_x, self._line_rows, settings,
-                                       noise))
+        followed = self._followed_rows
+        line = self._continued(track_line(red, offset, self._line_x[followed],
+                                          self._line_rows[followed], settings, noise))
         self._frames_since_seek += 1
         if self._line_followed or (self.hampel is not None
                                    and self._frames_since_seek < SEEK_PERIOD_FRAMES):
@@ -277,6 +281,15 @@ class FrameTracker:
         sought = self._continued(seek_line(red, offset, self._line_rows, low_x, high_x, settings,
                                         noise))
         return sought if len(sought.x_px) > len(line.x_px) else line
+
+    def _near_rows(self, rows: np.ndarray) -> np.ndarray:
+        """Which of the rows the line can cross (`_line_rows`) lie on the level surface's
+        line or within `band_px` rows of `rows` (full frame, ascending)."""
+        if not len(self._flat_rows):
+            return np.zeros(len(self._line_rows), bool)
+        margin = self.config.line.band_px
+        return (self._line_rows >= min(rows[0], self._flat_rows[0]) - margin) & \
+            (self._line_rows <= max(rows[-1], self._flat_rows[-1]) + margin)
 
     def _continued(self, line: LineProfile) -> LineProfile:
         """`line.continued_within` the flat surface's line's rows."""
