@@ -822,6 +822,34 @@ def test_a_blob_beside_the_lines_end_is_not_taken_for_line() -> None:
     assert np.max(np.abs(profile.x_px - expected)) < 0.5
 
 
+def test_beyond_the_level_lines_rows_the_line_is_taken_only_as_its_continuation() -> None:
+    """The line (slope 0.3) runs on to row 60, past the level surface's rows (100-380); a
+    saturated spot 3 px beside where it would run lies 12-35 rows past its end (rows 25-48),
+    joined to it without a gap. Searched on every row, the line is its own to its end, and
+    the spot's rows are not the line's."""
+    from sds_tracker.line import LineSettings, continued_within, track_line
+
+    rows, columns = np.indices((400, 300)).astype(float)
+    line_x = 150.0 + 0.3 * (rows[:, 0] - 100)
+    light = np.full(rows.shape, 15.0)
+    on_line = (rows[:, 0] >= 60) & (rows[:, 0] <= 380)
+    light[on_line] += 200.0 * np.exp(-0.5 * ((columns[on_line] - line_x[on_line, None]) / 1.5)
+                                     ** 2)
+    spot_x = 150.0 + 0.3 * (36.5 - 100) + 3.0
+    light += 600.0 * np.exp(-0.5 * (((columns - spot_x) / 5.0) ** 2 +
+                                    ((rows - 36.5) / 5.0) ** 2))
+    noise = np.random.default_rng(5).normal(0.0, 2.0, light.shape)
+    image = np.clip(np.round(light + noise), 0, 255).astype(np.uint8)
+    search = np.arange(10, 395)
+    settings = LineSettings()
+    measured = track_line(image, (0, 0), 150.0 + 0.3 * (search - 100.0), search, settings)
+    assert measured.y_px.min() < 50   # the spot's rows, joined to the line's
+    line = continued_within(measured, 100, 380, settings)
+    assert 58 <= line.y_px.min() <= 62 and line.y_px.max() >= 378
+    expected = 150.0 + 0.3 * (line.y_px - 100)
+    assert np.max(np.abs(line.x_px - expected)) < 0.5
+
+
 def rim_and_spot(spot: tuple[float, float] | None, seed: int) -> np.ndarray:
     """The demo's failure: the container's rim lit by ambient light (a 4 px grey stripe 35
     grey levels above the dark liquid, as the simulator renders it) across a diode's path,
