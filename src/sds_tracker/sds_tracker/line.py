@@ -100,7 +100,16 @@ def _without_islands(x: np.ndarray, rows: np.ndarray, s: LineSettings) -> np.nda
     rows long stood 19 px beside a 35° still's line, 4 rows beyond its end) or a speckle
     grain, not the line, which is long; the running median cannot tell such a run from the
     line where it is all there is on its rows."""
-    runs = _runs(x, rows, s)
+    found = np.flatnonzero(np.isfinite(x))
+    if len(found) < 2:
+        return x
+    row_steps = np.diff(rows[found]).astype(float)
+    column_steps = np.diff(x[found])
+    slope = float(np.median(column_steps / row_steps))
+    cut = (row_steps > s.continuity_rows + 1) | \
+        (np.abs(column_steps - slope * row_steps) > 3 * s.continuity_px)
+    breaks = np.flatnonzero(cut) + 1
+    runs = np.split(found, breaks)
     if len(runs) < 2:
         return x
     result = x.copy()
@@ -108,21 +117,6 @@ def _without_islands(x: np.ndarray, rows: np.ndarray, s: LineSettings) -> np.nda
         if rows[run[-1]] - rows[run[0]] + 1 < 2 * s.continuity_rows + 1:
             result[run] = np.nan
     return result
-
-
-def _runs(x: np.ndarray, rows: np.ndarray, s: LineSettings) -> list[np.ndarray]:
-    """Indices of the finite samples of `x` (on `rows`), split into runs where more than
-    `continuity_rows` rows pass without a sample or the line steps across by more than 3
-    `continuity_px` beyond its slope (the median of its samples' steps)."""
-    found = np.flatnonzero(np.isfinite(x))
-    if len(found) < 2:
-        return [found]
-    row_steps = np.diff(rows[found]).astype(float)
-    column_steps = np.diff(x[found])
-    slope = float(np.median(column_steps / row_steps))
-    cut = (row_steps > s.continuity_rows + 1) | \
-        (np.abs(column_steps - slope * row_steps) > 3 * s.continuity_px)
-    return np.split(found, np.flatnonzero(cut) + 1)
 
 
 def continued_within(line: LineProfile, first_row: float, last_row: float,

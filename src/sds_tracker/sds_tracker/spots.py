@@ -1230,14 +1230,14 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
     lies on the rows `line_span` (first and last; None: every row) and a straight line through
     it on the rows beyond half a window from the spot is used. The line's
     cross profile (signal against the column's offset from that line, in PROFILE_STEP_PX
-    bins) is the median over the rows that lie beyond half a window from the spot, and is
-    subtracted from every row, the spot's included: a spot on the line keeps its own light
-    and loses the line's, a spot beside it no longer leans towards it. A saturated pixel the
-    line lights holds an unknown share of the spot's light, so the centre is not a centroid
-    but the point about which what is left is most nearly symmetric, over the known pixels
-    within half a window (SYMMETRY_REACH_SHARE of one for a spot saturated beside the line;
-    `kernels.symmetric_centre`): a spot's own light is point-symmetric (a Gaussian, or an
-    ellipse on a tilted surface), the line's ragged remainder is not.
+    bins) is the median over its rows that lie beyond half a window from the spot, and is
+    subtracted from every one of its rows, the spot's included: a spot on the line keeps its
+    own light and loses the line's, a spot beside it no longer leans towards it. A saturated
+    pixel the line lights holds an unknown share of the spot's light, so the centre is not a
+    centroid but the point about which what is left is most nearly symmetric, over the known
+    pixels within half a window (SYMMETRY_REACH_SHARE of one for a spot saturated beside the
+    line; `kernels.symmetric_centre`): a spot's own light is point-symmetric (a Gaussian, or
+    an ellipse on a tilted surface), the line's ragged remainder is not.
     """
     rows, columns = np.indices(window.shape)
     background = border_median(window)

@@ -210,8 +210,8 @@ class FrameTracker:
         self.hampel = None if self.config.stills else HampelBank(
             self.config.hampel_window, self.config.hampel_k, self.config.hampel_floor_px)
         self._pending: dict[int, dict[int, SpotEstimate]] = {}
-        # The line is looked for around the flat surface's line first, on every row it can
-        # cross (beyond the flat line's ends on a tilted surface or at another fill level).
+        # The line is sought on every row it can cross (beyond the level surface's line's
+        # ends on a tilted surface or at another fill level), around that line at first.
         self._flat_rows, flat_x = flat_line_px(rig)
         self._line_rows, low_x, high_x = line_reach_px(rig, self.config.line.band_px)
         self._line_reach = (low_x, high_x)
