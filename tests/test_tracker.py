@@ -218,6 +218,31 @@ def test_the_line_on_a_tilted_still_is_found_along_its_whole_length(repo: Path) 
     assert len(spot_errors) >= 70 and max(spot_errors) < 0.5, max(spot_errors)
 
 
+def test_a_rig_without_a_line_laser_is_tracked(repo: Path) -> None:
+    """A rig without a line laser (its drop rendered without one) has no line to seek or to
+    take away: every frame's line is empty and every visible spot is measured, within 0.5 px
+    of its truth (a version that sought the line beyond the level surface's rows failed on
+    the first frame)."""
+    scenario = load_scenario(repo / "config" / "scenarios" / "ground_kick.yaml",
+                             {"duration_s": 0.4, "scale": 0.5})
+    rig = replace(scenario.rig, line_laser=None)
+    renderer = FrameRenderer(replace(scenario, rig=rig))
+    tracker = FrameTracker(replace(rig, camera=rig.camera.scaled(0.5)))
+    truths, outputs = {}, []
+    for index in range(12):
+        image, truths[index] = renderer.render(index)
+        ready, line = tracker.process(index, image[..., 2], (0, 0))
+        assert len(line.x_px) == 0
+        outputs += ready
+    outputs += tracker.flush()
+    ids = [d.laser_id for d in rig.diodes]
+    assert len(outputs) == 12
+    for index, spots in outputs:
+        found = errors_px(spots, truths[index], ids)
+        assert len(found) == int(truths[index].visible.sum()), index
+        assert max(error_px for _, error_px, _ in found) < 0.5, index
+
+
 def test_manual_seeds_start_the_spots_and_bad_seeds_are_refused(repo: Path) -> None:
     scenario = load_scenario(repo / "config" / "scenarios" / "ground_kick.yaml",
                              {"duration_s": 0.2})

@@ -217,7 +217,7 @@ class FrameTracker:
         self._line_reach = (low_x, high_x)
         self._line_x = np.interp(self._line_rows, self._flat_rows, flat_x) \
             if len(self._flat_rows) else np.zeros(0)
-        self._followed_rows = self._near_rows(self._flat_rows)
+        self._followed_rows = self._around(self._flat_rows, self.config.line.band_px)
         self._line_followed = False
         self._frames_since_seek = SEEK_PERIOD_FRAMES
         warm_up()
@@ -231,25 +231,21 @@ class FrameTracker:
         """
         line = self._find_line(red, offset)
         found = len(line.x_px) > len(self._flat_rows) // 4
+        # The spots get the line over the level surface's line's rows (a spot can hide the
+        # line's end) and on to its ends where it runs beyond them: past its ends it has no
+        # light to take away.
+        lit = self._around(line.y_px if found else self._flat_rows, 0)
         if found:
-            # Follow the line: next frame looks around where it is now, on the level
-            # surface's rows and on to `band_px` rows beyond its ends where it runs past them.
+            # Follow the line: next frame looks around where it is now, on those rows and
+            # `band_px` more at either end.
             self._line_x = np.interp(self._line_rows, line.y_px, line.x_px)
-            self._followed_rows = self._near_rows(line.y_px)
-            # Over the flat surface's line's rows (a spot can hide the line's end) and on to
-            # its ends where it runs beyond them; past its ends it has no light to take away.
-            rows = np.arange(int(min(line.y_px[0], self._flat_rows[0])),
-                             int(max(line.y_px[-1], self._flat_rows[-1])) + 1)
-            spots_line = (rows, np.interp(rows, line.y_px, line.x_px))
-        else:
-            spots_line = (self._flat_rows,
-                          np.interp(self._flat_rows, self._line_rows, self._line_x))
+            self._followed_rows = self._around(line.y_px, self.config.line.band_px)
         # A still's line says nothing of the next image's.
         self._line_followed = found and self.hampel is not None
         if self.hampel is None:   # a still: where the spots were says nothing of this image
             self.spots.forget()
         # The line's light is kept out of the spots it passes (seen this frame, or expected).
-        estimates = self.spots.update(red, offset, spots_line)
+        estimates = self.spots.update(red, offset, (self._line_rows[lit], self._line_x[lit]))
         if self.excess_sigma_px:
             estimates = [e if self.spots.measures_own_speckle(e) else
                          replace(e, sigma_px=float(np.hypot(e.sigma_px, self.excess_sigma_px)))
@@ -282,14 +278,14 @@ class FrameTracker:
                                         noise))
         return sought if len(sought.x_px) > len(line.x_px) else line
 
-    def _near_rows(self, rows: np.ndarray) -> np.ndarray:
-        """Which of the rows the line can cross (`_line_rows`) lie on the level surface's
-        line or within `band_px` rows of `rows` (full frame, ascending)."""
+    def _around(self, rows: np.ndarray, margin_rows: int) -> np.ndarray:
+        """Which of the rows the line can cross (`_line_rows`) lie between the first and the
+        last of the level surface's line's rows and `rows` (full frame, ascending), or
+        within `margin_rows` beyond them; none for a rig without a line laser."""
         if not len(self._flat_rows):
             return np.zeros(len(self._line_rows), bool)
-        margin = self.config.line.band_px
-        return (self._line_rows >= min(rows[0], self._flat_rows[0]) - margin) & \
-            (self._line_rows <= max(rows[-1], self._flat_rows[-1]) + margin)
+        return (self._line_rows >= min(rows[0], self._flat_rows[0]) - margin_rows) & \
+            (self._line_rows <= max(rows[-1], self._flat_rows[-1]) + margin_rows)
 
     def _continued(self, line: LineProfile) -> LineProfile:
         """`line.continued_within` the flat surface's line's rows."""
