@@ -189,18 +189,20 @@ mismatch is read (`symmetry_sigma_px`): a pixel or more, beyond the search's las
 SYMMETRY_NOISE_PIXELS = 4.0
 """Neighbouring pixels that share one draw of the noise in a spot's light (`symmetry_sigma_px`):
 speckle's grain of 1-2 px and the codec's blocks. Set on development data (the real-images
-bench's rigs 7001-7004, every effect and speckle alone, 287 spots measured without the line's
-light; the stills of 7101-7116): the error across the line over the σ with every pixel its
-own draw was 1.3-2.3 at the median, 2.2-3.7 RMS; at 4 (twice the σ) the spots' error/σ RMS
-came to 0.9-1.2 with the rule of HIDDEN_CENTRE_SIGMA_PX."""
+bench's rigs 7001-7004: every effect, speckle alone, and the codec on 7001-7002, 371 spots
+measured without the line's light; 95 on the stills of 7101-7116 and 76020): the error
+across the line over the σ with every pixel its own draw was 1.3-2.3 at the median, 2.2-3.7
+RMS; at 4 (twice the σ) those spots' error/σ RMS came to 0.76-1.17 (before: 1.27-2.43)
+with the rule of HIDDEN_CENTRE_SIGMA_PX."""
 HIDDEN_CENTRE_SIGMA_PX = 2.0 / 3.0
-"""Largest uncertainty [px] across the laser line of a spot's centre of symmetry
+"""Largest uncertainty [px] across the laser line or along it of a spot's centre of symmetry
 (`symmetry_sigma_px`) with which the centre is known: an error of 2 px is then 3 σ. Beyond it
-(a saturated spot on the saturated line whose far side the line's band hides: its mismatch
-rises 5 % over 1.5 px on that side) the centre is reported unknown. Development data: the
+the centre is reported unknown: a saturated spot on the saturated line whose far side the
+line's band hides (its mismatch rises 5 % over 1.5 px on that side), or a cluster of the
+speckled line's grains that a search along the path settles on. Development data: the
 two wrong spots of the held-out sets of 2026-12-06 (rigs 76020, a still, and 76103, a video
-frame: 2.3 px off with σ 0.13 px), and 8 of 287 other spots measured without the line's light
-(0.3-1.8 px off)."""
+frame: 2.3 px off with σ 0.13 px); of the 371 video spots above, 15 others (0.2-1.4 px off);
+none of the stills' others."""
 LINE_SPECKLE_PEAK = 8.0
 """How far above the laser line's own speckle (robust σ of what its profile leaves on the
 rows away from the spot) a spot's light must rise once the line's light is taken away. On a
