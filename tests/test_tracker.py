@@ -15,6 +15,7 @@ from sds_model.rig import load_rig
 from sds_sim.render import FrameRenderer, FrameTruth
 from sds_sim.scenario import load_scenario
 from sds_tracker.hampel import HampelBank
+from sds_tracker.line import LineProfile
 from sds_tracker.spots import (
     HAMPEL_REPLACED,
     LOST,
@@ -622,20 +623,8 @@ def test_a_spot_beside_the_lines_end_beyond_the_flat_lines_rows_keeps_none_of_it
     end: 2.1 px off, σ 0.05 px, valid. Sought on every row it can cross, the line is found
     to its end and taken away from the spot: the spot is within 3 of its σ, and every other
     measured spot within 2 px."""
-    from sds_sim.tilt_series import render_surfaces
-    from sds_workflows.demo import DEMO_SCENARIO
-    from sds_workflows.demo_rig import draw_demo_rig
-
-    drawn = draw_demo_rig(load_scenario(DEMO_SCENARIO, {"seed": 74001}), tmp_path)
-    still = 10
-    series = render_surfaces(drawn.true, [drawn.surfaces[still]], drawn.scale,
-                             drawn.seed + still, imaging=drawn.imaging)
-    rig, truth = drawn.true, series.truths[0]
-    region = Region(*rig.container_region_px(rig.camera, 60))
-    ((_, spots),), line = FrameTracker(rig, TrackerConfig(stills=True)).process(
-        0, select(series.images[0], region, "red"), (region.x, region.y))
+    ids, spots, line, truth = tracked_demo_still(74001, 10, tmp_path)
     assert line.y_px.min() <= truth.line_rows[0] + 2
-    ids = [d.laser_id for d in rig.diodes]
     errors = {spot.laser_id: (spot, error_px)
               for spot, error_px, visible in errors_px(spots, truth, ids) if visible}
     spot, error_px = errors.pop(3)
@@ -651,25 +640,32 @@ def test_a_saturated_spot_whose_far_side_the_saturated_line_hides_is_not_measure
     symmetry's mismatch rises only 5 % over 1.5 px towards the truth: the centre's σ across
     the line (`symmetry_sigma_px`) is beyond HIDDEN_CENTRE_SIGMA_PX, so it is not measured;
     the 13 other spots measured before still are, each within 2 px."""
-    from sds_sim.tilt_series import render_surfaces
-    from sds_workflows.demo import DEMO_SCENARIO
-    from sds_workflows.demo_rig import draw_demo_rig
-
-    drawn = draw_demo_rig(load_scenario(DEMO_SCENARIO, {"seed": 76020}), tmp_path)
-    still = 10
-    series = render_surfaces(drawn.true, [drawn.surfaces[still]], drawn.scale,
-                             drawn.seed + still, imaging=drawn.imaging)
-    rig, truth = drawn.true, series.truths[0]
-    region = Region(*rig.container_region_px(rig.camera, 60))
-    ((_, spots),), _ = FrameTracker(rig, TrackerConfig(stills=True)).process(
-        0, select(series.images[0], region, "red"), (region.x, region.y))
-    ids = [d.laser_id for d in rig.diodes]
+    ids, spots, _, truth = tracked_demo_still(76020, 10, tmp_path)
     errors = {spot.laser_id: (spot, error_px)
               for spot, error_px, visible in errors_px(spots, truth, ids) if visible}
     assert truth.visible[ids.index(18)]
     assert 18 not in errors, errors.get(18)
     assert len(errors) >= 13   # every other spot the code before measured here
     assert max(error for _, error in errors.values()) < 2.0
+
+
+def tracked_demo_still(seed: int, still: int, folder: Path
+                       ) -> tuple[list[int], list[TrackedSpot], LineProfile, FrameTruth]:
+    """One still of a demo rig's protocol (`draw_demo_rig` of `seed`, its imaging), rendered
+    as the stills bench renders it and tracked with the true rig: the diodes' ids, the
+    spots, the line and the still's truth."""
+    from sds_sim.tilt_series import render_surfaces
+    from sds_workflows.demo import DEMO_SCENARIO
+    from sds_workflows.demo_rig import draw_demo_rig
+
+    drawn = draw_demo_rig(load_scenario(DEMO_SCENARIO, {"seed": seed}), folder)
+    series = render_surfaces(drawn.true, [drawn.surfaces[still]], drawn.scale,
+                             drawn.seed + still, imaging=drawn.imaging)
+    rig = drawn.true
+    region = Region(*rig.container_region_px(rig.camera, 60))
+    ((_, spots),), line = FrameTracker(rig, TrackerConfig(stills=True)).process(
+        0, select(series.images[0], region, "red"), (region.x, region.y))
+    return [d.laser_id for d in rig.diodes], spots, line, series.truths[0]
 
 
 def test_the_parameter_file_states_the_trackers_own_defaults(repo: Path) -> None:
