@@ -637,9 +637,9 @@ def test_a_saturated_spot_whose_far_side_the_saturated_line_hides_is_not_measure
     """The held-out stills rig 76020, its still before the high fill level's: diode 18's
     saturated, blooming spot lies 4-6 px from the saturated laser line, whose band hides its
     far side. Its centre of symmetry slid 2.3 px across the line with σ 0.13 px, valid. The
-    symmetry's mismatch rises only 5 % over 1.5 px towards the truth: the centre's σ across
-    the line (`symmetry_sigma_px`) is beyond HIDDEN_CENTRE_SIGMA_PX, so it is not measured;
-    the 13 other spots measured before still are, each within 2 px."""
+    symmetry's mismatch rises only 5 % over 1.5 px towards the truth (`symmetry_spread`),
+    below HIDDEN_CENTRE_RISE, so it is not measured; the 13 other spots measured before
+    still are, each within 2 px."""
     ids, spots, _, truth = tracked_demo_still(76020, 10, tmp_path)
     errors = {spot.laser_id: (spot, error_px)
               for spot, error_px, visible in errors_px(spots, truth, ids) if visible}
@@ -1133,11 +1133,10 @@ def test_the_speckled_lines_light_beside_a_hidden_spot_is_not_it() -> None:
     only where it rises LINE_SPECKLE_PEAK times above what the line's speckle leaves at that
     offset from the line. Here, 30 such spots in a video's fixed aperture, each seen once and
     hidden for three frames: before, 24 of the 90 hidden frames gave a spot (7 with the first
-    change alone); now none. While it is there, 18 of the 30 are found, 1.0-2.5 px off: the
-    others' centres of symmetry are uncertain by more than HIDDEN_CENTRE_SIGMA_PX
-    (`symmetry_sigma_px`: 29 were found, 0.85-2.5 px off, before that rule; seed 16's search
-    along its path then found a centre 6.5 px off along the line, whose σ that way is 0.7 px
-    or more). Bound at 15."""
+    change alone); now none. While it is there, 27 of the 30 are found, 0.85-2.5 px off; seed
+    7's measurement without the line's light alternates between two centres, 1.2 px off and
+    3.3 px off on the line, and so is not known (`settled_line_free_centre`), and seeds 12's
+    and 24's centres of symmetry have a flat side (HIDDEN_CENTRE_RISE; found before it)."""
     size, line_x = 160, 80.3
     line = (np.arange(float(size)), np.full(size, line_x))
     fabricated, found = [], 0
@@ -1157,7 +1156,7 @@ def test_the_speckled_lines_light_beside_a_hidden_spot_is_not_it() -> None:
             if not gone.flags & LOST:
                 fabricated.append((seed, frame, gone))
     assert not fabricated, fabricated
-    assert found >= 15
+    assert found >= 27
 
 
 def bent_line_frame(seed: int, spot: tuple[float, float] | None, bend_px: float,
@@ -1202,12 +1201,12 @@ def test_an_unsaturated_spot_on_a_speckled_line_says_it_is_uncertain(beside_px: 
                                                                       ) -> None:
     """A dim spot (peak 180) overlapping a saturating line, both under speckle (contrast 0.5):
     what the line's profile leaves of its speckle moves the spot's centre by a pixel or two,
-    and its σ says so (`line_speckle_sigma_px`, `symmetry_sigma_px`) instead of the saturated
-    spots' 0.13 px, or the spot is not measured: where its centre of symmetry is uncertain by
-    more than HIDDEN_CENTRE_SIGMA_PX. Measured over 40 frames, 2 and 4 px beside the line:
-    8 and 20 measured, error/σ RMS 2.05 and 1.71 (the rest is a push away from the line, which
-    no σ holds; with the line's speckle alone in the σ, 40 measured: 3.9 and 3.3, and before
-    it 11.8 and 7.4); bound at 3, and at 6 measured."""
+    and its σ says so (`line_speckle_sigma_px`, `symmetry_spread`) instead of the saturated
+    spots' 0.13 px, or the spot is not measured: where its centre of symmetry has a flat side
+    (HIDDEN_CENTRE_RISE). Measured over 40 frames, 2 and 4 px beside the line: 34 and 40
+    measured, error/σ RMS 1.80 and 1.52 (the rest is a push away from the line, which no σ
+    holds; with the line's speckle alone in the σ, 40 measured: 3.9 and 3.3, and before it
+    11.8 and 7.4); bound at 2.5, and at 30 measured."""
     ratios, sigmas = [], []
     size = 160
     rows, columns = np.mgrid[0:size, 0:size].astype(float)
@@ -1228,9 +1227,9 @@ def test_an_unsaturated_spot_on_a_speckled_line_says_it_is_uncertain(beside_px: 
         error = np.hypot(estimate.x_px - spot[0], estimate.y_px - spot[1])
         ratios.append(error / np.sqrt(2) / estimate.sigma_px)
         sigmas.append(estimate.sigma_px)
-    assert len(ratios) >= 6
+    assert len(ratios) >= 30
     assert np.median(sigmas) > 2 * ON_LINE_SIGMA_PX[1]
-    assert np.sqrt(np.mean(np.square(ratios))) < 3.0
+    assert np.sqrt(np.mean(np.square(ratios))) < 2.5
 
 
 @pytest.mark.parametrize("seed", [1, 2])
