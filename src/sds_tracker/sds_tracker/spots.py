@@ -1262,7 +1262,9 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
     direction and the clearance between the two; None when the line does not reach enough of
     the window's rows, a NaN centre when no spot is left (nothing LINE_SPECKLE_PEAK times
     the line's speckle, and above the threshold, on the line or beside it) or where its
-    centre cannot be told (a saturated line hides its mirror half: HIDDEN_SYMMETRY_SHARE).
+    centre cannot be told (a saturated line hides its mirror half: HIDDEN_SYMMETRY_SHARE; or
+    its symmetry has a flat side: HIDDEN_CENTRE_RISE). The centre's own σ from its symmetry
+    is `symmetry_sigma_px` (`symmetry_spread`).
 
     `line_x[r]` is the line's centre column on window row r (NaN where unknown); the line
     lies on the rows `line_span` (first and last; None: every row) and a straight line through
