@@ -637,7 +637,7 @@ def test_a_saturated_spot_whose_far_side_the_saturated_line_hides_is_not_measure
     """The held-out stills rig 76020, its still before the high fill level's: diode 18's
     saturated, blooming spot lies 4-6 px from the saturated laser line, whose band hides its
     far side. Its centre of symmetry slid 2.3 px across the line with σ 0.13 px, valid. The
-    symmetry's mismatch rises only 5 % over 1.5 px towards the truth (`symmetry_spread`),
+    symmetry's mismatch rises only 5 % over 1.5 px towards the truth (`symmetry_spreads`),
     below HIDDEN_CENTRE_RISE, so it is not measured; the 13 other spots measured before
     still are, each within 2 px."""
     ids, spots, _, truth = tracked_demo_still(76020, 10, tmp_path)
@@ -1201,7 +1201,7 @@ def test_an_unsaturated_spot_on_a_speckled_line_says_it_is_uncertain(beside_px: 
                                                                       ) -> None:
     """A dim spot (peak 180) overlapping a saturating line, both under speckle (contrast 0.5):
     what the line's profile leaves of its speckle moves the spot's centre by a pixel or two,
-    and its σ says so (`line_speckle_sigma_px`, `symmetry_spread`) instead of the saturated
+    and its σ says so (`line_speckle_sigma_px`, `symmetry_spreads`) instead of the saturated
     spots' 0.13 px, or the spot is not measured: where its centre of symmetry has a flat side
     (HIDDEN_CENTRE_RISE). Measured over 40 frames, 2 and 4 px beside the line: 34 and 40
     measured, error/σ RMS 1.80 and 1.52 (the rest is a push away from the line, which no σ

@@ -185,10 +185,10 @@ HIDDEN_SYMMETRY_PX = 1.0
 """How far [px] the two searches' centres may differ before the spot's centre is unknown."""
 SYMMETRY_STEP_PX = 1.5
 """Step [px] across the laser line and along it from a spot's centre of symmetry at which the
-rise of its mismatch is read (`symmetry_spread`): a pixel or more, beyond the search's last
+rise of its mismatch is read (`symmetry_spreads`): a pixel or more, beyond the search's last
 steps."""
 SYMMETRY_NOISE_PIXELS = 4.0
-"""Neighbouring pixels that share one draw of the noise in a spot's light (`symmetry_spread`):
+"""Neighbouring pixels that share one draw of the noise in a spot's light (`symmetry_spreads`):
 speckle's grain of 1-2 px and the codec's blocks. Set on development data (the real-images
 bench's rigs 7001-7004: every effect, speckle alone, and the codec on 7001-7002, 371 spots
 measured without the line's light; 95 on the stills of 7101-7116 and 76020): the error
@@ -197,7 +197,7 @@ RMS; at 4 (twice the σ) those spots' error/σ RMS came to 0.75-1.16 (before: 1.
 with the rule of HIDDEN_CENTRE_RISE."""
 HIDDEN_CENTRE_RISE = 0.15
 """Least rise of a spot's symmetry mismatch over SYMMETRY_STEP_PX, as a share of its own at
-the centre, on the flatter side across the laser line or along it (`symmetry_spread`), with
+the centre, on the flatter side across the laser line or along it (`symmetry_spreads`), with
 which its centre of symmetry is known; below it (or where a step lowers the mismatch) the
 centre is reported unknown: a saturated spot on the saturated line whose far side the line's
 band hides has a flat side. Development data, the spots measured without the line's light
@@ -1081,7 +1081,7 @@ class LineFreeSpot:
     NaN where the line's light was all there was (no spot) or the spot's centre is hidden.
     `line_sigma_px` is the centre's uncertainty from the line's speckle left in the spot's
     light (`line_speckle_sigma_px`); `symmetry_sigma_px` its uncertainty per axis from how
-    sharply its symmetry falls off across the line and along it (`symmetry_spread`, the
+    sharply its symmetry falls off across the line and along it (`symmetry_spreads`, the
     root mean square of the two), which holds every noise in the spot's light.
     `beside_line_peak` is the brightest of the spot's own light beside the line's band (its
     half width at the threshold) [grey levels over the background]: on the band, what the
@@ -1264,7 +1264,7 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
     the line's speckle, and above the threshold, on the line or beside it) or where its
     centre cannot be told (a saturated line hides its mirror half: HIDDEN_SYMMETRY_SHARE; or
     its symmetry has a flat side: HIDDEN_CENTRE_RISE). The centre's own σ from its symmetry
-    is `symmetry_sigma_px` (`symmetry_spread`).
+    is `symmetry_sigma_px` (`symmetry_spreads`).
 
     `line_x[r]` is the line's centre column on window row r (NaN where unknown); the line
     lies on the rows `line_span` (first and last; None: every row) and a straight line through
@@ -1349,8 +1349,8 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
     if not np.isfinite(mismatch) or hidden or not (left[near] > floor[near]).any():
         return LineFreeSpot(np.full(2, np.nan), along, np.nan)
     across = np.array([1.0, -slope]) / norm
-    spreads = [symmetry_spread(left, unknown, centre, direction, symmetry_reach, s.threshold)
-               for direction in (across, along)]
+    spreads = symmetry_spreads(left, unknown, centre, (across, along), symmetry_reach,
+                               s.threshold)
     if min(rise for _, rise in spreads) < HIDDEN_CENTRE_RISE:
         return LineFreeSpot(np.full(2, np.nan), along, np.nan)
     # Clearance: the spot's reach on its side away from the line (where the line's light is
@@ -1369,29 +1369,37 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
                         abs(to_line) - line_half_width / norm)
 
 
-def symmetry_spread(left: np.ndarray, unknown: np.ndarray, centre: np.ndarray,
-                    direction: np.ndarray, reach: int, threshold: float) -> tuple[float, float]:
-    """How sharply a spot's symmetry falls off along the unit vector `direction` from its
-    centre of symmetry (`kernels.symmetric_centre`, `centre` in window px): the mismatch M0
-    there (N pairs) rises to M_h, the lower of the two at SYMMETRY_STEP_PX h either way.
-    Returns the centre's uncertainty σ [px] that way, from least squares over pairs whose
-    difference has the variance M0, SYMMETRY_NOISE_PIXELS pixels to each draw of the noise:
-    σ² = 2·M0·h²·SYMMETRY_NOISE_PIXELS / (N·(M_h − M0)); and the rise (M_h − M0) / M0, which a
-    side the saturated line hides leaves small (HIDDEN_CENTRE_RISE). (inf, 0) where a step
-    lowers the mismatch (no least mismatch that way); (0, inf) where it is exactly symmetric."""
+def symmetry_spreads(left: np.ndarray, unknown: np.ndarray, centre: np.ndarray,
+                     directions: tuple[np.ndarray, ...], reach: int, threshold: float
+                     ) -> list[tuple[float, float]]:
+    """How sharply a spot's symmetry falls off along each unit vector of `directions` from
+    its centre of symmetry (`kernels.symmetric_centre`, `centre` in window px): the mismatch
+    M0 there (N pairs) rises to M_h, the lower of the two at SYMMETRY_STEP_PX h either way.
+    Per direction: the centre's uncertainty σ [px] that way, from least squares over pairs
+    whose difference has the variance M0, SYMMETRY_NOISE_PIXELS pixels to each draw of the
+    noise: σ² = 2·M0·h²·SYMMETRY_NOISE_PIXELS / (N·(M_h − M0)); and the rise (M_h − M0) / M0,
+    which a side the saturated line hides leaves small (HIDDEN_CENTRE_RISE). (inf, 0) where a
+    step lowers the mismatch (no least mismatch that way); (0, inf) where it is exactly
+    symmetric."""
     at_centre, pairs = symmetry_mismatch(left, unknown, float(centre[0]), float(centre[1]),
                                          reach, threshold, 1)
-    step = SYMMETRY_STEP_PX * direction
-    stepped = min(symmetry_mismatch(left, unknown, float(centre[0] + sign * step[0]),
-                                    float(centre[1] + sign * step[1]), reach, threshold, 1)[0]
-                  for sign in (-1.0, 1.0))
-    if pairs == 0 or stepped <= at_centre:
-        return np.inf, 0.0
-    if at_centre == 0:
-        return 0.0, np.inf
-    return (float(np.sqrt(2 * at_centre * SYMMETRY_STEP_PX**2 * SYMMETRY_NOISE_PIXELS /
-                          (pairs * (stepped - at_centre)))),
-            float((stepped - at_centre) / at_centre))
+    spreads = []
+    for direction in directions:
+        step = SYMMETRY_STEP_PX * direction
+        stepped = min(symmetry_mismatch(left, unknown, float(centre[0] + sign * step[0]),
+                                        float(centre[1] + sign * step[1]), reach, threshold,
+                                        1)[0]
+                      for sign in (-1.0, 1.0))
+        if pairs == 0 or stepped <= at_centre:
+            spreads.append((np.inf, 0.0))
+        elif at_centre == 0:
+            spreads.append((0.0, np.inf))
+        else:
+            spreads.append((float(np.sqrt(2 * at_centre * SYMMETRY_STEP_PX**2 *
+                                          SYMMETRY_NOISE_PIXELS /
+                                          (pairs * (stepped - at_centre)))),
+                            float((stepped - at_centre) / at_centre)))
+    return spreads
 
 
 def line_wing_speckle(left: np.ndarray, offsets_px: np.ndarray, away: np.ndarray,
