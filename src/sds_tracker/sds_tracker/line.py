@@ -14,6 +14,9 @@ INTERPOLATED, SATURATED_LINE, LOW_SIGNAL = 1, 2, 4
 """Flag bits, the same as sds_msgs/LaserLineProfile's."""
 SEED_MEDIAN_ROWS = 31
 """Rows in the running median that turns per-row brightest columns into the search centre."""
+END_ROWS = 3
+"""Rows past a line's end that `end_is_dark` reads: a spot that hides the line's end lights
+the row next to it."""
 SEEK_MEDIAN_ROWS = 61
 """Rows in `seek_line`'s running median of per-row brightest columns: its reach holds spots
 beside the line, and a saturated spot is the brightest on about 17 rows of a 4K image (its
@@ -148,6 +151,26 @@ def continued_within(line: LineProfile, first_row: float, last_row: float,
     kept = slice(low, high + 1)
     return LineProfile(x[kept], rows[kept], line.sigma_px[kept], line.peak[kept],
                        line.flags[kept])
+
+
+def end_is_dark(image: np.ndarray, offset: tuple[int, int], line: LineProfile, step: int,
+                settings: LineSettings | None = None) -> bool:
+    """Whether the line really ends at its last sample (`step` 1) or its first (`step` −1):
+    on the END_ROWS rows past it, the pixels within a pixel of its end's column stay within
+    `threshold` of their row's median over the band (2 `band_px` + 1 columns). False where
+    they are lit, as by a spot whose light hides the line's end, or lie outside the image.
+    """
+    s = settings or LineSettings()
+    end = -1 if step > 0 else 0
+    column = round(float(line.x_px[end])) - offset[0]
+    first = int(line.y_px[end]) - offset[1] + step
+    rows = first + step * np.arange(END_ROWS)
+    x0, x1 = column - s.band_px, column + s.band_px + 1
+    if rows.min() < 0 or rows.max() >= image.shape[0] or x0 < 0 or x1 > image.shape[1]:
+        return False
+    band = image[rows, x0:x1].astype(np.float32)
+    near = band[:, s.band_px - 1:s.band_px + 2]
+    return bool(np.all(near.max(axis=1) - np.median(band, axis=1) <= s.threshold))
 
 
 def redness(bgr: np.ndarray) -> np.ndarray:

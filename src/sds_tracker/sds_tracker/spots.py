@@ -209,6 +209,11 @@ cut, 1.1-2.3 px off; none less than 1 px off rose under 0.22. A cut on the σ in
 also lost a spot 0.1 px off in 22 of 30 frames of 77102's video under the codec: its
 mismatch, large and rising 0.2-0.4 on its flatter side, is the codec's, not noise that
 moves its centre."""
+LINE_END_FADING_ROWS = 3
+"""Rows at an end of the laser line whose light fades (the blur of its fan's edge); where an
+end lies within a spot's window, the line's profile, its full light, is more than they hold,
+and their trough is not the line bending (`LineFreeSpot.line_deficit`). Held-out still 78012:
+its two end rows held a third and a fifth of the line's light."""
 LINE_SPECKLE_PEAK = 8.0
 """How far above the laser line's own speckle (robust σ of what its profile leaves on the
 rows away from the spot) a spot's light must rise once the line's light is taken away. On a
@@ -928,8 +933,11 @@ class SpotTracker:
         if reach is not None:
             near_path &= np.hypot(*(centres - reach[0]).T) <= reach[1]
         near_path[near_path] = [
-            self._spot_like(image, origin, np.array(peak), background, line)
-            for peak in self._peaks(signal, labels, near_path, (x0, y0))]
+            self._spot_like(image, origin, np.array(peak), background, line,
+                            own_light(window, labels, label, peak, (x0, y0), s.window_px // 2))
+            for label, peak in zip((np.flatnonzero(near_path) + 1).tolist(),
+                                   self._peaks(signal, labels, near_path, (x0, y0)),
+                                   strict=True)]
         # A blob far heavier than a candidate may own it as a grain of its halo, unless it
         # lies at the laser line, whose light is no halo.
         owners = masses * HALO_GRAIN_SHARE > masses[near_path].min(initial=np.inf)
@@ -1028,19 +1036,25 @@ class SpotTracker:
                 for y, x in maximum_position(signal, labels, indices)]
 
     def _spot_like(self, image: np.ndarray, origin: np.ndarray, peak: np.ndarray,
-                   background: float, line: tuple[np.ndarray, np.ndarray] | None) -> bool:
+                   background: float, line: tuple[np.ndarray, np.ndarray] | None,
+                   own: tuple[np.ndarray, np.ndarray]) -> bool:
         """Whether the light around a blob's brightest pixel `peak` (region px) can be a
         spot: no more elongated than `max_elongation` (`kernels.light_elongation` within half
-        a window, above the threshold over the search's `background`), unless the laser line
-        runs near it (`_near_line`: a spot on or beside the line is the line-free
-        measurement's to judge)."""
+        a window, above the threshold over the search's `background`), neither all the light
+        there nor the blob's `own` light alone (`own_light`: a stripe beside a spot is round
+        with the spot's light), unless the laser line runs near it (`_near_line`: a spot on
+        or beside the line is the line-free measurement's to judge)."""
         if not np.isfinite(self.max_elongation):
             return True
         if line is not None and self._near_line(origin, peak, line):
             return True
         reach = self.settings.window_px / 2
-        return light_elongation(image, float(peak[0]), float(peak[1]), reach, background,
-                                self.settings.threshold) <= self.max_elongation
+        threshold = self.settings.threshold
+        own_window, own_peak = own
+        return max(light_elongation(image, float(peak[0]), float(peak[1]), reach, background,
+                                    threshold),
+                   light_elongation(own_window, float(own_peak[0]), float(own_peak[1]), reach,
+                                    background, threshold)) <= self.max_elongation
 
     def _near_line(self, origin: np.ndarray, point: np.ndarray,
                    line: tuple[np.ndarray, np.ndarray]) -> bool:
@@ -1101,6 +1115,18 @@ class LineFreeSpot:
     beside_line_peak: float = np.nan
     line_deficit: float = np.nan
     line_edge_px: float = np.nan
+
+
+def own_light(window: np.ndarray, labels: np.ndarray, label: int, peak: tuple[float, float],
+              corner: tuple[int, int], half: int) -> tuple[np.ndarray, np.ndarray]:
+    """The light of blob `label` alone (`labels` of a search `window` whose top-left region
+    pixel is `corner`) within `half` px of its brightest pixel `peak` (region px), other
+    pixels at 0, and that pixel's place in it."""
+    x, y = int(peak[0]) - corner[0], int(peak[1]) - corner[1]
+    x0, y0 = max(x - half, 0), max(y - half, 0)
+    around = window[y0:y + half + 1, x0:x + half + 1]
+    return (np.where(labels[y0:y + half + 1, x0:x + half + 1] == label, around, 0),
+            np.array([x - x0, y - y0]))
 
 
 def line_free_sigma_px(sigma_px: float, found: LineFreeSpot) -> float:
@@ -1321,7 +1347,11 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
     # neighbouring spot's would break the symmetry.
     _, labels = cv2.connectedComponents(((left > s.threshold) | unknown).astype(np.uint8))
     joined = cv2.dilate((labels == labels[row, column]).astype(np.uint8), np.ones((5, 5)))
-    everywhere = left   # its troughs too (line_deficit)
+    # Its troughs too (line_deficit), but not on a line's fading end within the window: the
+    # profile is its full light, which the end rows do not hold.
+    ends = ((rows > last_row - LINE_END_FADING_ROWS) & (last_row < window.shape[0] - 1)) | \
+        ((rows < first_row + LINE_END_FADING_ROWS) & (first_row > 0))
+    everywhere = np.where(ends, 0.0, left)
     left = np.where(joined > 0, left, 0.0)
     starts = [(float(spot[0]), float(spot[1]))]
     if np.hypot(column - spot[0], row - spot[1]) > SYMMETRY_SEARCH_PX / 2:

@@ -17,7 +17,14 @@ from sds_recon.wall_reflection import wall_reflections_px
 
 from sds_tracker.hampel import BankOutput, HampelBank
 from sds_tracker.kernels import warm_up
-from sds_tracker.line import LineProfile, LineSettings, continued_within, seek_line, track_line
+from sds_tracker.line import (
+    LineProfile,
+    LineSettings,
+    continued_within,
+    end_is_dark,
+    seek_line,
+    track_line,
+)
 from sds_tracker.spots import (
     HAMPEL_REPLACED,
     LOST,
@@ -233,8 +240,12 @@ class FrameTracker:
         found = len(line.x_px) > len(self._flat_rows) // 4
         # The spots get the line over the level surface's line's rows (a spot can hide the
         # line's end) and on to its ends where it runs beyond them: past its ends it has no
-        # light to take away.
+        # light to take away. An end within those rows with dark rows past it is the line's
+        # own (a tilted surface's line is shorter): a spot beside it keeps all of its light
+        # there, where the line's profile taken from rows the line never lit slid it across.
         lit = self._around(line.y_px if found else self._flat_rows, 0)
+        if found:
+            lit &= self._within_dark_ends(red, offset, line)
         if found:
             # Follow the line: next frame looks around where it is now, on those rows and
             # `band_px` more at either end.
@@ -277,6 +288,18 @@ class FrameTracker:
         sought = self._continued(seek_line(red, offset, self._line_rows, low_x, high_x, settings,
                                         noise))
         return sought if len(sought.x_px) > len(line.x_px) else line
+
+    def _within_dark_ends(self, red: np.ndarray, offset: tuple[int, int], line: LineProfile
+                          ) -> np.ndarray:
+        """Which of the rows the line can cross (`_line_rows`) do not lie past an end of
+        `line` that has dark rows beyond it (`line.end_is_dark`)."""
+        within = np.ones(len(self._line_rows), bool)
+        settings = self.config.line
+        if end_is_dark(red, offset, line, 1, settings):
+            within &= self._line_rows <= line.y_px[-1]
+        if end_is_dark(red, offset, line, -1, settings):
+            within &= self._line_rows >= line.y_px[0]
+        return within
 
     def _around(self, rows: np.ndarray, margin_rows: int) -> np.ndarray:
         """Which of the rows the line can cross (`_line_rows`) lie between the first and the
