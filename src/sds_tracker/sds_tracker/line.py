@@ -154,23 +154,24 @@ def continued_within(line: LineProfile, first_row: float, last_row: float,
 
 
 def end_is_dark(image: np.ndarray, offset: tuple[int, int], line: LineProfile, step: int,
-                settings: LineSettings | None = None) -> bool:
+                settings: LineSettings) -> bool:
     """Whether the line really ends at its last sample (`step` 1) or its first (`step` −1):
     on the END_ROWS rows past it, the pixels within a pixel of its end's column stay within
     `threshold` of their row's median over the band (2 `band_px` + 1 columns). False where
     they are lit, as by a spot whose light hides the line's end, or lie outside the image.
     """
-    s = settings or LineSettings()
     end = -1 if step > 0 else 0
     column = round(float(line.x_px[end])) - offset[0]
-    first = int(line.y_px[end]) - offset[1] + step
-    rows = first + step * np.arange(END_ROWS)
-    x0, x1 = column - s.band_px, column + s.band_px + 1
-    if rows.min() < 0 or rows.max() >= image.shape[0] or x0 < 0 or x1 > image.shape[1]:
+    past = int(line.y_px[end]) - offset[1] + step
+    first, last = min(past, past + step * (END_ROWS - 1)), max(past, past + step * (END_ROWS - 1))
+    x0, x1 = column - settings.band_px, column + settings.band_px + 1
+    if first < 0 or last >= image.shape[0] or x0 < 0 or x1 > image.shape[1]:
         return False
-    band = image[rows, x0:x1].astype(np.float32)
-    near = band[:, s.band_px - 1:s.band_px + 2]
-    return bool(np.all(near.max(axis=1) - np.median(band, axis=1) <= s.threshold))
+    band = image[first:last + 1, x0:x1].astype(np.float32)
+    # The middle of an odd count: the row's median.
+    median = np.partition(band, settings.band_px, axis=1)[:, settings.band_px]
+    near = band[:, settings.band_px - 1:settings.band_px + 2].max(axis=1)
+    return bool(np.all(near - median <= settings.threshold))
 
 
 def redness(bgr: np.ndarray) -> np.ndarray:
