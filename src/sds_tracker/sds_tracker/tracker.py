@@ -246,7 +246,6 @@ class FrameTracker:
         lit = self._around(line.y_px if found else self._flat_rows, 0)
         if found:
             lit &= self._within_dark_ends(red, offset, line)
-        if found:
             # Follow the line: next frame looks around where it is now, on those rows and
             # `band_px` more at either end.
             self._line_x = np.interp(self._line_rows, line.y_px, line.x_px)
