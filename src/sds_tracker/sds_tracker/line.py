@@ -162,8 +162,9 @@ def end_is_dark(image: np.ndarray, offset: tuple[int, int], line: LineProfile, s
     """
     end = -1 if step > 0 else 0
     column = round(float(line.x_px[end])) - offset[0]
-    past = int(line.y_px[end]) - offset[1] + step
-    first, last = min(past, past + step * (END_ROWS - 1)), max(past, past + step * (END_ROWS - 1))
+    past = int(line.y_px[end]) - offset[1] + step   # the row next to the end
+    first = past if step > 0 else past - (END_ROWS - 1)
+    last = first + END_ROWS - 1
     x0, x1 = column - settings.band_px, column + settings.band_px + 1
     if first < 0 or last >= image.shape[0] or x0 < 0 or x1 > image.shape[1]:
         return False
