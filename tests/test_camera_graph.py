@@ -111,6 +111,34 @@ def test_flood_pacing_waits_for_acks_and_loses_nothing(clip, probe):
         np.testing.assert_array_equal(msg_to_image(msg), FRAMES[index])
 
 
+def test_realtime_acks_make_a_file_wait_for_a_consumer_slower_than_real_time(clip, probe):
+    """`realtime_acks` (the side camera's file, read as frames, whose every frame the recorder
+    keeps): a consumer at half real time gets every frame, each published after the previous
+    ack, and the file says how far it fell behind."""
+    ack_pub = probe.node.create_publisher(Header, "/camera/frame_ack", 10)
+    published_ns: list[int] = []
+    acked_ns: list[int] = []
+    images: list[Image] = []
+
+    def ack_slowly(msg: Image, info) -> None:
+        images.append(msg)
+        published_ns.append(info["source_timestamp"])
+        time.sleep(0.066)  # two frame periods: half real time
+        acked_ns.append(time.time_ns())
+        ack_pub.publish(Header(stamp=msg.header.stamp, frame_id="test"))
+
+    probe.node.create_subscription(Image, "/camera/image", ack_slowly, 10)
+    graph = SdsGraphRun("camera.yaml", "--set", f"camera.source={clip}",
+                         "--set", "camera.realtime_acks=true", "--set", "camera.max_in_flight=1",
+                         "--set", "camera.video=false")
+    assert graph.wait(timeout=60) == 0, graph.output()
+    assert len(images) == len(FRAMES), graph.output()
+    assert all(published_ns[i + 1] > acked_ns[i] for i in range(len(FRAMES) - 1))
+    assert "behind real time" in graph.output()
+    for index, msg in enumerate(images):
+        np.testing.assert_array_equal(msg_to_image(msg), FRAMES[index])
+
+
 def test_composed_graph_runs_camera_and_monitor_in_one_process(clip, tmp_path):
     summary = tmp_path / "summary.json"
     graph = SdsGraphRun("camera_monitor.yaml", "--compose", "--set", f"camera.source={clip}",

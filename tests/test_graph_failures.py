@@ -34,8 +34,7 @@ def camera_and_recorder(repo: Path, folder: Path) -> Path:
          "parameters": {"pacing": "flood", "ack_consumers": 1, "repeat": 0},
          "remap": {"image": "/camera/image", "frame_ack": "/camera/frame_ack"}},
         {"name": "recorder", "plugin": "sds_nodes.recorder:RecorderNode",
-         "params": str(params / "recorder.yaml"), "parameters": {"ack_for": ["/camera/image"]},
-         "remap": {"frame_ack": "/camera/frame_ack"}},
+         "params": str(params / "recorder.yaml"), "parameters": {"ack_for": ["/camera/image"]}},
     ]}
     path = folder / "camera_and_recorder.yaml"
     path.write_text(yaml.safe_dump(graph))

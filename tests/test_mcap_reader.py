@@ -10,7 +10,7 @@ import pytest
 from builtin_interfaces.msg import Time
 from mcap.writer import Writer
 from rclpy.serialization import serialize_message
-from sds_record.mcap_files import McapRecorder, decoded_messages
+from sds_record.mcap_files import McapRecorder, decoded_messages, message_counts
 from sds_ros.image_msg import image_to_msg
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Header, String
@@ -123,3 +123,23 @@ def test_an_idl_schema_decodes_and_an_unknown_encoding_is_named(tmp_path: Path) 
     with pytest.raises(ValueError, match=r"^/chatter: its schema std_msgs/msg/String does not "
                                          r"parse \(.*'jsonschema'.*\)$"):
         list(decoded_messages(tmp_path / "json.mcap"))
+
+
+def test_message_counts_come_from_the_statistics_or_an_unfinished_files_chunks(
+        tmp_path: Path) -> None:
+    """A finished file's counts (its statistics), an unfinished one's (its complete chunks,
+    as a killed recorder leaves them), and 0 for a topic the file does not have."""
+    header = Header(stamp=Time(sec=1), frame_id="lateral_optical")
+    recorder = McapRecorder(tmp_path / "run.mcap", flush_period_s=0.0)   # a chunk per message
+    recorder.add_topic("/lateral/image", "std_msgs/msg/Header")
+    recorder.add_topic("/tracker/spots", "std_msgs/msg/Header")
+    for index in range(7):
+        recorder.write("/lateral/image" if index % 3 else "/tracker/spots",
+                       serialize_message(header), index + 1, index + 1)
+    unfinished = tmp_path / "unfinished.mcap"
+    unfinished.write_bytes((tmp_path / "run.mcap").read_bytes())
+    recorder.close()
+    wanted = ["/lateral/image", "/tracker/spots", "/camera/video"]
+    expected = {"/lateral/image": 4, "/tracker/spots": 3, "/camera/video": 0}
+    assert message_counts(tmp_path / "run.mcap", wanted) == expected
+    assert message_counts(unfinished, wanted) == expected

@@ -537,7 +537,7 @@ def test_sds_run_measures_a_recorded_video_with_the_whole_graph(repo: Path,
     side_frames = sum(1 for _ in csv.DictReader((output.directory / "truth" /
                                                  "lateral.csv").open()))
     side = [msg for _, msg in decoded_messages(out / "recording.mcap", ["/lateral/image"])]
-    assert len(side) == side_frames       # every side frame recorded
+    assert len(side) == side_frames, (out / "graph.log").read_text()   # every side frame
     assert {msg.header.frame_id for msg in side} == {"lateral_optical"}
     # Played on the top camera's clock: the side's frame 0 stamped where it truly was, within
     # a side frame period (the clock link measured before the run).
@@ -553,6 +553,7 @@ def test_sds_run_measures_a_recorded_video_with_the_whole_graph(repo: Path,
     assert len(rows) == side_frames
     assert "Side camera" in (out / "analysis" / "report.html").read_text()
     assert "side clock: top − side" in done.stdout
+    assert f"side camera: {side_frames} of its {side_frames} frames recorded" in done.stdout
     assert "frames all 30 measured live; the recording holds every one" in done.stdout
     assert (out / "recording.mcap").is_file() and (out / "recording.rrd").is_file()
     assert (out / "analysis" / "report.html").is_file()

@@ -28,6 +28,8 @@ from sds_bringup.ros_env import graph_domain_id, graph_environment
 GRAPHS = ("drop.yaml", "view.yaml")
 IDLE_TIMEOUT_S = 60.0
 BRIDGE_OPEN_S = 0.5
+SIDE_ACK_TOPIC = "/lateral/frame_ack"
+"""Where drop.yaml's recorder acknowledges each side frame it wrote (lateral.yaml)."""
 """The bridge opens its port within this of publishing (it reads from its start)."""
 
 
@@ -63,9 +65,10 @@ def graph_entries(overrides: list[str], viewer: bool, extra: tuple[str, ...] = (
 
 def run_chain(overrides: list[str], out: Path, expected_frames: int | None,
               serial_lines: list[bytes] | None = None, port: Path | None = None,
-              graphs: tuple[str, ...] = ()) -> RunOutputs:
+              graphs: tuple[str, ...] = (), side_frames: int | None = None) -> RunOutputs:
     """Run the chain (with the extra graph files `graphs`) until `expected_frames` fits were
-    made (or Ctrl-C for a live camera), with a progress bar; node logs go to out/graph.log.
+    made and the recorder has acknowledged the `side_frames` of lateral.yaml's file if given
+    (or Ctrl-C for a live camera), with a progress bar; node logs go to out/graph.log.
     The recorder refuses an existing recording unless the overrides say
     `recorder.overwrite=true`."""
     outputs = RunOutputs(out / "recording.mcap", out / "recording.rrd", out / "graph.log")
@@ -90,8 +93,9 @@ def run_chain(overrides: list[str], out: Path, expected_frames: int | None,
     with outputs.log.open("w") as log:
         launcher = Launcher(entries, environment, output=log, console=sys.stderr)
         unplug, feeding = threading.Event(), threading.Event()
-        watcher = threading.Thread(target=_watch, args=(launcher, expected_frames, serial_lines,
-                                                        cable, unplug, feeding), daemon=True)
+        watcher = threading.Thread(target=_watch, args=(
+            launcher, expected_frames, side_frames, serial_lines, cable, unplug, feeding),
+            daemon=True)
         print(f"running the graph on ROS_DOMAIN_ID={domain_id}: "
               + ", ".join(e.name for e in entries) + f" (log: {outputs.log})")
         exit_code = launcher.run(on_started=watcher.start)
@@ -106,14 +110,17 @@ def run_chain(overrides: list[str], out: Path, expected_frames: int | None,
                    interrupted=launcher.signal_received is not None)
 
 
-def _watch(launcher: Launcher, expected_frames: int | None, serial_lines: list[bytes] | None,
-           cable: tuple[int, int] | None, unplug: threading.Event,
-           feeding: threading.Event) -> None:
-    """Count the tracked frames (progress bar), feed the Arduino stream, stop the graph."""
+def _watch(launcher: Launcher, expected_frames: int | None, side_frames: int | None,
+           serial_lines: list[bytes] | None, cable: tuple[int, int] | None,
+           unplug: threading.Event, feeding: threading.Event) -> None:
+    """Count the tracked frames (progress bar) and the recorded side frames, feed the Arduino
+    stream, stop the graph."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
     from sds_ros.qos import stream_qos
+    from std_msgs.msg import Header
 
     from sds_msgs.msg import LaserSpotArray
 
@@ -125,6 +132,12 @@ def _watch(launcher: Launcher, expected_frames: int | None, serial_lines: list[b
     tracked: list[int] = []   # frames tracked (the tracker waits for this subscriber too)
     node.create_subscription(LaserSpotArray, "/tracker/spots",
                              lambda msg: tracked.append(msg.frame_index), stream_qos(100))
+    side_recorded: set[tuple[int, int]] = set()   # side frames the recorder acknowledged
+    if side_frames:
+        node.create_subscription(
+            Header, SIDE_ACK_TOPIC, lambda msg: side_recorded.add((msg.stamp.sec,
+                                                                   msg.stamp.nanosec)),
+            QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
     bar = tqdm(total=expected_frames, desc="frames", unit="frame")
     written = threading.Event()
     try:
@@ -138,14 +151,16 @@ def _watch(launcher: Launcher, expected_frames: int | None, serial_lines: list[b
             feeding.set()
             threading.Thread(target=feed_serial, args=(cable, serial_lines, written, unplug),
                              daemon=True).start()
-        last, last_change = 0, time.monotonic()
+        last, last_side, last_change = 0, 0, time.monotonic()
         while not launcher.stopping:
             executor.spin_once(timeout_sec=0.1)
             if len(tracked) != last:
                 bar.update(len(tracked) - last)
                 last, last_change = len(tracked), time.monotonic()
-            done = expected_frames is not None and last >= expected_frames and (
-                not feeding.is_set() or written.is_set())
+            if len(side_recorded) != last_side:
+                last_side, last_change = len(side_recorded), time.monotonic()
+            done = expected_frames is not None and last >= expected_frames and \
+                last_side >= (side_frames or 0) and (not feeding.is_set() or written.is_set())
             stalled = expected_frames is not None and \
                 time.monotonic() - last_change > IDLE_TIMEOUT_S
             if done or stalled:

@@ -81,7 +81,7 @@ PARAMETERS = {"source": "", "fps": 0.0, "roi": [0, 0, 0, 0], "channel": "bgr",
               "max_in_flight": 2, "led_roi": [0, 0, 0, 0], "repeat": 1, "linger_s": 3.0,
               "follow": False, "stamp_offset_s": 0.0, "video": True,
               "packet_ack_consumers": 0, "wait_for_packet_subscribers": 0, "input_format": "",
-              "low_delay": False}
+              "low_delay": False, "realtime_acks": False}
 """The node's parameters and defaults (config/params/frame_source.yaml documents each)."""
 
 
@@ -478,7 +478,8 @@ class FrameSourceNode(HostedNode):
         """Publish thread: pace (without packets), stamp and publish frames until the stream
         ends."""
         p = self._p
-        flow_control = p["pacing"] == "flood" and p["ack_consumers"] > 0
+        flow_control = p["ack_consumers"] > 0 and (
+            p["pacing"] == "flood" or (p["realtime_acks"] and not self._source.is_live))
         if self._packets is None:
             if not self._start_clock():
                 return

@@ -35,12 +35,21 @@ PARAMETERS = {"output": "", "topics": [""], "exclude": [""], "compression": "zst
 """The node's parameters and defaults (config/params/recorder.yaml documents each)."""
 
 
+def ack_topic(topic: str, kind: str) -> str:
+    """The topic on which `topic`'s messages are acknowledged: `kind` (frame_ack or
+    packet_ack) beside it, e.g. /camera/image -> /camera/frame_ack, where the frame source of
+    /camera/image (remapped as in config/graphs/) waits for it."""
+    return f"{topic.rsplit('/', 1)[0]}/{kind}"
+
+
 class RecorderNode(HostedNode):
     """Subscribe (reliably, serialized) to every topic it discovers, or to `topics`; write MCAP.
 
-    Messages of the `ack_for` topics are acknowledged on frame_ack once written, those of the
-    `packet_ack_for` topics (the camera's packets) on packet_ack (the frame source's flood
-    pacing then waits for the recorder too, so no frame or packet is dropped).
+    Messages of the `ack_for` topics are acknowledged once written on the frame_ack topic
+    beside each (`ack_topic`: /camera/image on /camera/frame_ack), those of the
+    `packet_ack_for` topics (the camera's packets) on the packet_ack beside each (a frame
+    source that waits for acks then waits for the recorder too, so no frame or packet is
+    dropped).
     Latched topics (all publishers transient-local, e.g. the camera model) are subscribed
     transient-local so their last message is recorded even if it was sent before the recorder
     started. The log time is the recorder's ROS clock at reception (simulated time with
@@ -68,8 +77,10 @@ class RecorderNode(HostedNode):
         self._recorded: dict[str, object] = {}
         self._gaps: dict[str, PublisherGaps] = {}
         acks = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
-        self._ack_pubs = {"frame_ack": self.create_publisher(Header, "frame_ack", acks),
-                          "packet_ack": self.create_publisher(Header, "packet_ack", acks)}
+        self._ack_pubs = {topic: self.create_publisher(Header, ack_topic(topic, kind), acks)
+                          for kind, topics in (("frame_ack", self._ack_for),
+                                               ("packet_ack", self._packet_ack_for))
+                          for topic in topics}
         self._failed: set[str] = set()
         self.output = Path(output)
         self.get_logger().info(f"recording to {self.output}")
@@ -120,8 +131,7 @@ class RecorderNode(HostedNode):
             durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
 
     def _writer_for(self, topic: str):
-        acks = self._ack_pubs["frame_ack"] if topic in self._ack_for else \
-            self._ack_pubs["packet_ack"] if topic in self._packet_ack_for else None
+        acks = self._ack_pubs.get(topic)
         gaps = self._gaps.setdefault(topic, PublisherGaps())
 
         def write(data: bytes, info: MessageInfo) -> None:

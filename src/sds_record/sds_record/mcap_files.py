@@ -285,6 +285,24 @@ def _decoder(schema: Schema, topic: str) -> Callable[[memoryview], Any]:
     return partial(store.deserialize_cdr, typename=schema.name)
 
 
+def message_counts(path: str | Path, topics: Iterable[str]) -> dict[str, int]:
+    """How many messages each of `topics` has in the file: from its statistics, without
+    reading them (an unfinished file: counted up to its last complete chunk)."""
+    path = Path(path)
+    require_mcap(path)
+    counts = dict.fromkeys(topics, 0)
+    summary = _summary(path)
+    if summary is not None and summary.statistics is not None:
+        for channel_id, count in summary.statistics.channel_message_counts.items():
+            channel = summary.channels.get(channel_id)
+            if channel is not None and channel.topic in counts:
+                counts[channel.topic] += count
+        return counts
+    for _, channel, _ in _records(path, counts):
+        counts[channel.topic] += 1
+    return counts
+
+
 def recorded_topics(path: str | Path) -> dict[str, tuple[str, bool]]:
     """Topic → (type name, latched) of every channel in the file (summary, else a scan)."""
     path = Path(path)

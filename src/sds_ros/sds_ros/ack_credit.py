@@ -58,7 +58,7 @@ class AckCredit:
             while not self._condition.wait_for(
                     lambda: len(self._acked) <= limit or self._released, STALL_WARNING_S):
                 oldest = min(self._acked)
-                self._warn(f"flood pacing: {len(self._acked)} frame(s) still await "
+                self._warn(f"{len(self._acked)} frame(s) still await "
                            f"acknowledgement on {self._topic}; the oldest (stamp {oldest} ns) "
                            f"has {self._acked[oldest]} of {self.consumers}")
 

@@ -15,7 +15,6 @@ import csv
 import multiprocessing
 import shutil
 import sys
-from collections import Counter
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -28,7 +27,7 @@ from sds_model.paths import CONFIG
 from sds_model.rig import Rig, load_rig
 from sds_model.staging import staged_folder
 from sds_recon.results import ResultsWriter, load_results, refuse_results
-from sds_record.mcap_files import read_messages
+from sds_record.mcap_files import message_counts
 from sds_sim.imaging import merged
 from sds_sim.scenario import Scenario, load_scenario
 from sds_sim.simulate import SimulationOutput, simulate
@@ -54,6 +53,8 @@ from sds_workflows.run_tables import RunTables, finish_analysis
 VIDEO_TOPIC = "/camera/video"
 """The camera's packets in a recording of the drop graph (config/graphs/drop.yaml)."""
 SPOTS_TOPIC = "/tracker/spots"
+SIDE_IMAGE_TOPIC = "/lateral/image"
+"""The side camera's frames (config/graphs/lateral.yaml)."""
 
 DEMO_SCENARIO = CONFIG / "scenarios" / "drop_4p7s.yaml"
 LED_ROI_HALF_PX = 12
@@ -81,11 +82,13 @@ class ChainOutputs(Protocol):
 class ChainRunner(Protocol):
     """Runs the measuring chain with graph overrides until `expected_frames` were tracked
     (None: until Ctrl-C), feeding `serial_lines` to a stand-in Arduino at `port` if given,
-    with the nodes of the extra graph files `graphs` (config/graphs/, e.g. lateral.yaml)."""
+    with the nodes of the extra graph files `graphs` (config/graphs/, e.g. lateral.yaml),
+    and until the recorder has written the `side_frames` of lateral.yaml's file if given."""
 
     def __call__(self, overrides: list[str], out: Path, expected_frames: int | None,
                  serial_lines: list[bytes] | None = None, port: Path | None = None,
-                 graphs: tuple[str, ...] = ()) -> ChainOutputs: ...
+                 graphs: tuple[str, ...] = (), side_frames: int | None = None
+                 ) -> ChainOutputs: ...
 
 
 def height_errors(truth_spots: Path, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -321,7 +324,7 @@ def run_live(source: str, rig_file: Path, out: Path, port: str | None,
     if port is not None:
         graphs += ("arduino.yaml",)
         overrides.append(f"arduino.port={port}")
-    clock = None
+    clock, side_frames = None, None
     if side is not None:
         graphs += ("lateral.yaml",)
         side_source = side.inputs.video
@@ -334,7 +337,8 @@ def run_live(source: str, rig_file: Path, out: Path, port: str | None,
             clock = link_side_clock(side, rig, Path(source))
             print(f"sds run: {clock.summary()}")
             overrides.append(f"lateral.stamp_offset_s={clock.offset_s}")
-    outputs = run_chain(overrides, out, frames, graphs=graphs)
+            side_frames = _announced_frames(side_source)
+    outputs = run_chain(overrides, out, frames, graphs=graphs, side_frames=side_frames)
     if outputs.interrupted and is_file:   # a live camera's run ends with Ctrl-C
         return interrupted("sds run", outputs)
     if outputs.failure or not outputs.recording.is_file():
@@ -354,13 +358,19 @@ def run_live(source: str, rig_file: Path, out: Path, port: str | None,
     if port is not None and not _rows(out / "results" / "imu.csv"):
         missing.append(f"the Arduino at {port} sent no record (no imu.csv, no ToF; see "
                        f"{outputs.log})")
+    if side_frames is not None:
+        recorded = message_counts(outputs.recording, [SIDE_IMAGE_TOPIC])[SIDE_IMAGE_TOPIC]
+        print(f"  side camera: {recorded} of its {side_frames} frames recorded")
+        if recorded < side_frames:
+            missing.append(f"{side_frames - recorded} side frames are not in the recording "
+                           f"(see {outputs.log})")
     if analysed.side is not None:
         print("\n".join(f"  {line}" for line in analysed.side.lines()))
     elif analysed.side_failure:
         missing.append(f"side camera not compared: {analysed.side_failure}")
     elif side is not None:
-        print("  side camera: recorded (/lateral/image); its check of the top surface needs "
-              "the two videos: sds process --video TOP --lateral SIDE ...")
+        print(f"  side camera: recorded ({SIDE_IMAGE_TOPIC}); its check of the top surface "
+              "needs the two videos: sds process --video TOP --lateral SIDE ...")
     for line in missing:
         print(f"sds run: INCOMPLETE: {line}", file=sys.stderr)
     return 2 if missing else 0
@@ -369,8 +379,7 @@ def run_live(source: str, rig_file: Path, out: Path, port: str | None,
 def live_coverage(recording: Path) -> str:
     """How many of the frames the camera sent were measured live and whether the recording
     holds them all (its packets): one line for a run's summary."""
-    counts = Counter(message.topic for message in read_messages(
-        recording, (VIDEO_TOPIC, SPOTS_TOPIC)))
+    counts = message_counts(recording, (VIDEO_TOPIC, SPOTS_TOPIC))
     measured, sent = counts[SPOTS_TOPIC], counts[VIDEO_TOPIC]
     if not sent:
         return f"{measured} measured live (the recording holds the frames it measured)"
@@ -379,6 +388,16 @@ def live_coverage(recording: Path) -> str:
     return (f"{measured} of {sent} measured live (the others were shed: the machine could not "
             f"decode and measure them in time); the recording holds all {sent}: "
             f"`sds process --mcap {recording} --rig RIG --out DIR` measures them all")
+
+
+def _announced_frames(video: Path) -> int:
+    """The frames a video file announces (the side camera's)."""
+    from contextlib import closing
+
+    from sds_camera.frame_source import VideoFileSource
+
+    with closing(VideoFileSource(video)) as source:
+        return source.announced_frames
 
 
 def _video_frames(video: Path, rig: Rig) -> int:
