@@ -5,7 +5,9 @@ For each seed a random rig as built (`calibration_trial.rig_as_built`) is render
 1 g (config/scenarios/ground_kick.yaml) with one real-camera effect at a time
 (`sds_sim.imaging.EFFECTS`, each drawn from its range for that seed), the camera's H.264 at its
 bit rate, and all of them at once; the tracker follows the spots with the true rig (tracking
-alone: no calibration error). Per effect it prints, over every visible spot of every seed:
+alone: no calibration error) and the σ scale the calibration's repeated frames would give it
+(`sds_tracker.sigma_scale`, from REST_FRAMES frames of the rig at rest with the same imaging
+and noise of their own). Per effect it prints, over every visible spot of every seed:
 the tracker's RMS error against the truth and a naive windowed centroid's on the same spots
 (median of the window's border as background, a round aperture, re-centred twice, started at
 the true spot: it cannot take another diode's blob), their ratio, both errors' medians (the
@@ -28,6 +30,7 @@ from sds_model.rig import Rig, load_rig
 from sds_sim.imaging import EFFECTS, draw_imaging, merged
 from sds_sim.render import FrameRenderer, FrameTruth
 from sds_sim.scenario import Scenario, load_scenario
+from sds_tracker.sigma_scale import video_sigma_scale
 from sds_tracker.spots import is_measured
 from sds_tracker.tracker import FrameTracker, TrackedSpot
 from sds_workflows.calibration_trial import AsBuilt, rig_as_built
@@ -35,6 +38,11 @@ from sds_workflows.calibration_trial import AsBuilt, rig_as_built
 REPO = Path(__file__).resolve().parents[1]
 SCENARIO = REPO / "config" / "scenarios" / "ground_kick.yaml"
 CASES = ("clean", *EFFECTS, "codec", "all")
+REST_FRAMES = 15
+"""Frames of the rig at rest whose spots' scatter gives the σ scale (the calibration's
+repeated frames: three stills of five)."""
+REST_SEED_OFFSET = 1000
+"""The rest clip's noise seed is the video's plus this: its speckle and noise are its own."""
 
 
 def scenario_for(seed: int, case: str, frames: int, scale: float, true: Rig) -> Scenario:
@@ -62,6 +70,20 @@ def frames_of(scenario: Scenario, encoded: bool, folder: Path
             writer.write(image)
     region = Region(0, 0, width, height)
     return [frame.image for frame in VideoFileSource(path).frames(region, "red")], truths
+
+
+def with_sigma_scale(true: Rig, scenario: Scenario, encoded: bool, folder: Path) -> Rig:
+    """The true rig with the σ scale `video_sigma_scale` gives on REST_FRAMES frames of it at
+    rest (the scenario before its kick, with noise of its own), as the calibration's record
+    holds it."""
+    rest = replace(scenario, seed=scenario.seed + REST_SEED_OFFSET,
+                   duration_s=REST_FRAMES / scenario.fps, kick_s=REST_FRAMES / scenario.fps)
+    frames, _ = frames_of(rest, encoded, folder)
+    factor = video_sigma_scale(replace(true, camera=true.camera.scaled(scenario.scale)),
+                               [frames], (0, 0))
+    if factor is None:
+        return true
+    return replace(true, calibration={**(true.calibration or {}), "spot_sigma_scale": factor})
 
 
 def naive_centroid(red: np.ndarray, start: np.ndarray, half: int) -> np.ndarray:
@@ -140,8 +162,10 @@ def main() -> None:
             for seed in args.seeds:
                 _, true = rig_as_built(base, AsBuilt(), np.random.default_rng(seed))
                 scenario = scenario_for(seed, case, args.frames, args.scale, true)
-                frames, truths = frames_of(scenario, case in ("codec", "all"), Path(folder))
-                for key, values in measure(true, args.scale, frames, truths).items():
+                encoded = case in ("codec", "all")
+                frames, truths = frames_of(scenario, encoded, Path(folder))
+                rig = with_sigma_scale(true, scenario, encoded, Path(folder))
+                for key, values in measure(rig, args.scale, frames, truths).items():
                     total.setdefault(key, []).extend(values)
             tracker, naive = np.array(total["tracker"]), np.array(total["naive"])
             rms_tracker = float(np.sqrt(np.mean(np.sum(tracker**2, axis=1))))

@@ -210,10 +210,12 @@ class FrameTracker:
                 raise InputError(f"seed for laser {laser_id}, which the rig does not have")
             self.spots.previous[laser_id] = np.asarray(position, dtype=float)
         self.ids = list(self.paths)
-        # What the calibration's stills showed a single frame's σ leaves out (speckle), for
-        # the spots whose own light does not measure it (`SpotTracker.measures_own_speckle`).
-        self.excess_sigma_px = float((rig.calibration or {}).get("spot_excess_sigma_px")
-                                     or 0.0)
+        # What the calibration's stills showed a single frame's σ leaves out (speckle): for
+        # the spots whose own light does not measure it (`SpotTracker.measures_own_speckle`)
+        # an excess, for those whose light does a scale (`sigma_scale.video_sigma_scale`).
+        calibration = rig.calibration or {}
+        self.excess_sigma_px = float(calibration.get("spot_excess_sigma_px") or 0.0)
+        self.sigma_scale = float(calibration.get("spot_sigma_scale") or 1.0)
         self.hampel = None if self.config.stills else HampelBank(
             self.config.hampel_window, self.config.hampel_k, self.config.hampel_floor_px)
         self._pending: dict[int, dict[int, SpotEstimate]] = {}
@@ -236,6 +238,20 @@ class FrameTracker:
         Returns the spots of every frame whose Hampel window is now complete (frame, spots),
         and this frame's line profile.
         """
+        estimates, line = self.measure(red, offset)
+        self._pending[frame] = {e.laser_id: e for e in estimates}
+        positions = np.array([[e.x_px, e.y_px] for e in estimates]).reshape(-1, 2)
+        if self.hampel is None:
+            unfiltered = BankOutput(frame, positions, positions, np.zeros(len(positions), bool))
+            return [(frame, self._tracked(unfiltered))], line
+        out = self.hampel.push(frame, positions, np.array([e.sigma_px for e in estimates]))
+        ready = [] if out is None else [(out.frame, self._tracked(out))]
+        return ready, line
+
+    def measure(self, red: np.ndarray, offset: tuple[int, int]
+                ) -> tuple[list[SpotEstimate], LineProfile]:
+        """The next frame's spots (each diode's, before the Hampel filter) and line: the
+        tracker's state (where the spots and the line were) moves on to this frame."""
         line = self._find_line(red, offset)
         found = len(line.x_px) > len(self._flat_rows) // 4
         # The spots get the line over the level surface's line's rows (a spot can hide the
@@ -256,18 +272,18 @@ class FrameTracker:
             self.spots.forget()
         # The line's light is kept out of the spots it passes (seen this frame, or expected).
         estimates = self.spots.update(red, offset, (self._line_rows[lit], self._line_x[lit]))
-        if self.excess_sigma_px:
-            estimates = [e if self.spots.measures_own_speckle(e) else
-                         replace(e, sigma_px=float(np.hypot(e.sigma_px, self.excess_sigma_px)))
-                         for e in estimates]
-        self._pending[frame] = {e.laser_id: e for e in estimates}
-        positions = np.array([[e.x_px, e.y_px] for e in estimates]).reshape(-1, 2)
-        if self.hampel is None:
-            unfiltered = BankOutput(frame, positions, positions, np.zeros(len(positions), bool))
-            return [(frame, self._tracked(unfiltered))], line
-        out = self.hampel.push(frame, positions, np.array([e.sigma_px for e in estimates]))
-        ready = [] if out is None else [(out.frame, self._tracked(out))]
-        return ready, line
+        return [self._calibrated_sigma(e) for e in estimates], line
+
+    def _calibrated_sigma(self, estimate: SpotEstimate) -> SpotEstimate:
+        """The spot with what the calibration's repeated frames showed its σ leaves out: a
+        spot that measures its own speckle scaled by `sigma_scale`, any other widened by
+        `excess_sigma_px`."""
+        if self.spots.measures_own_speckle(estimate):
+            return replace(estimate, sigma_px=estimate.sigma_px * self.sigma_scale) \
+                if self.sigma_scale != 1.0 else estimate
+        return replace(estimate, sigma_px=float(np.hypot(estimate.sigma_px,
+                                                         self.excess_sigma_px))) \
+            if self.excess_sigma_px else estimate
 
     def _find_line(self, red: np.ndarray, offset: tuple[int, int]) -> LineProfile:
         """This frame's line: around the last frame's where it was followed, else (the first

@@ -33,6 +33,7 @@ from sds_recon.triangulation import beam_image_path
 from sds_tracker.discovery import SpotCandidates, averaged, excess_sigma_px, find_spots
 from sds_tracker.line import LineSettings, continued_within, seek_line
 from sds_tracker.plateaus import Plateau, changed_pixels, find_plateaus
+from sds_tracker.sigma_scale import video_sigma_scale
 from sds_tracker.tracker import flat_line_px, line_reach_px
 
 REGION_MARGIN_MM = 8.0
@@ -58,12 +59,14 @@ full 4K frames per surface hold about 1.1 GB for the protocol's eleven."""
 @dataclass(frozen=True)
 class CalibrationImages:
     """What was found in each calibration image: blobs and line pixels, and what the stills'
-    repeated frames showed of a single frame's spot σ (`excess_sigma_px`; None without)."""
+    repeated frames showed of a single frame's spot σ: a still's (`excess_sigma_px`) and,
+    once the rig is fitted, a video's (`video_sigma_scale`); None without them."""
 
     spots: list[SpotCandidates]
     line: LineObservations
     region: Region
     spot_excess_sigma_px: float | None = None
+    spot_sigma_scale: float | None = None
 
 
 def read_images(paths: list[Path]) -> list[np.ndarray]:
@@ -220,6 +223,12 @@ def calibrate_images(rig: Rig, images: list[np.ndarray], surfaces: list[KnownSur
     line = found.line if len(found.line.frame) else None
     result = fit_rig(rig, surfaces, [s.pixels for s in found.spots],
                      [s.covariance_px2 for s in found.spots], line, settings)
+    if repeats:   # the fitted rig's paths lead a video's tracker to each still's spots
+        region = found.region
+        stills = [[select(frame, region, "red") for frame in (image, *more)]
+                  for image, more in zip(images, repeats, strict=True)]
+        found = replace(found, spot_sigma_scale=video_sigma_scale(
+            calibrated_rig(rig, result), stills, (region.x, region.y)))
     return result, found
 
 
@@ -240,15 +249,17 @@ def calibrate_rig(rig: Rig, paths: list[Path], surfaces_csv: Path, rig_path: Pat
 def calibrated_rig_file(nominal: Rig, result: RigCalibration, found: CalibrationImages,
                         report: dict[str, Any] | None = None) -> Rig:
     """The calibrated rig as `sds calibrate rig` writes it: `calibrated_rig` (its record from
-    `report` where given), and where the stills had repeated frames, the σ a single frame's
-    spots leave out in its record (`spot_excess_sigma_px`: the tracker adds it to the σ of
+    `report` where given), and where the stills had repeated frames, what a single frame's
+    spot σ leaves out in its record: `spot_excess_sigma_px` (the tracker adds it to the σ of
     every spot whose own light does not measure its speckle: stills', and a video's on the
-    laser line)."""
+    laser line) and `spot_sigma_scale` (it scales the σ of a video's spots that do)."""
     rig = calibrated_rig(nominal, result, report)
-    if found.spot_excess_sigma_px is None:
+    measured = {key: value for key, value in (
+        ("spot_excess_sigma_px", found.spot_excess_sigma_px),
+        ("spot_sigma_scale", found.spot_sigma_scale)) if value is not None}
+    if not measured:
         return rig
-    return replace(rig, calibration={**(rig.calibration or {}),
-                                     "spot_excess_sigma_px": found.spot_excess_sigma_px})
+    return replace(rig, calibration={**(rig.calibration or {}), **measured})
 
 
 def write_calibration(nominal: Rig, result: RigCalibration, found: CalibrationImages,
@@ -263,6 +274,10 @@ def write_calibration(nominal: Rig, result: RigCalibration, found: CalibrationIm
         text += (f"\nspots' frame-to-frame scatter on the stills beyond their own σ: "
                  f"{found.spot_excess_sigma_px:.3f} px per axis (added to the σ of "
                  "spots whose own light does not measure their speckle)")
+    if found.spot_sigma_scale is not None:
+        report["spot_sigma_scale"] = found.spot_sigma_scale
+        text += (f"\na video's spots' frame-to-frame scatter on the stills against their "
+                 f"own σ: x {found.spot_sigma_scale:.2f} (their σ is scaled by it; at least 1)")
     save_rig(rig, rig_path, comment=f"Self-calibrated by {source} ({len(images)} images):\n"
                                     f"{text}")
     stem = rig_path.with_suffix("")
