@@ -8,8 +8,10 @@ rig`'s code; then the microgravity drop of config/scenarios/drop_4p7s.yaml rende
 true rig and its imaging, through the camera's H.264, processed offline as `sds process` does
 with the calibrated rig file, and analysed against the simulator's truth. One row per rig:
 the calibration's χ²/dof and whether it is within its band, the unseen tilt σ the rig report
-states, the beams' direction error over their stated σ (RMS), the σ the stills' scatter added
-to every spot (`spot_excess_sigma_px`), the drop's heights (RMSE, error/σ RMS, largest error,
+states, the beams' direction error over their stated σ (RMS), what the stills' scatter adds
+to the σ of the spots that do not measure their own speckle (`spot_excess_sigma_px`) and the
+scale on the σ of those that do (`spot_sigma_scale`), the drop's heights (RMSE, error/σ RMS,
+largest error,
 points more than 1 mm off or measured while the truth has their spot hidden: a wrong
 identity or a fabricated point), the first two lateral modes' frequency and damping errors
 (matrix pencil), and the second's damping error in its own σ (is a miss the estimate's
@@ -89,6 +91,7 @@ def one_rig(seed: int, seconds: float, folder: Path) -> dict[str, Any]:
             "unseen_tilt_sigma_deg": record["unseen_surfaces"]["tilt_sigma_deg"],
             "beams": len(geometry.beams_deg), "beam_in_sigma": float(beam_in_sigma),
             "excess_px": record.get("spot_excess_sigma_px", np.nan),
+            "sigma_scale": record.get("spot_sigma_scale", np.nan),
             "heights_rmse_mm": float(np.sqrt(np.mean(errors**2))),
             "heights_in_sigma": float(np.sqrt(np.mean((errors / sigmas) ** 2))),
             "largest_mm": float(np.abs(errors).max()),
@@ -105,9 +108,9 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=4.7, help="drop duration [s]")
     args = parser.parse_args()
     print(f"{'seed':>6s} {'chi2/dof':>9s} {'unseen σ°':>9s} {'beams e/σ':>9s} "
-          f"{'excess px':>9s} {'RMSE mm':>8s} {'e/σ':>5s} {'max mm':>7s} {'wrong':>6s} "
-          f"{'l1 f %':>7s} {'l1 ζ %':>7s} {'l2 f %':>7s} {'l2 ζ %':>7s} {'l2 ζ/σ':>7s} "
-          f"{'s':>4s}", flush=True)
+          f"{'excess px':>9s} {'σ scale':>7s} {'RMSE mm':>8s} {'e/σ':>5s} {'max mm':>7s} "
+          f"{'wrong':>6s} {'l1 f %':>7s} {'l1 ζ %':>7s} {'l2 f %':>7s} {'l2 ζ %':>7s} "
+          f"{'l2 ζ/σ':>7s} {'s':>4s}", flush=True)
     rows = []
     for seed in args.seeds:
         with tempfile.TemporaryDirectory(prefix="sds-bench-demo-") as folder:
@@ -115,7 +118,8 @@ def main() -> None:
         rows.append(row)
         print(f"{seed:6d} {row['chi2']:8.2f}{' ' if row['explained'] else '✗'} "
               f"{row['unseen_tilt_sigma_deg']:9.3f} {row['beam_in_sigma']:9.2f} "
-              f"{row['excess_px']:9.3f} {row['heights_rmse_mm']:8.3f} "
+              f"{row['excess_px']:9.3f} {row['sigma_scale']:7.2f} "
+              f"{row['heights_rmse_mm']:8.3f} "
               f"{row['heights_in_sigma']:5.2f} {row['largest_mm']:7.3f} "
               f"{row['wrong']:3d}/{row['points']:<4d}"
               + "".join(f" {v:+7.2f}" for v in (*row['lateral_1'][:2], *row['lateral_2']))

@@ -97,6 +97,9 @@ def test_the_readmes_real_rig_steps_run_as_written(tmp_path: Path) -> None:
     run = expanded(steps[2], tmp_path, substitutes)
     done = subprocess.run(run, cwd=tmp_path, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, (run, done.stdout, done.stderr)
+    # Image bursts are not the drop's video (its codec): they give no video σ scale.
+    record = load_rig(tmp_path / "rig.yaml").calibration or {}
+    assert "spot_excess_sigma_px" in record and "spot_sigma_scale" not in record
     # 4. The drop: a video for the live camera, no Arduino.
     scenario = replace(load_scenario(DEMO_SCENARIO, {"scale": SCALE}), rig=true)
     video = simulate(scenario, tmp_path / "simulation").video

@@ -268,6 +268,9 @@ def test_sds_calibrate_rig_takes_the_still_stretches_of_a_video(tmp_path: Path) 
     # the rig file's own geometry is the truth: no beam may come out leaning beyond 3 σ
     assert all(np.degrees(np.arccos(-d.direction[2])) < 3 * d.direction_sigma_deg + 0.05
                for d in rig.diodes)
+    # The still stretches' frames are the camera's video: a video's σ scale, at least 1.
+    assert (rig.calibration or {})["spot_sigma_scale"] >= 1.0
+    assert "a video's spots' frame-to-frame scatter" in (tmp_path / "rig.report.txt").read_text()
     report = (tmp_path / "rig.report.html").read_text()
     assert "frame 10 (still 0.60" in report        # the second step's middle frame
     assert report.count("spots averaged over 5 frames") == 6   # and the four around it

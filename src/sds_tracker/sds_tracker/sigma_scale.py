@@ -3,11 +3,12 @@
 A spot a video measures in its fixed aperture, clear of the laser line, states its own σ from
 its light: photons, read noise and the speckle that light shows
 (`SpotTracker.measures_own_speckle`). How much speckle a saturated, blooming spot really
-carries is hard to read from one frame, and the σ can fall short of it. The calibration's
-repeated frames of each still (the liquid at rest, new speckle in every frame) show it: their
-spots' scatter from frame to frame against their stated σ gives one factor for the rig and its
-camera settings (`spot_sigma_scale` in the calibrated rig's record), which the tracker applies
-to those spots' σ (`FrameTracker`).
+carries is hard to read from one frame, and the σ can fall short of it. The repeated frames of
+each still of a calibration from the camera's own video (the liquid at rest, new speckle in
+every frame, the video's codec as in the drop) show it: their spots' scatter from frame to
+frame against their stated σ gives one factor for the rig and its camera settings
+(`spot_sigma_scale` in the calibrated rig's record), which the tracker applies to those
+spots' σ (`FrameTracker`).
 """
 
 from __future__ import annotations

@@ -92,6 +92,11 @@ def known_surfaces(path: Path) -> list[KnownSurface]:
     return [known[k] for k in range(len(known))]
 
 
+def is_one_video(paths: list[Path]) -> bool:
+    """Whether the calibration's input is one video file (VIDEO_SUFFIXES), not images."""
+    return len(paths) == 1 and paths[0].suffix.lower() in VIDEO_SUFFIXES
+
+
 def calibration_frames(paths: list[Path], rig: Rig, count: int
                        ) -> tuple[list[np.ndarray], list[str], list[list[np.ndarray]] | None]:
     """Images of the known surfaces from image files (one per surface, or a burst of the
@@ -99,7 +104,7 @@ def calibration_frames(paths: list[Path], rig: Rig, count: int
     repeats), or from the still stretches of one video file (VIDEO_SUFFIXES), with each
     stretch's further frames (`read_video_plateaus`); a name for each image; no repeats
     (None) for one image per surface."""
-    if len(paths) == 1 and paths[0].suffix.lower() in VIDEO_SUFFIXES:
+    if is_one_video(paths):
         return read_video_plateaus(paths[0], rig, count)
     if count == 0 or len(paths) % count:
         raise InputError(f"{len(paths)} images but {count} known surfaces: give one image per "
@@ -213,17 +218,20 @@ def observe(rig: Rig, images: list[np.ndarray],
 
 def calibrate_images(rig: Rig, images: list[np.ndarray], surfaces: list[KnownSurface],
                      settings: CalibrationSettings | None = None,
-                     repeats: list[list[np.ndarray]] | None = None
+                     repeats: list[list[np.ndarray]] | None = None, from_video: bool = False
                      ) -> tuple[RigCalibration, CalibrationImages]:
     """Self-calibrate the rig from images of the known surfaces (one surface per image; with
-    `repeats`, more frames of each, whose spots are averaged with its own)."""
+    `repeats`, more frames of each, whose spots are averaged with its own). Where they are
+    frames of the camera's own video (`from_video`), as the drop's are, the repeats also give
+    a video's σ scale (`video_sigma_scale`); image bursts give none: without the video's
+    codec, their spots' scatter is not a video's."""
     if len(images) != len(surfaces):
         raise InputError(f"{len(images)} images but {len(surfaces)} known surfaces")
     found = observe(rig, images, repeats)
     line = found.line if len(found.line.frame) else None
     result = fit_rig(rig, surfaces, [s.pixels for s in found.spots],
                      [s.covariance_px2 for s in found.spots], line, settings)
-    if repeats:   # the fitted rig's paths lead a video's tracker to each still's spots
+    if repeats and from_video:   # the fitted rig's paths lead a video's tracker to the spots
         region = found.region
         stills = [[select(frame, region, "red") for frame in (image, *more)]
                   for image, more in zip(images, repeats, strict=True)]
@@ -241,7 +249,8 @@ def calibrate_rig(rig: Rig, paths: list[Path], surfaces_csv: Path, rig_path: Pat
     file's header)."""
     surfaces = known_surfaces(surfaces_csv)
     images, names, repeats = calibration_frames(paths, rig, len(surfaces))
-    result, found = calibrate_images(rig, images, surfaces, settings, repeats)
+    result, found = calibrate_images(rig, images, surfaces, settings, repeats,
+                                     from_video=is_one_video(paths))
     rig_path.parent.mkdir(parents=True, exist_ok=True)
     return write_calibration(rig, result, found, images, names, rig_path, source), result
 
@@ -277,7 +286,7 @@ def write_calibration(nominal: Rig, result: RigCalibration, found: CalibrationIm
     if found.spot_sigma_scale is not None:
         report["spot_sigma_scale"] = found.spot_sigma_scale
         text += (f"\na video's spots' frame-to-frame scatter on the stills against their "
-                 f"own σ: x {found.spot_sigma_scale:.2f} (their σ is scaled by it; at least 1)")
+                 f"own σ: × {found.spot_sigma_scale:.2f} (their σ is scaled by it; at least 1)")
     save_rig(rig, rig_path, comment=f"Self-calibrated by {source} ({len(images)} images):\n"
                                     f"{text}")
     stem = rig_path.with_suffix("")
