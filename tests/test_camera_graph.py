@@ -85,20 +85,27 @@ def test_every_frame_arrives_in_order_with_its_times_and_pixels(clip, probe, tmp
     assert "published 30 frames" in graph.output()
 
 
-def test_flood_pacing_waits_for_acks_and_loses_nothing(clip, probe):
+def slow_consumer(probe, delay_s: float) -> tuple[list[Image], list[int], list[int]]:
+    """A consumer of /camera/image that acknowledges each frame on /camera/frame_ack
+    `delay_s` after it came: the frames it got, their publish times and its acks' [ns]."""
     ack_pub = probe.node.create_publisher(Header, "/camera/frame_ack", 10)
+    images: list[Image] = []
     published_ns: list[int] = []
     acked_ns: list[int] = []
-    images: list[Image] = []
 
     def ack_slowly(msg: Image, info) -> None:
         images.append(msg)
         published_ns.append(info["source_timestamp"])
-        time.sleep(0.02)  # a consumer slower than the decoder
+        time.sleep(delay_s)
         acked_ns.append(time.time_ns())
         ack_pub.publish(Header(stamp=msg.header.stamp, frame_id="test"))
 
     probe.node.create_subscription(Image, "/camera/image", ack_slowly, 10)
+    return images, published_ns, acked_ns
+
+
+def test_flood_pacing_waits_for_acks_and_loses_nothing(clip, probe):
+    images, published_ns, acked_ns = slow_consumer(probe, 0.02)   # slower than the decoder
     graph = SdsGraphRun("camera.yaml", "--set", f"camera.source={clip}",
                          "--set", "camera.pacing=flood", "--set", "camera.max_in_flight=1")
     assert graph.wait(timeout=60) == 0, graph.output()
@@ -115,19 +122,7 @@ def test_realtime_acks_make_a_file_wait_for_a_consumer_slower_than_real_time(cli
     """`realtime_acks` (the side camera's file, read as frames, whose every frame the recorder
     keeps): a consumer at half real time gets every frame, each published after the previous
     ack, and the file says how far it fell behind."""
-    ack_pub = probe.node.create_publisher(Header, "/camera/frame_ack", 10)
-    published_ns: list[int] = []
-    acked_ns: list[int] = []
-    images: list[Image] = []
-
-    def ack_slowly(msg: Image, info) -> None:
-        images.append(msg)
-        published_ns.append(info["source_timestamp"])
-        time.sleep(0.066)  # two frame periods: half real time
-        acked_ns.append(time.time_ns())
-        ack_pub.publish(Header(stamp=msg.header.stamp, frame_id="test"))
-
-    probe.node.create_subscription(Image, "/camera/image", ack_slowly, 10)
+    images, published_ns, acked_ns = slow_consumer(probe, 0.066)   # two frame periods
     graph = SdsGraphRun("camera.yaml", "--set", f"camera.source={clip}",
                          "--set", "camera.realtime_acks=true", "--set", "camera.max_in_flight=1",
                          "--set", "camera.video=false")
