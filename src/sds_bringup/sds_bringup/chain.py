@@ -28,9 +28,9 @@ from sds_bringup.ros_env import graph_domain_id, graph_environment
 GRAPHS = ("drop.yaml", "view.yaml")
 IDLE_TIMEOUT_S = 60.0
 BRIDGE_OPEN_S = 0.5
+"""The bridge opens its port within this of publishing (it reads from its start)."""
 SIDE_ACK_TOPIC = "/lateral/frame_ack"
 """Where drop.yaml's recorder acknowledges each side frame it wrote (lateral.yaml)."""
-"""The bridge opens its port within this of publishing (it reads from its start)."""
 
 
 @dataclass(frozen=True)

@@ -278,12 +278,15 @@ class FrameTracker:
         """The spot with what the calibration's repeated frames showed its σ leaves out: a
         spot that measures its own speckle scaled by `sigma_scale`, any other widened by
         `excess_sigma_px`."""
+        # Unchanged spots are not copied: a copy costs about 8 µs, 20 spots a frame.
         if self.spots.measures_own_speckle(estimate):
-            return replace(estimate, sigma_px=estimate.sigma_px * self.sigma_scale) \
-                if self.sigma_scale != 1.0 else estimate
+            if self.sigma_scale == 1.0:
+                return estimate
+            return replace(estimate, sigma_px=estimate.sigma_px * self.sigma_scale)
+        if not self.excess_sigma_px:
+            return estimate
         return replace(estimate, sigma_px=float(np.hypot(estimate.sigma_px,
-                                                         self.excess_sigma_px))) \
-            if self.excess_sigma_px else estimate
+                                                         self.excess_sigma_px)))
 
     def _find_line(self, red: np.ndarray, offset: tuple[int, int]) -> LineProfile:
         """This frame's line: around the last frame's where it was followed, else (the first
