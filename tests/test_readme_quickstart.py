@@ -59,8 +59,9 @@ def expanded(command: list[str], folder: Path, substitutes: dict[str, list[str]]
 def test_the_readmes_real_rig_steps_run_as_written(tmp_path: Path) -> None:
     """Every step of the README's real-rig block, in order, each exit code 0: the camera
     calibrated from rendered checkerboards, the rig planned and calibrated from the table's
-    rendered images (a burst per surface), a drop video run through the graph (a file for the
-    live camera, no Arduino), then processed again from its recording, analysed and viewed."""
+    rendered images (a burst per surface), 2 s of a drop's video run through the graph (a
+    file for the live camera, no Arduino), then processed again from its recording, analysed
+    and viewed."""
     steps = readme_steps()
     assert [s[1] for s in steps] == ["calibrate", "calibrate", "calibrate", "run", "process",
                                      "analyze", "view"], steps
@@ -101,7 +102,8 @@ def test_the_readmes_real_rig_steps_run_as_written(tmp_path: Path) -> None:
     record = load_rig(tmp_path / "rig.yaml").calibration or {}
     assert "spot_excess_sigma_px" in record and "spot_sigma_scale" not in record
     # 4. The drop: a video for the live camera, no Arduino.
-    scenario = replace(load_scenario(DEMO_SCENARIO, {"scale": SCALE}), rig=true)
+    scenario = replace(load_scenario(DEMO_SCENARIO, {"scale": SCALE, "duration_s": 2.0}),
+                       rig=true)
     video = simulate(scenario, tmp_path / "simulation").video
     substitutes = {"/dev/video0": ["--no-arduino"], "--camera": ["--video", str(video)]}
     for step in steps[3:]:
@@ -112,4 +114,4 @@ def test_the_readmes_real_rig_steps_run_as_written(tmp_path: Path) -> None:
                  "drop1_again/points.csv", "drop1_analysis/report.html", "drop1_view.rrd"):
         assert (tmp_path / path).exists(), path
     again = load_results(tmp_path / "drop1_again").points
-    assert again is not None and len(again) > 100 * 17   # the drop's spots, measured again
+    assert again is not None and len(again) > 50 * 17   # the drop's spots, measured again
