@@ -248,8 +248,10 @@ def _line_band(thin: np.ndarray, spot: np.ndarray, spot_radius_px: float
 
 def _first_of_duplicates(pixels: np.ndarray, tolerance_px: float) -> list[int]:
     """Indices of the points that have no earlier point within `tolerance_px`."""
+    offsets = pixels[:, None, :] - pixels[None, :, :]
+    distances = np.hypot(offsets[..., 0], offsets[..., 1])
     kept: list[int] = []
-    for k, point in enumerate(pixels):
-        if all(np.hypot(*(point - pixels[j])) > tolerance_px for j in kept):
+    for k in range(len(pixels)):
+        if np.all(distances[k, kept] > tolerance_px):
             kept.append(k)
     return kept

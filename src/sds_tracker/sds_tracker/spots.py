@@ -1438,14 +1438,22 @@ def line_wing_speckle(left: np.ndarray, offsets_px: np.ndarray, away: np.ndarray
     pixel's offset from the line (`offsets_px`, in 1 px bins up to `reach`; 0 beyond), over
     the pixels `away` from the spot: speckle multiplies the line's light, so its wings, dim
     on average, leave grains as bright as a spot's beside a bright line."""
+    # Each pixel's bin 0..2·reach, and 2·reach + 1 beyond the reach (σ 0 there).
     bins = np.round(offsets_px).astype(int)
-    sigma = np.zeros(left.shape)
-    for offset in range(-reach, reach + 1):
-        at = bins == offset
-        known = left[at & away]
-        if known.size:
-            sigma[at] = 1.4826 * float(np.median(np.abs(known)))
-    return sigma
+    index = np.where(np.abs(bins) <= reach, bins + reach, 2 * reach + 1)
+    keys, values = index[away], np.abs(left[away])
+    # The bins' medians at once: each bin's values sorted, their middle one or two taken.
+    order = np.lexsort((values, keys))
+    keys, values = keys[order], values[order]
+    starts = np.searchsorted(keys, np.arange(2 * reach + 1))
+    counts = np.searchsorted(keys, np.arange(2 * reach + 1), side="right") - starts
+    lower = values[np.minimum(starts + (counts - 1) // 2, len(values) - 1)] if len(values) \
+        else np.zeros(2 * reach + 1)
+    upper = values[np.minimum(starts + counts // 2, len(values) - 1)] if len(values) \
+        else np.zeros(2 * reach + 1)
+    medians = np.where(counts % 2 == 1, lower, (lower + upper) / 2)
+    per_bin = np.append(np.where(counts > 0, 1.4826 * medians, 0.0), 0.0)
+    return per_bin[index]
 
 
 def line_speckle_sigma_px(speckle: float, distance2_px2: np.ndarray, light: float) -> float:
