@@ -12,8 +12,10 @@ the tracker's RMS error against the truth and a naive windowed centroid's on the
 (median of the window's border as background, a round aperture, re-centred twice, started at
 the true spot: it cannot take another diode's blob), their ratio, both errors' medians (the
 naive centroid's RMS is dominated by the spots the laser line passes), error/σ RMS of the
-tracker's own σ, wrong identities (a valid spot more than 2 px from its own diode's truth),
-spots given while their diode was hidden (fabricated), and visible spots not measured.
+tracker's own σ, the run's own check of it without the truth (path/σ: the spots' scatter
+across their beams' image paths over their σ, `sds_tracker.path_scatter`), wrong identities
+(a valid spot more than 2 px from its own diode's truth), spots given while their diode was
+hidden (fabricated), and visible spots not measured.
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ from sds_model.rig import Rig, load_rig
 from sds_sim.imaging import EFFECTS, draw_imaging, merged
 from sds_sim.render import FrameRenderer, FrameTruth
 from sds_sim.scenario import Scenario, load_scenario
+from sds_tracker.path_scatter import PathScatter
 from sds_tracker.sigma_scale import video_sigma_scale
 from sds_tracker.spots import is_measured
 from sds_tracker.tracker import FrameTracker, TrackedSpot
@@ -119,9 +122,14 @@ def measure(true: Rig, scale: float, frames: list[np.ndarray], truths: list[Fram
     ids = [d.laser_id for d in rig.diodes]
     half = max(6, round(24 * scale))
     result: dict[str, list] = {"tracker": [], "naive": [], "sigma": [], "wrong": [],
-                               "fabricated": [], "missed": []}
+                               "fabricated": [], "missed": [], "path_check": []}
+    scatter = PathScatter.for_rig(rig)
     for index, spots in outputs:
         truth = truths[index]
+        measured = [s for s in spots if is_measured(s.flags)]
+        scatter.add(np.array([s.laser_id for s in measured]),
+                    np.array([[s.x_raw_px, s.y_raw_px] for s in measured]).reshape(-1, 2),
+                    np.array([s.sigma_px for s in measured]))
         for spot in spots:
             k = ids.index(spot.laser_id)
             measured = is_measured(spot.flags)
@@ -141,6 +149,10 @@ def measure(true: Rig, scale: float, frames: list[np.ndarray], truths: list[Fram
             result["tracker"].append(error)
             result["naive"].append(naive - truth.spot_exposure_px[k])
             result["sigma"].append(spot.sigma_px)
+    check = scatter.check()
+    if check is not None:   # its χ² and degrees of freedom, to pool over the seeds
+        dof = check.measurements - check.spots
+        result["path_check"].append((check.scatter_over_sigma**2 * dof, dof))
     return result
 
 
@@ -155,7 +167,8 @@ def main() -> None:
     print(f"seeds {args.seeds}, {args.frames} frames each at scale {args.scale}, "
           "tracked with the true rig")
     print(f"{'case':20s} {'spots':>6s} {'tracker px':>10s} {'naive px':>9s} {'ratio':>6s} "
-          f"{'median':>13s} {'err/σ':>6s} {'wrong':>6s} {'fabric.':>7s} {'missed':>6s}")
+          f"{'median':>13s} {'err/σ':>6s} {'path/σ':>6s} {'wrong':>6s} {'fabric.':>7s} "
+          f"{'missed':>6s}")
     with tempfile.TemporaryDirectory(prefix="sds-bench-real-") as folder:
         for case in args.cases:
             total: dict[str, list] = {}
@@ -173,9 +186,11 @@ def main() -> None:
             in_sigma = float(np.sqrt(np.mean(np.sum(tracker**2, axis=1) /
                                              (2 * np.array(total["sigma"]) ** 2))))
             medians = [float(np.median(np.hypot(*e.T))) for e in (tracker, naive)]
+            chi2, dof = np.sum(np.array(total["path_check"]).reshape(-1, 2), axis=0)
+            path_check = float(np.sqrt(chi2 / dof)) if dof else float("nan")
             print(f"{case:20s} {len(tracker):6d} {rms_tracker:10.3f} {rms_naive:9.3f} "
                   f"{rms_tracker / rms_naive:6.2f} {medians[0]:6.3f} {medians[1]:6.3f} "
-                  f"{in_sigma:6.2f} {len(total['wrong']):6d} "
+                  f"{in_sigma:6.2f} {path_check:6.2f} {len(total['wrong']):6d} "
                   f"{sum(total['fabricated']):7d} {len(total['missed']):6d}", flush=True)
 
 

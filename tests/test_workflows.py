@@ -37,6 +37,10 @@ def test_process_video_writes_what_sds_process_writes(repo: Path, kick: Simulati
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     assert run.frames == 15 and done.stdout.startswith(f"sds process: 15 frames of {kick.video}")
+    # The spots' own check of their σ, as the API gives it (sds_tracker.path_scatter).
+    check = run.analysis.sigma_check
+    assert check is not None and check.spots == 20, check
+    assert f"sds process: spots' σ check: {check.line()}" in done.stdout, done.stdout
     match, mismatch, errors = filecmp.cmpfiles(tmp_path / "api", tmp_path / "cli",
                                                RESULT_FILES, shallow=False)
     assert sorted(match) == sorted(RESULT_FILES), (mismatch, errors)

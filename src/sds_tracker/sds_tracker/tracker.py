@@ -137,6 +137,12 @@ PATH_SIGMAS = 3.0
 """A beam's image path is trusted to this many of its σ beyond `path_tolerance_px`."""
 
 
+def path_heights_mm(config: TrackerConfig) -> np.ndarray:
+    """The surface heights [mm] at which each diode's image path is sampled."""
+    low, high = config.path_heights_mm
+    return np.linspace(low, high, 15)
+
+
 def path_sigma_px(rig: Rig, laser_id: int, heights_mm: np.ndarray) -> float:
     """How far [px] a diode's image path may be off where its beam's direction is uncertain:
     the largest move of the path over `heights_mm` when the direction turns by its σ
@@ -179,8 +185,7 @@ class FrameTracker:
     def __init__(self, rig: Rig, config: TrackerConfig | None = None,
                  seeds: dict[int, tuple[float, float]] | None = None) -> None:
         self.config = config or TrackerConfig()
-        low, high = self.config.path_heights_mm
-        heights = np.linspace(low, high, 15)
+        heights = path_heights_mm(self.config)
         self.paths = {d.laser_id: beam_image_path(rig, d.laser_id, heights)
                       for d in rig.tracked_diodes}
         widened = {d.laser_id: float(np.hypot(self.config.spots.path_tolerance_px,

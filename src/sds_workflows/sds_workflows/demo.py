@@ -34,6 +34,7 @@ from sds_sim.simulate import SimulationOutput, simulate
 from sds_sloshing.analysis import AnalysisOptions
 from sds_sloshing.report import summary_lines, truth_from_run
 from sds_sloshing.surface_series import RecordingError
+from sds_tracker.path_scatter import SigmaCheck
 from sds_viz.from_mcap import mcap_to_rrd
 
 from sds_workflows.demo_rig import DemoRig, calibrate_demo_rig, draw_demo_rig
@@ -131,6 +132,7 @@ class AnalysedRun:
     results: dict[str, Any]
     side: LateralRun | None = None
     side_failure: str = ""
+    sigma_check: SigmaCheck | None = None   # the spots' own check of their σ
 
 
 def analyse_run(recording: Path, rig: Rig, out: Path, options: AnalysisOptions,
@@ -163,7 +165,7 @@ def analyse_run(recording: Path, rig: Rig, out: Path, options: AnalysisOptions,
                 side_failure = str(error)
     if analysis.note:
         print(f"sds: {analysis.note}")
-    return AnalysedRun(analysis.results, side_run, side_failure)
+    return AnalysedRun(analysis.results, side_run, side_failure, analysis.sigma_check)
 
 
 def interrupted(command: str, outputs: ChainOutputs) -> int:
@@ -239,13 +241,13 @@ def run_demo(out: Path, seconds: float | None, run_chain: ChainRunner,
     analysed = analyse_run(outputs.recording, rig, out, AnalysisOptions(
         gravity_m_s2=scenario.gravity, damping_caveat=damping_caveat(simulation.video)),
         simulation.run)
-    return print_summary(out, scenario, simulation, outputs, analysed.results, built)
+    return print_summary(out, scenario, simulation, outputs, analysed, built)
 
 
-def print_summary(out: Path, scenario, simulation, outputs: ChainOutputs, result: dict,
-                  built: DemoRig | None = None) -> int:
+def print_summary(out: Path, scenario, simulation, outputs: ChainOutputs,
+                  analysed: AnalysedRun, built: DemoRig | None = None) -> int:
     """The demo's summary: the rig's calibration (with `built`), files, modes against the
-    truth, heights, spots, the Arduino."""
+    truth, heights, spots and their own check of their σ, the Arduino."""
     results = load_results(out / "results")
     spots, points = results.spots, results.points
     if spots is None or points is None:
@@ -287,12 +289,14 @@ def print_summary(out: Path, scenario, simulation, outputs: ChainOutputs, result
         ("Hampel-replaced", 16))}
     print(f"  spots              {len(spots)} ({len(spots) // max(frames, 1)} per frame): "
           + ", ".join(f"{count} {name}" for name, count in flags.items()))
+    if analysed.sigma_check is not None:
+        print(f"    σ check          {analysed.sigma_check.line()}")
     if arduino:
         print(f"  Arduino            {arduino[-1].split('final: ')[1]}")
     if offset:
         print(f"  clocks             camera vs Arduino, from the sync LED: {offset[-1]}")
     print("  sloshing (the report has every method; errors against the simulator's truth):")
-    for line in summary_lines(result):
+    for line in summary_lines(analysed.results):
         if any(key in line for key in ("matrix_pencil", " tof ", "no oscillation", "note:")):
             print(f"    {line}")
     complete = frames == scenario.frame_count
@@ -352,6 +356,8 @@ def run_live(source: str, rig_file: Path, out: Path, port: str | None,
     print(f"\nSDS run: {source}\n  recording {outputs.recording}\n  Rerun {outputs.rerun}\n"
           f"  report {out / 'analysis' / 'report.html'}\n  results {out / 'results'}/\n"
           f"  frames {live_coverage(outputs.recording)}")
+    if analysed.sigma_check is not None:
+        print(f"  spots' σ check: {analysed.sigma_check.line()}")
     for line in summary_lines(analysed.results):
         print(f"    {line}")
     missing = []

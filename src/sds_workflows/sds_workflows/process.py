@@ -101,8 +101,8 @@ class ProcessedRun:
         return bool(self.broken or self.lateral_failure or self.analysis.results is None)
 
     def summary(self) -> str:
-        """The console's lines: the run, then the side camera's."""
-        note = self.analysis.note
+        """The console's lines: the run, its spots' check of their σ, the side camera's."""
+        note, check = self.analysis.note, self.analysis.sigma_check
         return (f"sds process: {self.frames} frames of {self.source} -> {self.out}"
                 + (f" ({note})" if note else "")
                 + (f"; INPUT INCOMPLETE, results cover the frames read: {self.broken}"
@@ -110,6 +110,7 @@ class ProcessedRun:
                 + (f"; SIDE CAMERA NOT COMPARED: {self.lateral_failure}"
                    if self.lateral_failure else "")
                 + "".join(f"\nsds process: {line}" for line in
+                          ([f"spots' σ check: {check.line()}"] if check else []) +
                           (self.lateral.lines() if self.lateral else [])))
 
     def result_lines(self) -> list[str]:

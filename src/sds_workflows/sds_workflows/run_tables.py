@@ -26,6 +26,7 @@ from sds_sloshing.surface_series import (
     SurfaceSeries,
     surface_series_from_rows,
 )
+from sds_tracker.path_scatter import PathScatter, SigmaCheck
 from sds_tracker.spots import is_measured
 
 from sds_workflows.lateral import LATERAL_FILES
@@ -64,11 +65,15 @@ class RunTables:
         self._tof: list[tuple[float, float]] = []                         # time [s], [mm]
         self._accelerations: dict[str, list[np.ndarray]] = defaultdict(list)  # t, ax, ay, az
         self._line_frames = 0
+        self.path_scatter = PathScatter.for_rig(rig)
 
     def add_spots(self, frame: int, time_s: float, rows: list[tuple]) -> None:
         """Spot rows (laser_id, x, y, x_raw, y_raw, sigma, intensity, flags) of a frame."""
         self.writer.add("spots", [(frame, time_s, i, x, y, xr, yr, s, p, int(is_measured(f)),
                                    f) for i, x, y, xr, yr, s, p, f in rows])
+        measured = np.array([(i, xr, yr, s) for i, _, _, xr, yr, s, _, f in rows
+                             if is_measured(f)], dtype=float).reshape(-1, 4)
+        self.path_scatter.add(measured[:, 0].astype(int), measured[:, 1:3], measured[:, 3])
 
     def add_points(self, frame: int, time_s: float, points: SurfacePoints,
                    rejected: np.ndarray | None = None,
@@ -189,6 +194,7 @@ class RunAnalysis:
 
     results: dict[str, Any] | None
     note: str
+    sigma_check: SigmaCheck | None = None   # the spots' own check of their σ
 
 
 def finish_analysis(tables: RunTables, source: str, out: Path, options: AnalysisOptions,
@@ -207,4 +213,5 @@ def finish_analysis(tables: RunTables, source: str, out: Path, options: Analysis
     else:
         results = write_report(analysis, out, truth).results
     tables.writer.close()
-    return RunAnalysis(results, "; ".join(n for n in (regime, note) if n))
+    return RunAnalysis(results, "; ".join(n for n in (regime, note) if n),
+                       tables.path_scatter.check())
