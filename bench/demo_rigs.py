@@ -11,7 +11,8 @@ the calibration's χ²/dof and whether it is within its band, the unseen tilt σ
 states, the beams' direction error over their stated σ (RMS), what the stills' scatter adds
 to the σ of the spots that do not measure their own speckle (`spot_excess_sigma_px`) and the
 scale on the σ of those that do (`spot_sigma_scale`), the drop's heights (RMSE, error/σ RMS,
-largest error,
+the run's own check of its spots' σ without the truth (`sds_tracker.path_scatter`), largest
+error,
 points more than 1 mm off or measured while the truth has their spot hidden: a wrong
 identity or a fabricated point), the first two lateral modes' frequency and damping errors
 (matrix pencil), and the second's damping error in its own σ (is a miss the estimate's
@@ -94,6 +95,8 @@ def one_rig(seed: int, seconds: float, folder: Path) -> dict[str, Any]:
             "sigma_scale": record.get("spot_sigma_scale", np.nan),
             "heights_rmse_mm": float(np.sqrt(np.mean(errors**2))),
             "heights_in_sigma": float(np.sqrt(np.mean((errors / sigmas) ** 2))),
+            "sigma_check": analysis.sigma_check.scatter_over_sigma
+            if analysis.sigma_check else np.nan,
             "largest_mm": float(np.abs(errors).max()),
             "wrong": int(np.sum(np.abs(errors) > WRONG_MM))
             + hidden_points(simulation.spots, spot_points), "points": len(spot_points),
@@ -108,7 +111,8 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=4.7, help="drop duration [s]")
     args = parser.parse_args()
     print(f"{'seed':>6s} {'chi2/dof':>9s} {'unseen σ°':>9s} {'beams e/σ':>9s} "
-          f"{'excess px':>9s} {'σ scale':>7s} {'RMSE mm':>8s} {'e/σ':>5s} {'max mm':>7s} "
+          f"{'excess px':>9s} {'σ scale':>7s} {'RMSE mm':>8s} {'e/σ':>5s} {'check':>5s} "
+          f"{'max mm':>7s} "
           f"{'wrong':>6s} {'l1 f %':>7s} {'l1 ζ %':>7s} {'l2 f %':>7s} {'l2 ζ %':>7s} "
           f"{'l2 ζ/σ':>7s} {'s':>4s}", flush=True)
     rows = []
@@ -120,7 +124,8 @@ def main() -> None:
               f"{row['unseen_tilt_sigma_deg']:9.3f} {row['beam_in_sigma']:9.2f} "
               f"{row['excess_px']:9.3f} {row['sigma_scale']:7.2f} "
               f"{row['heights_rmse_mm']:8.3f} "
-              f"{row['heights_in_sigma']:5.2f} {row['largest_mm']:7.3f} "
+              f"{row['heights_in_sigma']:5.2f} {row['sigma_check']:5.2f} "
+              f"{row['largest_mm']:7.3f} "
               f"{row['wrong']:3d}/{row['points']:<4d}"
               + "".join(f" {v:+7.2f}" for v in (*row['lateral_1'][:2], *row['lateral_2']))
               + f" {row['seconds']:4.0f}", flush=True)

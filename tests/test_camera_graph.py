@@ -223,9 +223,10 @@ def test_the_demo_calibrates_a_rig_as_built_and_measures_its_drop_with_the_whole
     images with a real camera's imaging, and the summary states the fit's χ² and its own σ
     for unseen surfaces. The drop is measured with the calibrated rig file: every frame
     through camera, tracker, reconstruction, recorder and viewer, the Arduino stream through
-    a pseudo-terminal, the analysis. No point is wrong: the demo's seed once had diodes take
-    the container's rim for a spot that dropped out (points 1.7–19.6 mm off, valid); the
-    right ones were within 0.30 mm (the 4.7 s run, 2692 points), so 1 mm tells them apart.
+    a pseudo-terminal, the analysis, the spots' own check of their σ. No point is wrong:
+    the demo's seed once had diodes take the container's rim for a spot that dropped out
+    (points 1.7–19.6 mm off, valid); the right ones were within 0.30 mm (the 4.7 s run, 2692
+    points), so 1 mm tells them apart.
     (`--exact-rig`, the scenario's own rig file, is run by the Ctrl-C test of
     test_nothing_lost.)"""
     result = subprocess.run([str(Path(sys.executable).with_name("sds")), "demo", "--seconds", "2",
@@ -239,6 +240,8 @@ def test_the_demo_calibrates_a_rig_as_built_and_measures_its_drop_with_the_whole
     assert not (tmp_path / "ttyARDUINO").is_symlink()     # the stand-in cable is unplugged
     assert "bad lines 0" in result.stdout and "reconnects 0" in result.stdout, result.stdout
     assert "from the sync LED" in result.stdout
+    assert re.search(r"σ check +scatter across their beams' paths over their σ: RMS [0-9.]+, "
+                     r"the σ are", result.stdout), result.stdout
     for path in ("recording.mcap", "recording.rrd", "analysis/report.html", "results/points.csv",
                  "results/imu.csv", "results/tof.csv"):
         assert (tmp_path / path).is_file(), path

@@ -555,6 +555,7 @@ def test_sds_run_measures_a_recorded_video_with_the_whole_graph(repo: Path,
     assert "side clock: top − side" in done.stdout
     assert f"side camera: {side_frames} of its {side_frames} frames recorded" in done.stdout
     assert "frames all 30 measured live; the recording holds every one" in done.stdout
+    assert "spots' σ check: scatter across their beams' paths over their σ" in done.stdout
     assert (out / "recording.mcap").is_file() and (out / "recording.rrd").is_file()
     assert (out / "analysis" / "report.html").is_file()
     results = load_results(out / "results")
