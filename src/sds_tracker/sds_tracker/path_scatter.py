@@ -12,7 +12,7 @@ every frame (a mean offset takes that in).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from sds_model.rig import Rig
@@ -24,19 +24,21 @@ MIN_FRAMES = 5
 """A spot counts once it was measured in this many frames (its mean offset then costs little)."""
 
 
-def across_path_px(path_px: np.ndarray, points_px: np.ndarray) -> np.ndarray:
-    """Signed distance [px] of each point (N×2) from a path (M×2 polyline, M ≥ 2): from its
-    nearest point on the nearest segment, positive to the left of the path's direction."""
-    start, step = path_px[:-1], np.diff(path_px, axis=0)
-    length2 = np.maximum(np.einsum("ij,ij->i", step, step), 1e-12)
-    offset = points_px[:, None, :] - start[None, :, :]
-    along = np.clip(np.einsum("nij,ij->ni", offset, step) / length2, 0.0, 1.0)
-    gap = offset - along[..., None] * step[None, :, :]
+def across_path_px(paths_px: np.ndarray, points_px: np.ndarray) -> np.ndarray:
+    """Signed distance [px] of each point (N×2) from its path (N×M×2 polylines, or one M×2
+    for all, M ≥ 2): from its nearest point on the nearest segment, positive to the left of
+    the path's direction."""
+    paths = np.broadcast_to(paths_px, (len(points_px), *np.shape(paths_px)[-2:]))
+    start, step = paths[:, :-1], np.diff(paths, axis=1)
+    length2 = np.maximum(np.einsum("nij,nij->ni", step, step), 1e-12)
+    offset = points_px[:, None, :] - start
+    along = np.clip(np.einsum("nij,nij->ni", offset, step) / length2, 0.0, 1.0)
+    gap = offset - along[..., None] * step
     distance = np.hypot(gap[..., 0], gap[..., 1])
     nearest = np.argmin(distance, axis=1)
     rows = np.arange(len(points_px))
-    chosen, direction = gap[rows, nearest], step[nearest]
-    side = np.sign(direction[:, 0] * chosen[:, 1] - direction[:, 1] * chosen[:, 0])
+    chosen, direction = gap[rows, nearest], step[rows, nearest]
+    side = direction[:, 0] * chosen[:, 1] - direction[:, 1] * chosen[:, 0]
     return np.where(side < 0, -1.0, 1.0) * distance[rows, nearest]
 
 
@@ -59,13 +61,15 @@ class SigmaCheck:
                 f"{self.spots} spots, {self.measurements} measurements)")
 
 
-@dataclass
 class PathScatter:
     """Sums per diode of its measured spots' offsets r [px] from its path and their weights
     w = 1/σ², from which `check` gives Σ (r − r̄)²·w over Σ (n − 1), r̄ each diode's mean."""
 
-    paths_px: dict[int, np.ndarray]
-    sums: dict[int, np.ndarray] = field(default_factory=dict)   # n, Σr, Σr·w, Σr²·w, Σw
+    def __init__(self, paths_px: dict[int, np.ndarray]) -> None:
+        """`paths_px`: each diode's image path (M×2 px, the same M for all)."""
+        self.rows = {laser_id: row for row, laser_id in enumerate(paths_px)}
+        self.paths_px = np.stack(list(paths_px.values())) if paths_px else np.zeros((0, 2, 2))
+        self.sums = np.zeros((len(paths_px), 5))   # per diode: n, Σr, Σr·w, Σr²·w, Σw
 
     @classmethod
     def for_rig(cls, rig: Rig) -> PathScatter:
@@ -76,27 +80,26 @@ class PathScatter:
                     for d in rig.tracked_diodes})
 
     def add(self, laser_ids: np.ndarray, points_px: np.ndarray, sigmas_px: np.ndarray) -> None:
-        """A frame's measured spots: their diodes, raw positions (N×2 px) and σ [px]."""
-        for laser_id, point, sigma in zip(laser_ids, points_px, sigmas_px, strict=True):
-            path = self.paths_px.get(int(laser_id))
-            if path is None or not (np.isfinite(point).all() and sigma > 0):
-                continue
-            offset = float(across_path_px(path, point[None, :])[0])
-            weight = 1.0 / float(sigma) ** 2
-            sums = self.sums.setdefault(int(laser_id), np.zeros(5))
-            sums += (1.0, offset, offset * weight, offset**2 * weight, weight)
+        """A frame's measured spots: their diodes, raw positions (N×2 px) and σ [px]; a spot
+        without a path, a finite position or a σ > 0 is left out."""
+        rows = np.array([self.rows.get(int(laser_id), -1) for laser_id in laser_ids], int)
+        sigmas = np.asarray(sigmas_px, dtype=float).reshape(-1)
+        points = np.asarray(points_px, dtype=float).reshape(-1, 2)
+        keep = (rows >= 0) & np.isfinite(points).all(axis=1) & (sigmas > 0)
+        if not keep.any():
+            return
+        offsets = across_path_px(self.paths_px[rows[keep]], points[keep])
+        weights = 1.0 / sigmas[keep] ** 2
+        np.add.at(self.sums, rows[keep], np.column_stack([
+            np.ones_like(offsets), offsets, offsets * weights, offsets**2 * weights, weights]))
 
     def check(self) -> SigmaCheck | None:
         """The check over the diodes measured in MIN_FRAMES frames or more; None if none was."""
-        chi2, dof, spots, measurements = 0.0, 0, 0, 0
-        for n, total, weighted, squares, weights in self.sums.values():
-            if n < MIN_FRAMES:
-                continue
-            mean = total / n
-            chi2 += squares - 2 * mean * weighted + mean**2 * weights
-            dof += int(n) - 1
-            spots += 1
-            measurements += int(n)
-        if not dof:
+        counted = self.sums[self.sums[:, 0] >= MIN_FRAMES]
+        if not len(counted):
             return None
-        return SigmaCheck(float(np.sqrt(max(chi2, 0.0) / dof)), spots, measurements)
+        n, total, weighted, squares, weights = counted.T
+        mean = total / n
+        chi2 = float(np.sum(squares - 2 * mean * weighted + mean**2 * weights))
+        dof = int(np.sum(n)) - len(counted)
+        return SigmaCheck(float(np.sqrt(max(chi2, 0.0) / dof)), len(counted), int(np.sum(n)))
