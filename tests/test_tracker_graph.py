@@ -468,7 +468,9 @@ def test_sds_process_runs_a_campaign_in_parallel_and_reports_the_file_that_fails
 def test_export_round_trip_equals_the_graphs_messages(drop_run: DropRun) -> None:
     """export -> load_results gives back what the graph published."""
     folder = drop_run.folder / "exported_again"
-    assert sds("export", str(drop_run.recording), "--out", str(folder)).returncode == 0
+    done = sds("export", str(drop_run.recording), "--out", str(folder))
+    assert done.returncode == 0, done.stderr
+    assert "sds export: spots' σ check: scatter across their beams' paths" in done.stdout
     results = load_results(folder)
     spots = by_key(results.spots, "frame", "laser_id")
     for message in drop_run.spots:

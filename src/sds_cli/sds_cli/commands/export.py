@@ -33,4 +33,6 @@ def run(args: argparse.Namespace) -> int:
     note = analysis.note
     print(f"sds export: {frames} frames of {args.recording} -> {args.out}" + (
         f" ({note})" if note else ""), file=sys.stdout if analysis.results else sys.stderr)
+    if analysis.sigma_check is not None:
+        print(f"sds export: spots' σ check: {analysis.sigma_check.line()}")
     return 0 if analysis.results else 2
