@@ -4,6 +4,8 @@ pipeline give what the `sds` command gives."""
 from __future__ import annotations
 
 import filecmp
+import html
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -41,6 +43,9 @@ def test_process_video_writes_what_sds_process_writes(repo: Path, kick: Simulati
     check = run.analysis.sigma_check
     assert check is not None and check.spots == 20, check
     assert f"sds process: spots' σ check: {check.line()}" in done.stdout, done.stdout
+    recorded = json.loads((tmp_path / "cli" / "analysis.json").read_text())["spot_sigma_check"]
+    assert recorded["scatter_over_sigma"] == check.scatter_over_sigma
+    assert html.escape(check.line()) in (tmp_path / "cli" / "report.html").read_text()
     match, mismatch, errors = filecmp.cmpfiles(tmp_path / "api", tmp_path / "cli",
                                                RESULT_FILES, shallow=False)
     assert sorted(match) == sorted(RESULT_FILES), (mismatch, errors)

@@ -7,7 +7,7 @@ what the analysis reads; `finish_analysis` analyses them and closes the tables.
 from __future__ import annotations
 
 from collections import defaultdict
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -20,7 +20,7 @@ from sds_recon.instant import sample_offsets_s
 from sds_recon.reconstruction import LINE_LASER_ID, SurfaceFits, SurfacePoints
 from sds_recon.results import TABLE_FILES, ResultsWriter
 from sds_sloshing.analysis import AnalysisOptions, analyze, with_gravity_regime
-from sds_sloshing.report import REPORT_FILES, Truth, write_report
+from sds_sloshing.report import REPORT_FILES, Truth, add_report_section, write_report
 from sds_sloshing.surface_series import (
     RecordingError,
     SurfaceSeries,
@@ -38,6 +38,9 @@ LINE_FRAME_STEP = 10
 """The analysis keeps the line's points of the first LINE_FRAMES_IN_FULL frames (a minute at
 30 fps), then of every LINE_FRAME_STEP-th: they serve only the meniscus, a mean radial profile,
 and all of a 10-minute 4K run's would hold 0.8 GB (the result files keep every one)."""
+
+SIGMA_CHECK_KEY = "spot_sigma_check"
+"""analysis.json's key for the spots' own check of their σ (`sds_tracker.path_scatter`)."""
 
 RUN_FILES = (*TABLE_FILES, *REPORT_FILES, *LATERAL_FILES)
 """What a run of `sds process` or `sds export` writes into its folder: all of it is replaced
@@ -206,12 +209,17 @@ def finish_analysis(tables: RunTables, source: str, out: Path, options: Analysis
     `sds run` and the demo alike)."""
     options, regime = with_gravity_regime(options, tables.accelerations())
     results, note = None, ""
+    check = tables.path_scatter.check()
     try:   # data that give no analysis (no point, no oscillation); a fault is raised
         analysis = analyze(tables.surface_series(source), tables.rig, options)
     except InputError as error:
         note = f"NO ANALYSIS: {error}"
     else:
         results = write_report(analysis, out, truth).results
+        if check is not None:
+            content = {**asdict(check), "summary": check.line()}
+            add_report_section(out, "The spots' own check of their σ", [check.line()], None,
+                               SIGMA_CHECK_KEY, content)
+            results[SIGMA_CHECK_KEY] = content
     tables.writer.close()
-    return RunAnalysis(results, "; ".join(n for n in (regime, note) if n),
-                       tables.path_scatter.check())
+    return RunAnalysis(results, "; ".join(n for n in (regime, note) if n), check)
