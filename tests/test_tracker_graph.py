@@ -458,6 +458,9 @@ def test_sds_process_runs_a_campaign_in_parallel_and_reports_the_file_that_fails
     failure = [line for line in done.stderr.splitlines() if "drop_c.mp4:" in line]
     assert len(failure) == 1 and "Traceback" not in done.stdout + done.stderr, done.stderr
     assert "drop_c" not in done.stdout
+    assert {line.split(": spots' σ check:")[0] for line in done.stdout.splitlines()
+            if "spots' σ check" in line} == {f"sds process: {campaign / name}"
+                                              for name in ("drop_a.mp4", "drop_b.mp4")}
     first, second = load_results(out / "drop_a"), load_results(out / "drop_b")
     assert sorted(set(first.spots["frame"])) == list(range(30))
     np.testing.assert_array_equal(first.spots["x_px"], second.spots["x_px"])   # same video

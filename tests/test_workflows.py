@@ -42,7 +42,9 @@ def test_process_video_writes_what_sds_process_writes(repo: Path, kick: Simulati
     # The spots' own check of their σ, as the API gives it (sds_tracker.path_scatter).
     check = run.analysis.sigma_check
     assert check is not None and check.spots == 20, check
-    assert f"sds process: spots' σ check: {check.line()}" in done.stdout, done.stdout
+    assert run.sigma_check_line() == \
+        f"sds process: {kick.video}: spots' σ check: {check.line()}"
+    assert run.sigma_check_line() in done.stdout.splitlines(), done.stdout
     recorded = json.loads((tmp_path / "cli" / "analysis.json").read_text())["spot_sigma_check"]
     assert recorded["scatter_over_sigma"] == check.scatter_over_sigma
     assert html.escape(check.line()) in (tmp_path / "cli" / "report.html").read_text()

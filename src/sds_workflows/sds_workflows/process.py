@@ -101,8 +101,8 @@ class ProcessedRun:
         return bool(self.broken or self.lateral_failure or self.analysis.results is None)
 
     def summary(self) -> str:
-        """The console's lines: the run, its spots' check of their σ, the side camera's."""
-        note, check = self.analysis.note, self.analysis.sigma_check
+        """The console's lines: the run, then the side camera's."""
+        note = self.analysis.note
         return (f"sds process: {self.frames} frames of {self.source} -> {self.out}"
                 + (f" ({note})" if note else "")
                 + (f"; INPUT INCOMPLETE, results cover the frames read: {self.broken}"
@@ -110,8 +110,13 @@ class ProcessedRun:
                 + (f"; SIDE CAMERA NOT COMPARED: {self.lateral_failure}"
                    if self.lateral_failure else "")
                 + "".join(f"\nsds process: {line}" for line in
-                          ([f"spots' σ check: {check.line()}"] if check else []) +
                           (self.lateral.lines() if self.lateral else [])))
+
+    def sigma_check_line(self) -> str:
+        """The spots' own check of their σ as the console says it, a result like the
+        frequencies, also for an incomplete run ("" without one)."""
+        check = self.analysis.sigma_check
+        return f"sds process: {self.source}: spots' σ check: {check.line()}" if check else ""
 
     def result_lines(self) -> list[str]:
         """The analysis's frequencies and damping ratios, as `sds run` and `sds analyze` print
@@ -203,15 +208,16 @@ def process_input(source: Path, is_video: bool, rig_file: Path | None, out: Path
 
 def _process_in_worker(source: Path, is_video: bool, rig_file: Path | None, out: Path,
                        fps: float, gravity_m_s2: float | None, overwrite: bool,
-                       sequence: bool) -> tuple[bool, str]:
-    """One input in a worker process: (done, summary line or the failure's one line); an
-    input that broke off is not done, though its frames' results are written."""
+                       sequence: bool) -> tuple[bool, str, str]:
+    """One input in a worker process: (done, summary line or the failure's one line, the
+    spots' σ check line or ""); an input that broke off is not done, though its frames'
+    results are written."""
     try:
         processed = process_input(source, is_video, rig_file, out, fps, gravity_m_s2,
                                   overwrite, False, sequence)
-        return not processed.incomplete, processed.summary()
+        return not processed.incomplete, processed.summary(), processed.sigma_check_line()
     except InputError as error:
-        return False, f"sds process: {source}: {error}"
+        return False, f"sds process: {source}: {error}", ""
 
 
 def process_inputs(inputs: list[Path], is_video: bool, rig_file: Path | None, out: Path,
@@ -231,13 +237,16 @@ def process_inputs(inputs: list[Path], is_video: bool, rig_file: Path | None, ou
         with tqdm(total=len(inputs), desc="inputs", unit="file", disable=not progress) as bar:
             for future in as_completed(futures):
                 try:
-                    done, line = future.result()
+                    done, line, check = future.result()
                 except Exception as error:   # the program's own fault: raised at the end
                     faults.append(error)
-                    done, line = False, (f"sds process: {futures[future]}: internal error "
-                                         f"({type(error).__name__}: {error})")
+                    done, check = False, ""
+                    line = (f"sds process: {futures[future]}: internal error "
+                            f"({type(error).__name__}: {error})")
                 failed += not done
                 bar.write(line, file=sys.stdout if done else sys.stderr)
+                if check:
+                    bar.write(check, file=sys.stdout)
                 bar.update()
     print(f"sds process: {len(inputs) - failed} of {len(inputs)} inputs processed into "
           f"{out}" + (f", {failed} failed (above)" if failed else ""))

@@ -121,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
                                   args.gravity, args.overwrite, not args.no_progress,
                                   args.sequence, lateral)
         print(processed.summary(), file=sys.stderr if processed.incomplete else sys.stdout)
-        for line in processed.result_lines():
+        for line in filter(None, [processed.sigma_check_line(), *processed.result_lines()]):
             print(line)
         return 2 if processed.incomplete else 0
     failed = process_inputs(inputs, is_video, rig_file, args.out, args.jobs, args.fps,
