@@ -244,7 +244,7 @@ def test_the_demo_calibrates_a_rig_as_built_and_measures_its_drop_with_the_whole
                      r"the σ are", result.stdout), result.stdout
     for path in ("recording.mcap", "recording.rrd", "analysis/report.html", "results/points.csv",
                  "results/imu.csv", "results/tof.csv"):
-        assert (tmp_path / path).is_file(), path
+        assert (tmp_path / path).is_file(), (path, result.stdout, result.stderr)
     results = load_results(tmp_path / "results")
     for table in (results.imu, results.tof):   # one clock from the first record: none back
         assert table is not None and np.all(np.diff(table["t_s"]) > 0)

@@ -31,6 +31,10 @@ BRIDGE_OPEN_S = 0.5
 """The bridge opens its port within this of publishing (it reads from its start)."""
 SIDE_ACK_TOPIC = "/lateral/frame_ack"
 """Where drop.yaml's recorder acknowledges each side frame it wrote (lateral.yaml)."""
+RECORDER_NODE = "recorder"
+"""drop.yaml's recorder node, whose subscriptions the stand-in Arduino waits for."""
+ARDUINO_TOPICS = ("/arduino/imu", "/arduino/tof", "/arduino/events")
+"""What arduino.yaml's bridge publishes from the serial stream."""
 
 
 @dataclass(frozen=True)
@@ -144,7 +148,10 @@ def _watch(launcher: Launcher, expected_frames: int | None, side_frames: int | N
         if cable is not None and serial_lines is not None:
             # The stand-in Arduino starts with the video, as on the rig: once the bridge has
             # opened the port (opening discards what waited in it) and the first frame is in.
-            while not launcher.stopping and not (node.count_publishers("/arduino/imu")
+            # And once the recorder takes the bridge's topics: it subscribes to a topic when
+            # it sees it, which on a busy machine came 5 s after the bridge had published
+            # all 470 records of a 2 s demo (none recorded, no imu.csv).
+            while not launcher.stopping and not (_recording(node, ARDUINO_TOPICS)
                                                  and tracked):
                 executor.spin_once(timeout_sec=0.05)
             time.sleep(BRIDGE_OPEN_S)
@@ -172,6 +179,13 @@ def _watch(launcher: Launcher, expected_frames: int | None, side_frames: int | N
         node.destroy_node()
         rclpy.shutdown(context=context)
         launcher.request_stop()
+
+
+def _recording(node, topics: tuple[str, ...]) -> bool:
+    """Whether the recorder has subscribed to every one of `topics`."""
+    return all(any(info.node_name == RECORDER_NODE
+                   for info in node.get_subscriptions_info_by_topic(topic))
+               for topic in topics)
 
 
 def plug_in(port: Path) -> tuple[int, int]:

@@ -192,8 +192,9 @@ class RunTables:
 
 @dataclass(frozen=True)
 class RunAnalysis:
-    """A run's analysis: the report's results (None when there was nothing to analyse) and
-    what the console should say about it (the gravity regime, why there is no analysis)."""
+    """A run's analysis: the report's results (None when there was nothing to analyse), what
+    the console should say about it (the gravity regime, why there is no analysis) and the
+    spots' own check of their σ (None when too few spots were measured)."""
 
     results: dict[str, Any] | None
     note: str
@@ -206,7 +207,8 @@ def finish_analysis(tables: RunTables, source: str, out: Path, options: Analysis
     closed; data that give no analysis leave `results` None and say why in `note` (no report
     is written), anything else that fails is raised. Without a gravity in `options`, a free
     fall in any accelerometer the run holds means microgravity (`sds process`, `sds export`,
-    `sds run` and the demo alike)."""
+    `sds run` and the demo alike). The report and analysis.json also hold the spots' own
+    check of their σ (`SIGMA_CHECK_KEY`)."""
     options, regime = with_gravity_regime(options, tables.accelerations())
     results, note = None, ""
     check = tables.path_scatter.check()
