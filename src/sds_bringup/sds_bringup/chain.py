@@ -16,6 +16,7 @@ import time
 import tty
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from sds_arduino.replay import paced
 from sds_model.paths import CONFIG
@@ -24,6 +25,9 @@ from tqdm import tqdm
 
 from sds_bringup.launcher import Launcher
 from sds_bringup.ros_env import graph_domain_id, graph_environment
+
+if TYPE_CHECKING:   # rclpy is imported where a graph runs, not with the launcher
+    from rclpy.node import Node
 
 GRAPHS = ("drop.yaml", "view.yaml")
 IDLE_TIMEOUT_S = 60.0
@@ -181,7 +185,7 @@ def _watch(launcher: Launcher, expected_frames: int | None, side_frames: int | N
         launcher.request_stop()
 
 
-def _recording(node, topics: tuple[str, ...]) -> bool:
+def _recording(node: Node, topics: tuple[str, ...]) -> bool:
     """Whether the recorder has subscribed to every one of `topics`."""
     return all(any(info.node_name == RECORDER_NODE
                    for info in node.get_subscriptions_info_by_topic(topic))

@@ -1,6 +1,6 @@
 """A run's own check of its spots' σ: how far they scatter across their beams' image paths.
 
-A diode's spot can only move along its beam's image path (`beam_image_path`): the surface's
+A diode's spot can only move along its beam's image path (`beam_paths_px`): the surface's
 height moves it there and nothing else does. So its scatter across the path, about its own
 mean offset (which holds the rig file's small error in the path), is its measurement's error
 in that direction, and the RMS of that scatter over the spots' own σ says, without any truth,
@@ -16,9 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from sds_model.rig import Rig
-from sds_recon.triangulation import beam_image_path
 
-from sds_tracker.tracker import TrackerConfig, path_heights_mm
+from sds_tracker.tracker import TrackerConfig, beam_paths_px, path_heights_mm
 
 MIN_FRAMES = 5
 """A spot counts once it was measured in this many frames (its mean offset then costs little)."""
@@ -81,9 +80,7 @@ class PathScatter:
     def for_rig(cls, rig: Rig) -> PathScatter:
         """Empty sums for the rig's tracked diodes' paths, over the heights the tracker's
         paths span."""
-        heights = path_heights_mm(TrackerConfig())
-        return cls({d.laser_id: beam_image_path(rig, d.laser_id, heights)
-                    for d in rig.tracked_diodes})
+        return cls(beam_paths_px(rig, path_heights_mm(TrackerConfig())))
 
     def add(self, laser_ids: np.ndarray, points_px: np.ndarray, sigmas_px: np.ndarray) -> None:
         """A frame's measured spots: their diodes, raw positions (N×2 px) and σ [px]; a spot

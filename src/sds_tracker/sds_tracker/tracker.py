@@ -143,6 +143,12 @@ def path_heights_mm(config: TrackerConfig) -> np.ndarray:
     return np.linspace(low, high, 15)
 
 
+def beam_paths_px(rig: Rig, heights_mm: np.ndarray) -> dict[int, np.ndarray]:
+    """Each tracked diode's image path (M×2 px) over the surface heights `heights_mm`."""
+    return {d.laser_id: beam_image_path(rig, d.laser_id, heights_mm)
+            for d in rig.tracked_diodes}
+
+
 def path_sigma_px(rig: Rig, laser_id: int, heights_mm: np.ndarray) -> float:
     """How far [px] a diode's image path may be off where its beam's direction is uncertain:
     the largest move of the path over `heights_mm` when the direction turns by its σ
@@ -186,8 +192,7 @@ class FrameTracker:
                  seeds: dict[int, tuple[float, float]] | None = None) -> None:
         self.config = config or TrackerConfig()
         heights = path_heights_mm(self.config)
-        self.paths = {d.laser_id: beam_image_path(rig, d.laser_id, heights)
-                      for d in rig.tracked_diodes}
+        self.paths = beam_paths_px(rig, heights)
         widened = {d.laser_id: float(np.hypot(self.config.spots.path_tolerance_px,
                                               PATH_SIGMAS * path_sigma_px(rig, d.laser_id,
                                                                           heights)))
