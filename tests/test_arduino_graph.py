@@ -15,6 +15,7 @@ import pytest
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from ros_helpers import LATCHED, Probe, SdsGraphRun, wait_until
 from sds_arduino.protocol import format_record
+from sds_ros.qos import stream_qos
 from sds_sim.arduino import arduino_records
 from sds_sim.scenario import load_scenario
 from sensor_msgs.msg import Imu, Range
@@ -79,11 +80,15 @@ def test_bridge_publishes_every_valid_record_through_a_pty(repo: Path, tmp_path:
         expected = sum(1 for r in valid if r.kind == "IMU")
         assert wait_until(lambda: len(imu) >= expected, timeout=30), (len(imu), expected)
         time.sleep(1.0)
+        # A subscriber that comes after the records (a recorder on a busy machine) gets them.
+        late = probe.collect(Imu, "/arduino/imu", stream_qos(5000))
+        assert wait_until(lambda: len(late) >= expected, timeout=10), (len(late), expected)
     finally:
         probe.close()
         graph.stop()
         writer.communicate("EXIT\n", timeout=10)
     kinds = {kind: [r for r in valid if r.kind == kind] for kind in ("IMU", "TOF")}
+    assert [m.header.stamp for m in late] == [m.header.stamp for m in imu]
     assert len(imu) == len(kinds["IMU"]) and len(tof) == len(kinds["TOF"])
     assert len(events) == len(valid) - len(kinds["IMU"]) - len(kinds["TOF"])
     for msg, record in zip(imu, kinds["IMU"], strict=True):

@@ -10,7 +10,12 @@ import pytest
 from builtin_interfaces.msg import Time
 from mcap.writer import Writer
 from rclpy.serialization import serialize_message
-from sds_record.mcap_files import McapRecorder, decoded_messages, message_counts
+from sds_record.mcap_files import (
+    McapRecorder,
+    decoded_messages,
+    message_counts,
+    not_recorded,
+)
 from sds_ros.image_msg import image_to_msg
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Header, String
@@ -143,3 +148,20 @@ def test_message_counts_come_from_the_statistics_or_an_unfinished_files_chunks(
     expected = {"/lateral/image": 4, "/tracker/spots": 3, "/camera/video": 0}
     assert message_counts(tmp_path / "run.mcap", wanted) == expected
     assert message_counts(unfinished, wanted) == expected
+
+
+def test_what_the_recorder_never_got_reads_back_from_its_file(tmp_path: Path) -> None:
+    """The counts a recorder closes its file with come back by topic; a file closed without
+    them, and an unfinished one (a killed recorder's: its complete chunks), have none."""
+    header = serialize_message(Header(stamp=Time(sec=1)))
+    for name, counts in (("counted", {"/arduino/imu": 120, "/arduino/tof": 4}),
+                         ("clean", None)):
+        recorder = McapRecorder(tmp_path / f"{name}.mcap", flush_period_s=0.0)
+        recorder.add_topic("/arduino/imu", "std_msgs/msg/Header")
+        recorder.write("/arduino/imu", header, 1, 1)
+        if name == "counted":
+            (tmp_path / "unfinished.mcap").write_bytes((tmp_path / "counted.mcap").read_bytes())
+        recorder.close(counts)
+    assert not_recorded(tmp_path / "counted.mcap") == {"/arduino/imu": 120, "/arduino/tof": 4}
+    assert not_recorded(tmp_path / "clean.mcap") == {}
+    assert not_recorded(tmp_path / "unfinished.mcap") == {}

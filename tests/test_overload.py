@@ -13,7 +13,7 @@ from builtin_interfaces.msg import Time
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from ros_helpers import LATCHED, RELIABLE, Probe, SdsGraphRun, wait_until
 from sds_model.rig import load_rig
-from sds_record.mcap_files import header_stamp_ns, read_messages
+from sds_record.mcap_files import header_stamp_ns, not_recorded, read_messages
 from sds_ros.frame_gaps import FrameGaps
 from sds_ros.image_msg import image_to_msg
 from sds_ros.qos import live_qos, stream_qos
@@ -224,3 +224,37 @@ def test_the_recorder_says_how_many_messages_never_reached_it(tmp_path):
     first = min(header_stamp_ns(m.data) for m in recorded) // 10**9
     assert f"{60 - first - len(recorded)} of /test/image" in said, recorder.output()
     assert "never reached the recorder (it fell behind" in recorder.output()
+
+
+@pytest.mark.ros
+def test_what_was_published_before_the_recorder_subscribed_is_counted_in_its_file(tmp_path):
+    """A publisher (an Arduino's bridge) that wrote before the recorder subscribed: what it
+    wrote then is not in the recording, and the recording says how much (its closing
+    metadata, `not_recorded`), as the recorder's log does."""
+    output = tmp_path / "late.mcap"
+    probe = Probe("late_recorder_probe")
+    recorder = None
+    try:
+        records = probe.node.create_publisher(Header, "/test/records", QoSProfile(
+            depth=100, reliability=ReliabilityPolicy.RELIABLE))
+        for index in range(30):
+            records.publish(Header(stamp=Time(sec=index)))
+        recorder = SdsGraphRun("record.yaml", "--set", f"recorder.output={output}",
+                               "--set", "recorder.topics=[/test/records]")
+        assert wait_until(lambda: records.get_subscription_count() > 0), recorder.output()
+        recorder.wait_for_line("recording /test/records", 10.0)
+        time.sleep(0.5)
+        for index in range(30, 50):
+            records.publish(Header(stamp=Time(sec=index)))
+        time.sleep(1.0)
+    finally:
+        probe.close()
+        if recorder is not None:
+            recorder.stop()
+    recorded = [m for m in read_messages(output) if m.topic == "/test/records"]
+    assert recorded, "nothing recorded: the test proves nothing"
+    counted = not_recorded(output)
+    assert counted.get("/test/records", 0) >= 30, counted
+    assert len(recorded) + counted["/test/records"] == 50, (len(recorded), counted)
+    said = recorder.wait_for_line("published before the recorder subscribed, so not in it", 1.0)
+    assert f"{counted['/test/records']} of /test/records" in said, recorder.output()

@@ -13,6 +13,7 @@ from sds_arduino.stamps import HOLD_S, RecordStamper, StampClock, Stamped
 from sds_arduino.stream import RecordStream
 from sds_ros.arduino_msg import TOPICS, SensorSpec, record_message
 from sds_ros.hosted_node import HostedNode
+from sds_ros.qos import stream_qos
 from sensor_msgs.msg import Imu, Range
 
 from sds_msgs.msg import SyncEvent
@@ -23,6 +24,10 @@ PARAMETERS = {"port": "/dev/ttyACM0", "baud": 115200,
               "hold_for_led_s": HOLD_S}
 """The node's parameters and defaults, the sensors' from `SensorSpec`
 (config/params/arduino.yaml documents each)."""
+RECORD_HISTORY = 2000
+"""Records each topic keeps for a late subscriber, as the chain's streams do (`stream_qos`):
+on a busy machine the recorder subscribed 5 s after the bridge had published the first
+records, and a volatile writer's were lost to it. 10 s of the 200 Hz IMU."""
 
 
 class ArduinoBridgeNode(HostedNode):
@@ -42,11 +47,11 @@ class ArduinoBridgeNode(HostedNode):
         super().__init__(node_name, **node_kwargs)
         self._p = self.declare_parameter_table(PARAMETERS)
         self._spec = SensorSpec(**{f.name: self._p[f.name] for f in fields(SensorSpec)})
-        reliable = QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE)
+        kept = stream_qos(RECORD_HISTORY)
         self._publishers_by_topic = {
-            "imu": self.create_publisher(Imu, "imu", reliable),
-            "tof": self.create_publisher(Range, "tof", reliable),
-            "events": self.create_publisher(SyncEvent, "events", reliable)}
+            "imu": self.create_publisher(Imu, "imu", kept),
+            "tof": self.create_publisher(Range, "tof", kept),
+            "events": self.create_publisher(SyncEvent, "events", kept)}
         self.stream = RecordStream()
         self.stamper: RecordStamper[tuple[Record, float]] = RecordStamper(
             bool(self._p["align_to_camera"]), hold_s=float(self._p["hold_for_led_s"]))

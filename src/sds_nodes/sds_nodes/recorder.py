@@ -150,19 +150,26 @@ class RecorderNode(HostedNode):
         """Finish the file (summary section) when the graph stops; a file without a message
         is removed."""
         if hasattr(self, "_recorder"):
-            self._recorder.close()
+            lost = {topic: gaps.missed_in_all for topic, gaps in self._gaps.items()
+                    if gaps.missed_in_all}
+            early = {topic: gaps.before_first for topic, gaps in self._gaps.items()
+                     if gaps.before_first}
+            self._recorder.close(not_recorded={
+                topic: lost.get(topic, 0) + early.get(topic, 0) for topic in {*lost, *early}})
             if self._recorder.message_count == 0:   # it would only block the retry
                 self.output.unlink(missing_ok=True)
                 self.get_logger().warning(f"no message came: {self.output} removed")
                 return
             self.get_logger().info(f"wrote {self._recorder.message_count} messages to "
                                    f"{self.output}")
-            lost = {topic: gaps.missed_in_all for topic, gaps in self._gaps.items()
-                    if gaps.missed_in_all}
             if lost:
                 self.get_logger().warning(
                     "never reached the recorder, so not in it: " + ", ".join(
                         f"{count} of {topic}" for topic, count in lost.items()))
+            if early:
+                self.get_logger().warning(
+                    "published before the recorder subscribed, so not in it: " + ", ".join(
+                        f"{count} of {topic}" for topic, count in early.items()))
 
 
 def main(args: list[str] | None = None) -> None:

@@ -44,6 +44,8 @@ from sds_record.schemas import MESSAGE_ENCODING, SCHEMA_ENCODING, message_defini
 PROFILE = "ros2"
 DURABILITY_KEY = "durability"
 """Channel metadata key: the recorded publishers' durability, transient_local or volatile."""
+NOT_RECORDED_METADATA = "sds.not_recorded"
+"""Metadata record: topic → how many of its published messages the recorder never got."""
 COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
                 "none": CompressionType.NONE}
 _log = logging.getLogger(__name__)
@@ -147,12 +149,17 @@ class McapRecorder:
             self._writer.flush()
             self._last_flush = time.monotonic()
 
-    def close(self) -> None:
-        """Write the summary section and close the file."""
+    def close(self, not_recorded: dict[str, int] | None = None) -> None:
+        """Write the summary section and close the file; `not_recorded` (topic → messages
+        its publishers wrote that never came) goes into a metadata record
+        (NOT_RECORDED_METADATA, read back by `not_recorded`)."""
         with self._lock:
             if self.closed:
                 return
             self.closed = True
+            if not_recorded:
+                self._writer.add_metadata(NOT_RECORDED_METADATA, {
+                    topic: str(count) for topic, count in sorted(not_recorded.items())})
             self._writer.finish()
             self._stream.close()
 
@@ -300,6 +307,22 @@ def message_counts(path: str | Path, topics: Iterable[str]) -> dict[str, int]:
         return counts
     for _, channel, _ in _records(path, counts):
         counts[channel.topic] += 1
+    return counts
+
+
+def not_recorded(path: str | Path) -> dict[str, int]:
+    """Topic → messages its publishers wrote that the recorder never got (before it
+    subscribed, or lost on the way), as its recorder wrote them when closing the file; {}
+    for a file without that record (none lost, or an unfinished file)."""
+    path = Path(path)
+    require_mcap(path)
+    if _summary(path) is None:
+        return {}
+    counts: dict[str, int] = {}
+    with path.open("rb") as stream:
+        for record in make_reader(stream).iter_metadata():
+            if record.name == NOT_RECORDED_METADATA:
+                counts.update({topic: int(count) for topic, count in record.metadata.items()})
     return counts
 
 

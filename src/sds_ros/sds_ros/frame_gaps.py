@@ -52,22 +52,30 @@ class FrameGaps:
 
 
 class PublisherGaps:
-    """Messages a subscriber never got, from the gaps in each publisher's sequence numbers."""
+    """Messages a subscriber never got, from the gaps in each publisher's sequence numbers:
+    between two it got (`missed_in_all`), and before the first it got from each publisher
+    (`before_first`: a publisher numbers its messages from 1, so a subscriber that matched
+    late, or a latched topic whose history was shorter than what it had published, starts
+    past 1)."""
 
     def __init__(self) -> None:
         self.missed_in_all = 0
+        self.before_first = 0
         self._last: dict[bytes, int] = {}
 
     def missed(self, info: MessageInfo) -> int:
         """Messages of this one's publisher missing since its previous one (0 at the first
-        from a publisher: what came before this subscriber matched is not counted)."""
+        from a publisher, whose number adds to `before_first` instead)."""
         sequence = info.get("publication_sequence_number")
         gid = info.get("publisher_gid")
         if sequence is None or gid is None:
             return 0
         key = bytes(gid["data"])
         last, self._last[key] = self._last.get(key), sequence
-        if last is None or sequence <= last:
+        if last is None:
+            self.before_first += max(sequence - 1, 0)
+            return 0
+        if sequence <= last:
             return 0
         missing = sequence - last - 1
         self.missed_in_all += missing

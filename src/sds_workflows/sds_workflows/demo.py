@@ -27,7 +27,7 @@ from sds_model.paths import CONFIG
 from sds_model.rig import Rig, load_rig
 from sds_model.staging import staged_folder
 from sds_recon.results import ResultsWriter, load_results, refuse_results
-from sds_record.mcap_files import message_counts
+from sds_record.mcap_files import message_counts, not_recorded
 from sds_sim.imaging import merged
 from sds_sim.scenario import Scenario, load_scenario
 from sds_sim.simulate import SimulationOutput, simulate
@@ -281,6 +281,9 @@ def print_summary(out: Path, scenario, simulation, outputs: ChainOutputs,
     print(f"  result files       {out / 'results'}/ (spots, points, line, fits, imu, tof .csv)")
     print(f"  frames processed   {frames} of {scenario.frame_count}; "
           f"{live_coverage(outputs.recording)}")
+    lost = not_recorded_line(outputs.recording)
+    if lost is not None:
+        print(f"  NOT RECORDED       {lost}")
     print(f"  heights            RMSE {np.sqrt(np.mean(errors**2)):.3f} mm against the truth "
           f"({len(errors)} points; their own σ RMS {np.sqrt(np.mean(sigmas**2)):.3f} mm, "
           f"error/σ RMS {np.sqrt(np.mean((errors / sigmas) ** 2)):.2f})")
@@ -300,8 +303,10 @@ def print_summary(out: Path, scenario, simulation, outputs: ChainOutputs,
         if any(key in line for key in ("matrix_pencil", " tof ", "no oscillation", "note:")):
             print(f"    {line}")
     complete = frames == scenario.frame_count
-    print("  result             " + ("every frame measured" if complete else "FRAMES MISSING"))
-    return 0 if complete else 1
+    print("  result             " + ("FRAMES MISSING" if not complete else
+                                     "MESSAGES NOT RECORDED" if lost is not None else
+                                     "every frame measured"))
+    return 0 if complete and lost is None else 1
 
 
 def run_live(source: str, rig_file: Path, out: Path, port: str | None,
@@ -377,6 +382,9 @@ def run_live(source: str, rig_file: Path, out: Path, port: str | None,
     elif side is not None:
         print(f"  side camera: recorded ({SIDE_IMAGE_TOPIC}); its check of the top surface "
               "needs the two videos: sds process --video TOP --lateral SIDE ...")
+    lost = not_recorded_line(outputs.recording)
+    if lost is not None:
+        missing.append(f"not recorded: {lost} (see {outputs.log})")
     for line in missing:
         print(f"sds run: INCOMPLETE: {line}", file=sys.stderr)
     return 2 if missing else 0
@@ -394,6 +402,16 @@ def live_coverage(recording: Path) -> str:
     return (f"{measured} of {sent} measured live (the others were shed: the machine could not "
             f"decode and measure them in time); the recording holds all {sent}: "
             f"`sds process --mcap {recording} --rig RIG --out DIR` measures them all")
+
+
+def not_recorded_line(recording: Path) -> str | None:
+    """The messages the graph published that its recorder never got (`not_recorded`), one
+    line for a run's summary; None when it got every one."""
+    counts = not_recorded(recording)
+    if not counts:
+        return None
+    return (", ".join(f"{count} of {topic}" for topic, count in sorted(counts.items()))
+            + " (published before the recorder subscribed, or lost on the way)")
 
 
 def _announced_frames(video: Path) -> int:
