@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 from typing import Any
 
@@ -150,9 +151,11 @@ def test_message_counts_come_from_the_statistics_or_an_unfinished_files_chunks(
     assert message_counts(unfinished, wanted) == expected
 
 
-def test_what_the_recorder_never_got_reads_back_from_its_file(tmp_path: Path) -> None:
-    """The counts a recorder closes its file with come back by topic; a file closed without
-    them, and an unfinished one (a killed recorder's: its complete chunks), have none."""
+def test_what_the_recorder_never_got_reads_back_from_its_file(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """The counts a recorder closes its file with come back by topic, and reading the file
+    says them once; a file closed without them, and an unfinished one (a killed recorder's:
+    its complete chunks), have none."""
     header = serialize_message(Header(stamp=Time(sec=1)))
     for name, counts in (("counted", {"/arduino/imu": 120, "/arduino/tof": 4}),
                          ("clean", None)):
@@ -165,3 +168,10 @@ def test_what_the_recorder_never_got_reads_back_from_its_file(tmp_path: Path) ->
     assert not_recorded(tmp_path / "counted.mcap") == {"/arduino/imu": 120, "/arduino/tof": 4}
     assert not_recorded(tmp_path / "clean.mcap") == {}
     assert not_recorded(tmp_path / "unfinished.mcap") == {}
+    with caplog.at_level(logging.WARNING, logger="sds_record.mcap_files"):
+        for _ in range(2):
+            assert len(list(decoded_messages(tmp_path / "counted.mcap"))) == 1
+            assert len(list(decoded_messages(tmp_path / "clean.mcap"))) == 1
+    assert [record.getMessage() for record in caplog.records] == [
+        f"{tmp_path / 'counted.mcap'} lacks messages its recorder never got: "
+        "120 of /arduino/imu, 4 of /arduino/tof"]

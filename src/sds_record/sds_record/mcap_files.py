@@ -49,8 +49,9 @@ NOT_RECORDED_METADATA = "sds.not_recorded"
 COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
                 "none": CompressionType.NONE}
 _log = logging.getLogger(__name__)
-_warned_unfinished: set[Path] = set()
-"""Unfinished files this process has warned about (each file is read several times)."""
+_warned: set[tuple[Path, str]] = set()
+"""(file, warning) pairs this process has given (each file is read several times): an
+unfinished file, one that lacks messages its recorder never got."""
 
 
 @dataclass(frozen=True)
@@ -217,6 +218,11 @@ def _records(path: Path, topics: Iterable[str] | None
     require_mcap(path)
     wanted = set(topics) if topics is not None else None
     if _summary(path) is not None:
+        lost = not_recorded(path)
+        if lost and (path.resolve(), "not recorded") not in _warned:
+            _warned.add((path.resolve(), "not recorded"))
+            _log.warning(f"{path} lacks messages its recorder never got: " + ", ".join(
+                f"{count} of {topic}" for topic, count in sorted(lost.items())))
         try:
             yield from _indexed_messages(path, wanted)
         except McapError as error:
@@ -231,8 +237,8 @@ def _records(path: Path, topics: Iterable[str] | None
             found += 1
             yield schema, channel, message
     # Nothing found: the caller's own error (no such topic...) says it all.
-    if found and path.resolve() not in _warned_unfinished:
-        _warned_unfinished.add(path.resolve())
+    if found and (path.resolve(), "unfinished") not in _warned:
+        _warned.add((path.resolve(), "unfinished"))
         _log.warning(f"{path} is unfinished (its recorder did not close it): {complete} "
                      "messages up to its last complete chunk are read; `sds mcap-repair "
                      f"{shlex.quote(str(path))} REPAIRED.mcap` gives it an index")
