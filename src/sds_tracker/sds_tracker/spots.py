@@ -932,12 +932,14 @@ class SpotTracker:
         reach = self._reach(laser_id)
         if reach is not None:
             near_path &= np.hypot(*(centres - reach[0]).T) <= reach[1]
-        near_path[near_path] = [
-            self._spot_like(image, origin, np.array(peak), background, line,
-                            own_light(window, labels, label, peak, (x0, y0), s.window_px // 2))
-            for label, peak in zip((np.flatnonzero(near_path) + 1).tolist(),
-                                   self._peaks(signal, labels, near_path, (x0, y0)),
-                                   strict=True)]
+        if np.isfinite(self.max_elongation):   # discovery's tracker takes any shape
+            near_path[near_path] = [
+                self._spot_like(image, origin, np.array(peak), background, line,
+                                own_light(window, labels, label, peak, (x0, y0),
+                                          s.window_px // 2))
+                for label, peak in zip((np.flatnonzero(near_path) + 1).tolist(),
+                                       self._peaks(signal, labels, near_path, (x0, y0)),
+                                       strict=True)]
         # A blob far heavier than a candidate may own it as a grain of its halo, unless it
         # lies at the laser line, whose light is no halo.
         owners = masses * HALO_GRAIN_SHARE > masses[near_path].min(initial=np.inf)
@@ -1044,8 +1046,6 @@ class SpotTracker:
         there nor the blob's `own` light alone (`own_light`: a stripe beside a spot is round
         with the spot's light), unless the laser line runs near it (`_near_line`: a spot on
         or beside the line is the line-free measurement's to judge)."""
-        if not np.isfinite(self.max_elongation):
-            return True
         if line is not None and self._near_line(origin, peak, line):
             return True
         reach = self.settings.window_px / 2
