@@ -539,6 +539,7 @@ def test_sds_run_measures_a_recorded_video_with_the_whole_graph(repo: Path,
     assert done.returncode == 2, done.stdout + done.stderr
     assert f"sds run: INCOMPLETE: the Arduino at {port} sent no record" in done.stderr, \
         done.stderr
+    assert "  Arduino            records 0, published 0" in done.stdout, done.stdout
     side_frames = sum(1 for _ in csv.DictReader((output.directory / "truth" /
                                                  "lateral.csv").open()))
     side = [msg for _, msg in decoded_messages(out / "recording.mcap", ["/lateral/image"])]

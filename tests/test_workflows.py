@@ -14,6 +14,7 @@ import pytest
 from sds_model.rig import load_rig
 from sds_sim.scenario import load_scenario
 from sds_sim.simulate import SimulationOutput, simulate
+from sds_workflows.demo import HOST_CLOCK, arduino_lines
 from sds_workflows.pipeline import PipelineStep, damping_caveat
 
 from sds_workflows import FramePipeline, process_video, video_frames
@@ -75,3 +76,22 @@ def test_the_pipeline_gives_every_frame_once_in_order(repo: Path, kick: Simulati
     for frame in spot_frames:
         assert len(frame.spots) == len(rig.diodes) == len(frame.points.laser_ids)
         assert frame.fits.plane is not None and abs(frame.fits.plane.p00_mm) < 5.0
+
+
+def test_a_runs_summary_says_which_clock_the_arduinos_stamps_are_on() -> None:
+    """From the bridge's lines in the graph's log (as it writes them): its final counts, and
+    the camera's clock with the LED's offset, or the host's, flagged, when the LED never
+    came; nothing from a log without the bridge."""
+    final = ("[arduino] [INFO] [1796614726.14] [arduino]: final: records 470, published 470, "
+             "bad lines 0, noise bytes 0, missing records 0, reconnects 0")
+    aligned = ("[arduino] [INFO] [1796614720.89] [arduino]: stamps on the camera's clock: "
+               "LED offset -1.4539 s")
+    unaligned = ("[arduino] [WARN] [1796614726.10] [arduino]: no sync LED seen within 30 s: "
+                 "this run's Arduino stamps are on the host clock, not the camera's")
+    counts = "Arduino            records 470, published 470, bad lines 0, noise bytes 0, " \
+             "missing records 0, reconnects 0"
+    assert arduino_lines(f"{aligned}\n{final}\n") == [
+        counts, "clocks             camera vs Arduino, from the sync LED: -1.4539 s"]
+    said = arduino_lines(f"{unaligned}\n{final}\n")
+    assert said[0] == counts and said[1].startswith(HOST_CLOCK) and "host clock" in said[1]
+    assert arduino_lines("[camera] [INFO] [1.0] [camera]: reading a file\n") == []

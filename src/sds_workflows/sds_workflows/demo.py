@@ -255,9 +255,6 @@ def print_summary(out: Path, scenario, simulation, outputs: ChainOutputs,
         return 1
     frames = len(set(spots["frame"].tolist()))
     errors, sigmas = height_errors(simulation.spots, points[points["laser_id"] != 65535])
-    log = outputs.log.read_text()
-    arduino = [line for line in log.splitlines() if "final: records" in line]
-    offset = [line.split("LED offset ")[1] for line in log.splitlines() if "LED offset" in line]
     print(f"\nSDS demo: '{scenario.name}', {scenario.frame_count} frames "
           f"({scenario.duration_s:g} s at {scenario.fps:g} fps, "
           f"{scenario.rig.camera.width_px}x{scenario.rig.camera.height_px})")
@@ -294,10 +291,8 @@ def print_summary(out: Path, scenario, simulation, outputs: ChainOutputs,
           + ", ".join(f"{count} {name}" for name, count in flags.items()))
     if analysed.sigma_check is not None:
         print(f"    σ check          {analysed.sigma_check.line()}")
-    if arduino:
-        print(f"  Arduino            {arduino[-1].split('final: ')[1]}")
-    if offset:
-        print(f"  clocks             camera vs Arduino, from the sync LED: {offset[-1]}")
+    for line in arduino_lines(outputs.log.read_text()):
+        print(f"  {line}")
     print("  sloshing (the report has every method; errors against the simulator's truth):")
     for line in summary_lines(analysed.results):
         if any(key in line for key in ("matrix_pencil", " tof ", "no oscillation", "note:")):
@@ -382,6 +377,11 @@ def run_live(source: str, rig_file: Path, out: Path, port: str | None,
     elif side is not None:
         print(f"  side camera: recorded ({SIDE_IMAGE_TOPIC}); its check of the top surface "
               "needs the two videos: sds process --video TOP --lateral SIDE ...")
+    if port is not None:
+        said = arduino_lines(outputs.log.read_text())
+        print("\n".join(f"  {line}" for line in said))
+        for line in (line for line in said if line.startswith(HOST_CLOCK)):
+            print(f"sds run: note: {line.removeprefix(HOST_CLOCK).strip()}", file=sys.stderr)
     lost = not_recorded_line(outputs.recording)
     if lost is not None:
         missing.append(f"not recorded: {lost} (see {outputs.log})")
@@ -402,6 +402,26 @@ def live_coverage(recording: Path) -> str:
     return (f"{measured} of {sent} measured live (the others were shed: the machine could not "
             f"decode and measure them in time); the recording holds all {sent}: "
             f"`sds process --mcap {recording} --rig RIG --out DIR` measures them all")
+
+
+HOST_CLOCK = "clocks             NOT ALIGNED:"
+"""How a summary's clock line starts when the Arduino's stamps stayed on the host clock."""
+
+
+def arduino_lines(log_text: str) -> list[str]:
+    """What the Arduino's bridge said of a run in the graph's log, as summary lines: its
+    final counts, and the clock its stamps are on (the camera's, from the sync LED; or the
+    host's, when the LED was not seen in time: then its times are not the video's)."""
+    lines = log_text.splitlines()
+    final = [line.split("final: ")[1] for line in lines if "final: records" in line]
+    offset = [line.split("LED offset ")[1] for line in lines if "LED offset" in line]
+    said = [f"Arduino            {final[-1]}"] if final else []
+    if offset:
+        said.append(f"clocks             camera vs Arduino, from the sync LED: {offset[-1]}")
+    elif any("no sync LED seen" in line for line in lines):
+        said.append(f"{HOST_CLOCK} no sync LED seen: the Arduino's stamps are on the host "
+                    "clock, not the camera's (its records are not on the frames' times)")
+    return said
 
 
 def not_recorded_line(recording: Path) -> str | None:
