@@ -4,9 +4,12 @@ cause on the console, and never hangs or prints a traceback."""
 
 from __future__ import annotations
 
+import errno
+import io
 import os
 import re
 import signal
+import threading
 import time
 from pathlib import Path
 
@@ -14,7 +17,10 @@ import pytest
 import yaml
 from conftest import NTSC, random_frames, write_lossless_clip
 from ros_helpers import SdsGraphRun, pid_alive, wait_until
+from sds_bringup.launcher import Launcher
+from sds_bringup.ros_env import graph_domain_id, graph_environment
 from sds_record.mcap_files import holds_messages
+from sds_ros.graph_file import NodeEntry
 
 pytestmark = pytest.mark.ros
 
@@ -121,6 +127,37 @@ def test_a_process_that_hangs_while_it_stops_is_ended_with_its_stacks_in_the_log
     assert "[close] did not stop in 10 s: its threads' stacks follow; killed" in output, output
     assert "in close" in output, output
     assert "teardown (teardown) " not in output, output   # no failure report for it
+
+
+class FullDisk(io.StringIO):
+    """A log file on a full disk: every write fails."""
+
+    def write(self, text: str) -> int:
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+
+def test_a_log_that_cannot_be_written_neither_hangs_the_graph_nor_is_kept_quiet(
+        repo, monkeypatch):
+    """The graph's log on a full disk: the console says once that its lines are lost from
+    there, and every process's output is still read (a node that logs far more than a pipe
+    holds is done and ends; unread, it would block), so the graph ends as it would."""
+    monkeypatch.setenv("PYTHONPATH", str(repo / "tests"))
+    console = io.StringIO()
+    launcher = Launcher([NodeEntry("chatty", "chatty_nodes:ChattyNode", process="chatty",
+                                   required=True)],
+                        graph_environment(graph_domain_id(None)), output=FullDisk(),
+                        console=console)
+    stop = threading.Timer(60.0, launcher.request_stop)   # a blocked node: a failure
+    stop.start()
+    started = time.monotonic()
+    try:
+        assert launcher.run() == 0, console.getvalue()
+    finally:
+        stop.cancel()
+    assert time.monotonic() - started < 60.0, console.getvalue()
+    assert console.getvalue().count("sds graph: the graph's log cannot be written (No space "
+                                    "left on device): its lines from here on are lost") == 1
+    assert launcher.log_error is not None and launcher.failure is None
 
 
 def test_a_file_fed_graph_ends_by_itself_once_the_file_is_done(clip):

@@ -9,6 +9,7 @@ pseudo-terminal when given its lines, and stops the graph once every frame is in
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 import threading
@@ -98,17 +99,26 @@ def run_chain(overrides: list[str], out: Path, expected_frames: int | None,
                              *([f"lateral.wait_for_subscribers={1 + extra}"]
                                if "lateral.yaml" in graphs else [])], viewer, graphs)
     cable = plug_in(port) if serial_lines is not None and port is not None else None
-    with outputs.log.open("w") as log:
-        launcher = Launcher(entries, environment, output=log, console=sys.stderr)
-        unplug, feeding = threading.Event(), threading.Event()
-        watcher = threading.Thread(target=_watch, args=(
-            launcher, expected_frames, side_frames, serial_lines, cable, unplug, feeding),
-            daemon=True)
-        print(f"running the graph on ROS_DOMAIN_ID={domain_id}: "
-              + ", ".join(e.name for e in entries) + f" (log: {outputs.log})")
+    log = outputs.log.open("w")
+    launcher = Launcher(entries, environment, output=log, console=sys.stderr)
+    unplug, feeding = threading.Event(), threading.Event()
+    watcher = threading.Thread(target=_watch, args=(
+        launcher, expected_frames, side_frames, serial_lines, cable, unplug, feeding),
+        daemon=True)
+    print(f"running the graph on ROS_DOMAIN_ID={domain_id}: "
+          + ", ".join(e.name for e in entries) + f" (log: {outputs.log})")
+    try:
         exit_code = launcher.run(on_started=watcher.start)
+    finally:
+        # The watcher's middleware threads must end before the interpreter does (else the
+        # process aborts), and a log on a full disk fails again on closing: the launcher has
+        # said so (`log_error`).
+        launcher.request_stop()
         unplug.set()   # the stand-in Arduino leaves after the bridge
-        watcher.join(timeout=5.0)
+        if watcher.is_alive():
+            watcher.join(timeout=5.0)
+        with contextlib.suppress(OSError):
+            log.close()
     if cable is not None and not feeding.is_set():
         for fd in cable:
             os.close(fd)

@@ -127,6 +127,9 @@ class Launcher:
         self._stop = threading.Event()
         self._print_lock = threading.Lock()
         self._log_threads: list[threading.Thread] = []
+        self.log_error: OSError | None = None
+        """Why `output` could not be written (a full disk); its lines are dropped from then
+        on, so that the processes' pipes are still drained and the graph stops as it would."""
 
     def request_stop(self, *_: object) -> None:
         """Ask the graph to shut down (signal handler and API)."""
@@ -207,9 +210,10 @@ class Launcher:
             self.failure = headline
         report = [f"sds graph: {headline}; {consequence}. Its last lines:",
                   *(f"  [{process.name}] {line}" for line in process.last_lines)]
-        for stream in {self.output, self.console} - {None}:
-            with self._print_lock:
-                print("\n".join(report), file=stream, flush=True)
+        with self._print_lock:
+            self._write_log("\n".join(report))
+            if self.console is not None and self.console is not self.output:
+                print("\n".join(report), file=self.console, flush=True)
 
     def _shutdown(self) -> None:
         """SIGTERM to every live process; after the grace period, a process still alive writes
@@ -247,4 +251,17 @@ class Launcher:
 
     def _say(self, name: str, line: str) -> None:
         with self._print_lock:
-            print(f"[{name}] {line}", file=self.output, flush=True)
+            self._write_log(f"[{name}] {line}")
+
+    def _write_log(self, text: str) -> None:
+        """Append to `output` (under the print lock) until it fails; then say once on the
+        console why the log stops there (`log_error`)."""
+        if self.log_error is not None:
+            return
+        try:
+            print(text, file=self.output, flush=True)
+        except OSError as error:
+            self.log_error = error
+            if self.console is not None:
+                print(f"sds graph: the graph's log cannot be written ({error.strerror}): "
+                      "its lines from here on are lost", file=self.console, flush=True)
