@@ -49,7 +49,6 @@ class RunOutputs:
     recording: Path
     rerun: Path
     log: Path
-    exit_code: int = 0
     failure: str | None = None
     """The needed node that failed and why (None if none did)."""
     interrupted: bool = False
@@ -108,7 +107,7 @@ def run_chain(overrides: list[str], out: Path, expected_frames: int | None,
     print(f"running the graph on ROS_DOMAIN_ID={domain_id}: "
           + ", ".join(e.name for e in entries) + f" (log: {outputs.log})")
     try:
-        exit_code = launcher.run(on_started=watcher.start)
+        launcher.run(on_started=watcher.start)
     finally:
         # The watcher's middleware threads must end before the interpreter does (else the
         # process aborts), and a log on a full disk fails again on closing: the launcher has
@@ -124,7 +123,7 @@ def run_chain(overrides: list[str], out: Path, expected_frames: int | None,
             os.close(fd)
     if port is not None:
         port.unlink(missing_ok=True)   # the stand-in cable's link dangles once it is gone
-    return replace(outputs, exit_code=exit_code, failure=launcher.failure,
+    return replace(outputs, failure=launcher.failure,
                    interrupted=launcher.signal_received is not None)
 
 

@@ -27,7 +27,7 @@ from sds_model.paths import CONFIG
 from sds_model.rig import Rig, load_rig
 from sds_model.staging import staged_folder
 from sds_recon.results import ResultsWriter, load_results, refuse_results
-from sds_record.mcap_files import message_counts, not_recorded
+from sds_record.mcap_files import holds_messages, message_counts, not_recorded
 from sds_sim.imaging import merged
 from sds_sim.scenario import Scenario, load_scenario
 from sds_sim.simulate import SimulationOutput, simulate
@@ -70,8 +70,6 @@ class ChainOutputs(Protocol):
     def rerun(self) -> Path: ...
     @property
     def log(self) -> Path: ...
-    @property
-    def exit_code(self) -> int: ...
     @property
     def failure(self) -> str | None:
         """The needed node that failed and why (None if none did)."""
@@ -237,7 +235,7 @@ def run_demo(out: Path, seconds: float | None, run_chain: ChainRunner,
     if outputs.failure or not outputs.recording.is_file():
         print(f"demo failed: {outputs.failure or 'no recording'} (see {outputs.log})",
               file=sys.stderr)
-        return outputs.exit_code or 1
+        return 1
     analysed = analyse_run(outputs.recording, rig, out, AnalysisOptions(
         gravity_m_s2=scenario.gravity, damping_caveat=damping_caveat(simulation.video)),
         simulation.run)
@@ -346,9 +344,12 @@ def run_live(source: str, rig_file: Path, out: Path, port: str | None,
     if outputs.interrupted and is_file:   # a live camera's run ends with Ctrl-C
         return interrupted("sds run", outputs)
     if outputs.failure or not outputs.recording.is_file():
-        print(f"sds run: {outputs.failure or 'no recording'} (see {outputs.log})",
+        kept = f"; the recording keeps what came before: sds process --mcap " \
+            f"{outputs.recording} --rig {rig_file} --out DIR" \
+            if outputs.recording.is_file() and holds_messages(outputs.recording) else ""
+        print(f"sds run: {outputs.failure or 'no recording'} (see {outputs.log}){kept}",
               file=sys.stderr)
-        return outputs.exit_code or 1
+        return 1   # the graph failed: its cause is said (a process the stop then killed is not)
     check = SideCheck(side, Path(source), clock) if side is not None and is_file else None
     analysed = analyse_run(outputs.recording, rig, out, AnalysisOptions(
         gravity_m_s2=gravity, damping_caveat=damping_caveat(Path(source)) if is_file else ""),
