@@ -99,23 +99,25 @@ def run_chain(overrides: list[str], out: Path, expected_frames: int | None,
                                if "lateral.yaml" in graphs else [])], viewer, graphs)
     cable = plug_in(port) if serial_lines is not None and port is not None else None
     log = outputs.log.open("w")
-    launcher = Launcher(entries, environment, output=log, console=sys.stderr)
-    unplug, feeding = threading.Event(), threading.Event()
-    watcher = threading.Thread(target=_watch, args=(
-        launcher, expected_frames, side_frames, serial_lines, cable, unplug, feeding),
-        daemon=True)
-    print(f"running the graph on ROS_DOMAIN_ID={domain_id}: "
-          + ", ".join(e.name for e in entries) + f" (log: {outputs.log})")
     try:
-        launcher.run(on_started=watcher.start)
+        launcher = Launcher(entries, environment, output=log, console=sys.stderr)
+        unplug, feeding = threading.Event(), threading.Event()
+        watcher = threading.Thread(target=_watch, args=(
+            launcher, expected_frames, side_frames, serial_lines, cable, unplug, feeding),
+            daemon=True)
+        print(f"running the graph on ROS_DOMAIN_ID={domain_id}: "
+              + ", ".join(e.name for e in entries) + f" (log: {outputs.log})")
+        try:
+            launcher.run(on_started=watcher.start)
+        finally:
+            # The watcher's middleware threads must end before the interpreter does (else
+            # the process aborts).
+            launcher.request_stop()
+            unplug.set()   # the stand-in Arduino leaves after the bridge
+            if watcher.is_alive():
+                watcher.join(timeout=5.0)
     finally:
-        # The watcher's middleware threads must end before the interpreter does (else the
-        # process aborts), and a log on a full disk fails again on closing: the launcher has
-        # said so (`log_error`).
-        launcher.request_stop()
-        unplug.set()   # the stand-in Arduino leaves after the bridge
-        if watcher.is_alive():
-            watcher.join(timeout=5.0)
+        # A log on a full disk fails again on closing: the launcher has said so.
         with contextlib.suppress(OSError):
             log.close()
     if cable is not None and not feeding.is_set():

@@ -218,11 +218,12 @@ def _records(path: Path, topics: Iterable[str] | None
     require_mcap(path)
     wanted = set(topics) if topics is not None else None
     if _summary(path) is not None:
-        lost = not_recorded(path)
-        if lost and (path.resolve(), "not recorded") not in _warned:
+        if (path.resolve(), "not recorded") not in _warned:
             _warned.add((path.resolve(), "not recorded"))
-            _log.warning(f"{path} lacks messages its recorder never got: " + ", ".join(
-                f"{count} of {topic}" for topic, count in sorted(lost.items())))
+            lost = not_recorded(path)
+            if lost:
+                _log.warning(f"{path} lacks messages its recorder never got: " + ", ".join(
+                    f"{count} of {topic}" for topic, count in sorted(lost.items())))
         try:
             yield from _indexed_messages(path, wanted)
         except McapError as error:

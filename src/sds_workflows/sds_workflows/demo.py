@@ -379,10 +379,11 @@ def run_live(source: str, rig_file: Path, out: Path, port: str | None,
         print(f"  side camera: recorded ({SIDE_IMAGE_TOPIC}); its check of the top surface "
               "needs the two videos: sds process --video TOP --lateral SIDE ...")
     if port is not None:
-        said = arduino_lines(outputs.log.read_text())
-        print("\n".join(f"  {line}" for line in said))
-        for line in (line for line in said if line.startswith(HOST_CLOCK)):
-            print(f"sds run: note: {line.removeprefix(HOST_CLOCK).strip()}", file=sys.stderr)
+        for line in arduino_lines(outputs.log.read_text()):
+            print(f"  {line}")
+            if line.startswith(HOST_CLOCK):
+                print(f"sds run: note: {line.removeprefix(HOST_CLOCK).strip()}",
+                      file=sys.stderr)
     lost = not_recorded_line(outputs.recording)
     if lost is not None:
         missing.append(f"not recorded: {lost} (see {outputs.log})")
