@@ -10,6 +10,7 @@ B-frames gives its packets in decode order, their times out of order).
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Iterator
 from dataclasses import dataclass
 from fractions import Fraction
@@ -204,6 +205,7 @@ class PacketDecoder:
         self._codec.thread_type = "SLICE" if low_delay else "AUTO"   # threads: as many as cores
         self._region, self._channel = region, channel
         self._converter: RegionConverter | None = None
+        self._drained = False
         self.frames_out = 0
 
     def decode(self, packet: VideoPacket) -> list[Frame]:
@@ -214,7 +216,20 @@ class PacketDecoder:
 
     def flush(self) -> list[Frame]:
         """The frames the decoder still holds; the decoder is done afterwards."""
+        self._drained = True
         return self._frames(None)
+
+    def __del__(self) -> None:
+        """Drain a decoder dropped before its end (frames discarded). FFmpeg frees a frame-
+        threaded decoder that still holds frames by waiting for its threads, and PyAV does
+        that holding the GIL, which one of those threads waits for: the process hung for
+        good (the frame source's decode thread when a graph stopped mid-stream; the hang of
+        PyAV-Org/PyAV#1849). Draining first, with the GIL free, leaves the threads nothing
+        to wait for."""
+        if not self._drained:
+            self._drained = True
+            with contextlib.suppress(av.FFmpegError):
+                self._codec.decode(None)
 
     def _frames(self, encoded: av.Packet[Any] | None) -> list[Frame]:
         try:
