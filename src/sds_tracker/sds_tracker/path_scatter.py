@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from sds_model.rig import Rig
 
+from sds_tracker.spots import nearest_on_paths
 from sds_tracker.tracker import TrackerConfig, beam_paths_px, path_heights_mm
 
 MIN_FRAMES = 5
@@ -33,17 +34,12 @@ def across_path_px(paths_px: np.ndarray, points_px: np.ndarray) -> np.ndarray:
     for all, M ≥ 2): from its nearest point on the nearest segment, positive to the left of
     the path's direction."""
     paths = np.broadcast_to(paths_px, (len(points_px), *np.shape(paths_px)[-2:]))
-    start, step = paths[:, :-1], np.diff(paths, axis=1)
-    length2 = np.maximum(np.einsum("nij,nij->ni", step, step), 1e-12)
-    offset = points_px[:, None, :] - start
-    along = np.clip(np.einsum("nij,nij->ni", offset, step) / length2, 0.0, 1.0)
-    gap = offset - along[..., None] * step
-    distance = np.hypot(gap[..., 0], gap[..., 1])
-    nearest = np.argmin(distance, axis=1)
+    segment, _, distance = nearest_on_paths(points_px, paths)
     rows = np.arange(len(points_px))
-    chosen, direction = gap[rows, nearest], step[rows, nearest]
-    side = direction[:, 0] * chosen[:, 1] - direction[:, 1] * chosen[:, 0]
-    return np.where(side < 0, -1.0, 1.0) * distance[rows, nearest]
+    start = paths[rows, segment]
+    direction, offset = paths[rows, segment + 1] - start, points_px - start
+    side = direction[:, 0] * offset[:, 1] - direction[:, 1] * offset[:, 0]
+    return np.where(side < 0, -1.0, 1.0) * distance
 
 
 @dataclass(frozen=True)
