@@ -3,9 +3,15 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
+from sds_model.rig import load_rig
+from sds_recon.triangulation import beam_image_path
 from sds_tracker.path_scatter import MIN_FRAMES, PathScatter, across_path_px
+
+RIG_PATH = Path(__file__).resolve().parents[1] / "config" / "rigs" / "stelium.yaml"
 
 
 def test_the_offset_from_a_path_is_signed_by_its_side_and_taken_from_its_nearest_segment(
@@ -57,3 +63,20 @@ def test_a_spot_measured_in_too_few_frames_is_left_out_and_none_gives_no_check()
     scatter.add(np.array([99, 0]), np.array([[0.0, 0.0], [np.nan, 1.0]]), np.array([0.1, 0.1]))
     check = scatter.check()   # a diode without a path, a spot without a position: not counted
     assert check is not None and check.measurements == 20 * MIN_FRAMES
+
+
+def test_a_rigs_paths_span_its_container_so_a_spot_far_from_its_rest_is_on_its_path() -> None:
+    """A spot 120 mm above the fill level (beyond the default tracker's ±40 mm, as a run
+    tracked with a wider span measures it) is on its path: its offset is the path's own
+    polyline error (zero for the pinhole rig's straight paths), not its distance along the
+    path from a path that ends at 40 mm (tens of px)."""
+    rig = load_rig(RIG_PATH)
+    scatter = PathScatter.for_rig(rig)
+    heights_mm = np.array([-45.0, -10.0, 0.0, 37.0, 120.0, 145.0])
+    for diode in rig.tracked_diodes:
+        spots = beam_image_path(rig, diode.laser_id, heights_mm)
+        path = scatter.paths_px[scatter.rows[diode.laser_id]]
+        np.testing.assert_allclose(across_path_px(path, spots), 0.0, atol=1e-6)
+    short_path = beam_image_path(rig, rig.tracked_diodes[0].laser_id, np.linspace(-40, 40, 15))
+    far_spot = beam_image_path(rig, rig.tracked_diodes[0].laser_id, [120.0])
+    assert abs(across_path_px(short_path, far_spot)[0]) > 10.0

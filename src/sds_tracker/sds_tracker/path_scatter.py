@@ -42,6 +42,17 @@ def across_path_px(paths_px: np.ndarray, points_px: np.ndarray) -> np.ndarray:
     return np.where(side < 0, -1.0, 1.0) * distance
 
 
+def container_heights_mm(rig: Rig) -> np.ndarray:
+    """Surface heights [mm] from the container's floor to its rim, no further apart than the
+    default tracker's path samples: whatever heights a run's tracker searched (its
+    `path_heights_mm`, not recorded with the spots), a spot lies on this path, and its offset
+    from it is across the path, never along it beyond the path's end."""
+    step_mm = float(np.diff(path_heights_mm(TrackerConfig()))[0])
+    floor_mm = -rig.container.fill_height_mm
+    rim_mm = rig.container.height_mm - rig.container.fill_height_mm
+    return np.linspace(floor_mm, rim_mm, int(np.ceil((rim_mm - floor_mm) / step_mm)) + 1)
+
+
 @dataclass(frozen=True)
 class SigmaCheck:
     """A run's spots' scatter across their paths over their σ (RMS), from how many spots and
@@ -74,9 +85,9 @@ class PathScatter:
 
     @classmethod
     def for_rig(cls, rig: Rig) -> PathScatter:
-        """Empty sums for the rig's tracked diodes' paths, over the heights the tracker's
-        paths span."""
-        return cls(beam_paths_px(rig, path_heights_mm(TrackerConfig())))
+        """Empty sums for the rig's tracked diodes' paths, over the container's whole height
+        (`container_heights_mm`)."""
+        return cls(beam_paths_px(rig, container_heights_mm(rig)))
 
     def add(self, laser_ids: np.ndarray, points_px: np.ndarray, sigmas_px: np.ndarray) -> None:
         """A frame's measured spots: their diodes, raw positions (N×2 px) and σ [px]; a spot
