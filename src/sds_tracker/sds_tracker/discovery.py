@@ -15,6 +15,7 @@ import cv2
 import numpy as np
 from scipy.optimize import brentq
 
+from sds_tracker.chroma import has_chroma_blocks
 from sds_tracker.spots import (
     LOST,
     ON_LINE_SIGMA_PX,
@@ -70,6 +71,9 @@ def find_spots(red: np.ndarray, offset: tuple[int, int] = (0, 0),
     line's gets ON_LINE_SIGMA_PX along and across it."""
     s = settings or SpotSettings()
     image = np.ascontiguousarray(red)
+    if line is not None and len(line[0]) > 1 and s.chroma_blocks is None:
+        s = replace(s, chroma_blocks=has_chroma_blocks(image, np.asarray(offset, float), line,
+                                                       s.threshold))
     small = cv2.resize(image, None, fx=1 / BACKGROUND_SCALE, fy=1 / BACKGROUND_SCALE,
                        interpolation=cv2.INTER_AREA)
     kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (BACKGROUND_KERNEL_PX,) * 2)

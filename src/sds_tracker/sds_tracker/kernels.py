@@ -10,6 +10,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from sds_tracker.chroma import LOWER_BOUND, UNKNOWN
+
 FIXED_APERTURE_PASSES = 8
 """Most passes of a centroid in a fixed aperture (`spot_windows`): started at a spot's
 brightest pixel, a grain of speckle up to a few px from its centre. Measured on development
@@ -362,39 +364,49 @@ def remove_line(window: np.ndarray, background: float, slope: float, intercept: 
 
 
 @njit(cache=True, fastmath=True)
-def symmetry_mismatch(left: np.ndarray, unknown: np.ndarray, cx: float, cy: float, reach: int,
+def symmetry_mismatch(left: np.ndarray, states: np.ndarray, cx: float, cy: float, reach: int,
                       threshold: float, stride: int) -> tuple[float, int]:
-    """Mean squared difference between `left` at each known pixel within `reach` of (cx, cy)
-    (every `stride`-th row and column) and at its mirror image about that centre (bilinear,
-    all four neighbours known), over the pairs where either side is above `threshold`; and
-    the number of such pairs."""
+    """Mean squared difference between `left` at each pixel within `reach` of (cx, cy)
+    (every `stride`-th row and column) that is not UNKNOWN (`states`, `chroma.pixel_states`)
+    and at its mirror image about that centre (bilinear, none of its four neighbours
+    UNKNOWN), over the pairs where either side is above `threshold`; and the number of such
+    pairs. A LOWER_BOUND side (the mirror's if any of its neighbours is one) holds at least
+    its light: it differs only where it is the brighter; a pair of two lower bounds tells
+    nothing and is left out."""
     height, width = left.shape
     x0, x1 = max(int(np.floor(cx)) - reach, 0), min(int(np.ceil(cx)) + reach + 1, width)
     y0, y1 = max(int(np.floor(cy)) - reach, 0), min(int(np.ceil(cy)) + reach + 1, height)
     total, count = 0.0, 0
     for y in range(y0, y1, stride):
         for x in range(x0, x1, stride):
-            if unknown[y, x] or (x - cx) ** 2 + (y - cy) ** 2 > reach * reach:
+            if states[y, x] == UNKNOWN or (x - cx) ** 2 + (y - cy) ** 2 > reach * reach:
                 continue
             mx, my = 2 * cx - x, 2 * cy - y
             ix, iy = int(np.floor(mx)), int(np.floor(my))
             if ix < 0 or iy < 0 or ix + 1 >= width or iy + 1 >= height:
                 continue
-            if unknown[iy, ix] or unknown[iy, ix + 1] or unknown[iy + 1, ix] or \
-                    unknown[iy + 1, ix + 1]:
+            mirror_state = max(states[iy, ix], states[iy, ix + 1], states[iy + 1, ix],
+                               states[iy + 1, ix + 1])
+            if mirror_state == UNKNOWN or (mirror_state == LOWER_BOUND and
+                                           states[y, x] == LOWER_BOUND):
                 continue
             fx, fy = mx - ix, my - iy
             mirror = (left[iy, ix] * (1 - fx) * (1 - fy) + left[iy, ix + 1] * fx * (1 - fy)
                       + left[iy + 1, ix] * (1 - fx) * fy + left[iy + 1, ix + 1] * fx * fy)
             if left[y, x] <= threshold and mirror <= threshold:
                 continue
-            total += (left[y, x] - mirror) ** 2
+            difference = left[y, x] - mirror
+            if states[y, x] == LOWER_BOUND:
+                difference = max(difference, 0.0)
+            elif mirror_state == LOWER_BOUND:
+                difference = min(difference, 0.0)
+            total += difference**2
             count += 1
     return total / max(count, 1), count
 
 
 @njit(cache=True, fastmath=True)
-def symmetric_centre(left: np.ndarray, unknown: np.ndarray, start_x: float, start_y: float,
+def symmetric_centre(left: np.ndarray, states: np.ndarray, start_x: float, start_y: float,
                      reach: int, threshold: float, span_px: int, min_pairs: int
                      ) -> tuple[float, float, float]:
     """The centre [window px] about which `left` is most nearly point-symmetric
@@ -410,7 +422,7 @@ def symmetric_centre(left: np.ndarray, unknown: np.ndarray, start_x: float, star
         for j in range(-radius, radius + 1):
             for i in range(-radius, radius + 1):
                 x, y = centre_x + i * step, centre_y + j * step
-                mismatch, pairs = symmetry_mismatch(left, unknown, x, y, reach, threshold,
+                mismatch, pairs = symmetry_mismatch(left, states, x, y, reach, threshold,
                                                     stride)
                 if pairs * stride * stride >= min_pairs and mismatch < best:
                     best_x, best_y, best = x, y, mismatch
@@ -422,9 +434,9 @@ def symmetric_centre(left: np.ndarray, unknown: np.ndarray, start_x: float, star
     offsets = np.zeros(2)
     for axis in range(2):
         dx, dy = (step, 0.0) if axis == 0 else (0.0, step)
-        below = symmetry_mismatch(left, unknown, best_x - dx, best_y - dy, reach, threshold,
+        below = symmetry_mismatch(left, states, best_x - dx, best_y - dy, reach, threshold,
                                   1)[0]
-        above = symmetry_mismatch(left, unknown, best_x + dx, best_y + dy, reach, threshold,
+        above = symmetry_mismatch(left, states, best_x + dx, best_y + dy, reach, threshold,
                                   1)[0]
         curvature = below - 2 * best + above
         if curvature > 0:
@@ -440,7 +452,7 @@ def warm_up() -> None:
     background_step(image, 2.0)
     light_elongation(image, 32.0, 32.0, 12.0, 0.0, 30.0)
     line_rows(image, np.zeros(1, np.int64), np.zeros(1, np.int64), 61, 6, 10, 0.15, 30.0, 2.0)
-    symmetric_centre(np.zeros((9, 9)), np.zeros((9, 9), np.bool_), 4.0, 4.0, 3, 30.0, 1, 1)
+    symmetric_centre(np.zeros((9, 9)), np.zeros((9, 9), np.uint8), 4.0, 4.0, 3, 30.0, 1, 1)
     remove_line(np.zeros((49, 49), np.float32), 0.0, 0.0, 24.0, 24.0, 12, 0.25, 30.0, 250.0,
                 0, 48)
     continues_line(np.arange(3.0), np.zeros(3), 2, 0, 1, 8.0, 2.0)

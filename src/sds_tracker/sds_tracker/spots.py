@@ -12,6 +12,7 @@ from scipy.ndimage import maximum_position
 from scipy.optimize import linear_sum_assignment
 from scipy.sparse.csgraph import connected_components
 
+from sds_tracker.chroma import has_chroma_blocks, pixel_states
 from sds_tracker.kernels import (
     FIXED_APERTURE_PASSES,
     FIXED_APERTURE_SETTLED_PX,
@@ -273,6 +274,8 @@ class SpotSettings:
     read_noise: float = 2.0        # grey levels, for the position uncertainty; a background
                                    # step within it is noise (kernels.background_step)
     min_competitor: float = 0.3    # a second blob this bright (relative) flags a reflection
+    chroma_blocks: bool | None = None  # the red channel's 2×2 chroma blocks (sds_tracker.chroma;
+                                       # None: not known yet, SpotTracker finds it on the line)
 
 
 class LastSeen(NamedTuple):
@@ -507,10 +510,14 @@ class SpotTracker:
         yet acquired that the search misses is looked for on the line (`_acquire_on_line`).
         """
         origin = np.array(offset, dtype=float)
-        tracked = [i for i in self.paths if self.previous[i] is not None]
-        settled = self._track_batch(image, origin, tracked) if tracked else {}
         if line is not None and len(line[0]) < 2:
             line = None
+        if line is not None and self.settings.chroma_blocks is None:
+            # A property of the frames' source: found once, where the line has light enough.
+            self.settings = replace(self.settings, chroma_blocks=has_chroma_blocks(
+                image, origin, line, self.settings.threshold))
+        tracked = [i for i in self.paths if self.previous[i] is not None]
+        settled = self._track_batch(image, origin, tracked) if tracked else {}
         estimates: dict[int, SpotEstimate] = {}
         for laser_id, path in self.paths.items():
             estimate = settled.get(laser_id)
@@ -1202,8 +1209,9 @@ def window_without_line(image: np.ndarray, origin: np.ndarray,
     window columns per window row, the line on the window rows `line_span`, first and last,
     or on every row), started at `centre`, in full-frame px."""
     x0, y0, x1, y1 = window
+    corner = (x0 + int(origin[0]), y0 + int(origin[1])) if s.chroma_blocks else None
     local = spot_without_line(image[y0:y1, x0:x1].astype(np.float32), line_x,
-                              centre - origin - (x0, y0), s, line_span)
+                              centre - origin - (x0, y0), s, line_span, corner)
     if local is None:
         return None
     return replace(local, centre=local.centre + origin + (x0, y0))
@@ -1282,8 +1290,8 @@ def spot_window(shape: tuple[int, ...], offset: np.ndarray, centre: np.ndarray, 
 
 
 def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
-                      s: SpotSettings, line_span: tuple[int, int] | None = None
-                      ) -> LineFreeSpot | None:
+                      s: SpotSettings, line_span: tuple[int, int] | None = None,
+                      block_corner_px: tuple[int, int] | None = None) -> LineFreeSpot | None:
     """A spot's centre [window px] with the laser line's light taken away, the line's
     direction and the clearance between the two; None when the line does not reach enough of
     the window's rows, a NaN centre when no spot is left (nothing LINE_SPECKLE_PEAK times
@@ -1303,7 +1311,10 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
     centroid but the point about which what is left is most nearly symmetric, over the known
     pixels within half a window (SYMMETRY_REACH_SHARE of one for a spot saturated beside the
     line; `kernels.symmetric_centre`): a spot's own light is point-symmetric (a Gaussian, or
-    an ellipse on a tilted surface), the line's ragged remainder is not.
+    an ellipse on a tilted surface), the line's ragged remainder is not. In an image with
+    chroma blocks (`block_corner_px`: the window's top-left pixel, full-frame) the pixels
+    that share a block with a saturated one the line lights hold at least what is left
+    there (`chroma.pixel_states`): the camera averaged the block after the sensor clipped.
     """
     rows, columns = np.indices(window.shape)
     background = border_median(window)
@@ -1324,6 +1335,7 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
         s.saturation_level, first_row, last_row)
     if profile_pixels < 3 * (2 * reach + 1):
         return None
+    states = pixel_states(unknown, block_corner_px)
     # The line's speckle leaves light of its own within the line's band: what it leaves on
     # the profile's rows says how much.
     offsets = np.asarray(columns - intercept - slope * rows, dtype=float)
@@ -1360,7 +1372,7 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
     saturated = int(np.count_nonzero((window >= s.saturation_level) & ~unknown & (joined > 0))
                     ) >= SATURATED_BESIDE_LINE_PX
     symmetry_reach = int(SYMMETRY_REACH_SHARE * s.window_px) if saturated else reach
-    x, y, mismatch = min((symmetric_centre(left, unknown, x, y, symmetry_reach, s.threshold,
+    x, y, mismatch = min((symmetric_centre(left, states, x, y, symmetry_reach, s.threshold,
                                            SYMMETRY_SEARCH_PX, SYMMETRY_PAIRS)
                           for x, y in starts), key=lambda found: found[2])
     # A spot centred within the saturated line's band that does not reach across it has its
@@ -1368,7 +1380,7 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
     # enough is off by a spot's radius. Where a centre with fewer pairs is far more nearly
     # symmetric and elsewhere, the spot's centre is not known.
     hidden_x, hidden_y, hidden_mismatch = min(
-        (symmetric_centre(left, unknown, x, y, symmetry_reach, s.threshold, SYMMETRY_SEARCH_PX,
+        (symmetric_centre(left, states, x, y, symmetry_reach, s.threshold, SYMMETRY_SEARCH_PX,
                           HIDDEN_SYMMETRY_PAIRS) for x, y in starts), key=lambda found: found[2])
     centre = np.array([x, y])
     near = (columns - x) ** 2 + (rows - y) ** 2 <= reach**2
@@ -1379,7 +1391,7 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
     if not np.isfinite(mismatch) or hidden or not (left[near] > floor[near]).any():
         return LineFreeSpot(np.full(2, np.nan), along, np.nan)
     across = np.array([1.0, -slope]) / norm
-    spreads = symmetry_spreads(left, unknown, centre, (across, along), symmetry_reach,
+    spreads = symmetry_spreads(left, states, centre, (across, along), symmetry_reach,
                                s.threshold)
     if min(rise for _, rise in spreads) < HIDDEN_CENTRE_RISE:
         return LineFreeSpot(np.full(2, np.nan), along, np.nan)
@@ -1399,7 +1411,7 @@ def spot_without_line(window: np.ndarray, line_x: np.ndarray, spot: np.ndarray,
                         abs(to_line) - line_half_width / norm)
 
 
-def symmetry_spreads(left: np.ndarray, unknown: np.ndarray, centre: np.ndarray,
+def symmetry_spreads(left: np.ndarray, states: np.ndarray, centre: np.ndarray,
                      directions: tuple[np.ndarray, ...], reach: int, threshold: float
                      ) -> list[tuple[float, float]]:
     """How sharply a spot's symmetry falls off along each unit vector of `directions` from
@@ -1411,12 +1423,12 @@ def symmetry_spreads(left: np.ndarray, unknown: np.ndarray, centre: np.ndarray,
     which a side the saturated line hides leaves small (HIDDEN_CENTRE_RISE). (inf, 0) where a
     step lowers the mismatch (no least mismatch that way); (0, inf) where it is exactly
     symmetric."""
-    at_centre, pairs = symmetry_mismatch(left, unknown, float(centre[0]), float(centre[1]),
+    at_centre, pairs = symmetry_mismatch(left, states, float(centre[0]), float(centre[1]),
                                          reach, threshold, 1)
     spreads = []
     for direction in directions:
         step = SYMMETRY_STEP_PX * direction
-        stepped = min(symmetry_mismatch(left, unknown, float(centre[0] + sign * step[0]),
+        stepped = min(symmetry_mismatch(left, states, float(centre[0] + sign * step[0]),
                                         float(centre[1] + sign * step[1]), reach, threshold,
                                         1)[0]
                       for sign in (-1.0, 1.0))
