@@ -80,3 +80,16 @@ def test_a_rigs_paths_span_its_container_so_a_spot_far_from_its_rest_is_on_its_p
     short_path = beam_image_path(rig, rig.tracked_diodes[0].laser_id, np.linspace(-40, 40, 15))
     far_spot = beam_image_path(rig, rig.tracked_diodes[0].laser_id, [120.0])
     assert abs(across_path_px(short_path, far_spot)[0]) > 10.0
+
+
+def test_a_paths_points_the_camera_does_not_see_are_left_out() -> None:
+    """A beam whose path leaves the camera's field at the container's rim (NaN there, as on
+    a rig as built) still checks its spots; a path the camera does not see checks none."""
+    path = np.array([[0.0, 0.0], [0.0, 10.0], [0.0, 20.0], [np.nan, np.nan]])
+    scatter = PathScatter({1: path, 2: np.full((4, 2), np.nan)})
+    rng = np.random.default_rng(4)
+    for _ in range(MIN_FRAMES * 4):
+        scatter.add(np.array([1, 2]), np.array([[rng.normal(0.5, 0.1), 15.0], [3.0, 3.0]]),
+                    np.array([0.1, 0.1]))
+    check = scatter.check()
+    assert check is not None and check.spots == 1 and np.isfinite(check.scatter_over_sigma)

@@ -42,6 +42,18 @@ def across_path_px(paths_px: np.ndarray, points_px: np.ndarray) -> np.ndarray:
     return np.where(side < 0, -1.0, 1.0) * distance
 
 
+def seen_path_px(path_px: np.ndarray) -> np.ndarray | None:
+    """A path (M×2 px) with the points the camera does not see (NaN: beyond its model's
+    field, as a beam's at the container's rim can be) in the place of the nearest seen one
+    at either end (on the line between the two about them within); None with fewer than two
+    seen points."""
+    seen = np.flatnonzero(np.isfinite(path_px).all(axis=1))
+    if len(seen) < 2:
+        return None
+    index = np.arange(len(path_px))
+    return np.column_stack([np.interp(index, seen, path_px[seen, axis]) for axis in (0, 1)])
+
+
 def container_heights_mm(rig: Rig) -> np.ndarray:
     """Surface heights [mm] from the container's floor to its rim, no further apart than the
     default tracker's path samples: whatever heights a run's tracker searched (its
@@ -78,10 +90,14 @@ class PathScatter:
     w = 1/σ², from which `check` gives Σ (r − r̄)²·w over Σ (n − 1), r̄ each diode's mean."""
 
     def __init__(self, paths_px: dict[int, np.ndarray]) -> None:
-        """`paths_px`: each diode's image path (M×2 px, the same M for all)."""
-        self.rows = {laser_id: row for row, laser_id in enumerate(paths_px)}
-        self.paths_px = np.stack(list(paths_px.values())) if paths_px else np.zeros((0, 2, 2))
-        self.sums = np.zeros((len(paths_px), 5))   # per diode: n, Σr, Σr·w, Σr²·w, Σw
+        """`paths_px`: each diode's image path (M×2 px, the same M for all; a point the
+        camera does not see, NaN, takes its nearest seen neighbour's place). A diode whose
+        path has fewer than two seen points has none."""
+        seen = {laser_id: seen_path_px(path) for laser_id, path in paths_px.items()}
+        seen = {laser_id: path for laser_id, path in seen.items() if path is not None}
+        self.rows = {laser_id: row for row, laser_id in enumerate(seen)}
+        self.paths_px = np.stack(list(seen.values())) if seen else np.zeros((0, 2, 2))
+        self.sums = np.zeros((len(seen), 5))   # per diode: n, Σr, Σr·w, Σr²·w, Σw
 
     @classmethod
     def for_rig(cls, rig: Rig) -> PathScatter:
