@@ -78,10 +78,10 @@ def has_chroma_blocks(image: np.ndarray, origin: np.ndarray,
 
 
 def pixel_states(unknown: np.ndarray, corner_px: tuple[int, int] | None) -> np.ndarray:
-    """Each pixel's state (KNOWN, LOWER_BOUND, UNKNOWN) in a window whose `unknown` pixels
-    are known: where the image has chroma blocks (`corner_px`, the window's top-left pixel
-    in full-frame px; None without blocks), the other pixels of an unknown pixel's block are
-    lower bounds."""
+    """Each pixel's state (KNOWN, LOWER_BOUND, UNKNOWN) in a window, from its `unknown`
+    pixels: where the image has chroma blocks (`corner_px`, the window's top-left pixel in
+    full-frame px; None without blocks), the other pixels of an unknown pixel's block are
+    lower bounds, the rest known."""
     states = np.where(unknown, UNKNOWN, KNOWN).astype(np.uint8)
     if corner_px is None or not unknown.any():
         return states
