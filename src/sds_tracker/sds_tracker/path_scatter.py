@@ -93,8 +93,11 @@ class PathScatter:
         """`paths_px`: each diode's image path (M×2 px, the same M for all; a point the
         camera does not see, NaN, takes its nearest seen neighbour's place). A diode whose
         path has fewer than two seen points has none."""
-        seen = {laser_id: seen_path_px(path) for laser_id, path in paths_px.items()}
-        seen = {laser_id: path for laser_id, path in seen.items() if path is not None}
+        seen: dict[int, np.ndarray] = {}
+        for laser_id, path in paths_px.items():
+            seen_path = seen_path_px(path)
+            if seen_path is not None:
+                seen[laser_id] = seen_path
         self.rows = {laser_id: row for row, laser_id in enumerate(seen)}
         self.paths_px = np.stack(list(seen.values())) if seen else np.zeros((0, 2, 2))
         self.sums = np.zeros((len(seen), 5))   # per diode: n, Σr, Σr·w, Σr²·w, Σw
