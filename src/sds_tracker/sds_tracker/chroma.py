@@ -7,7 +7,7 @@ before the camera averaged the block, so a pixel that shares a block with a satu
 holds less than its own light: beside a saturated spot on the saturated laser line, only
 on the line's side, which moves the spot's centre of symmetry away from the line
 (bench/README, "saturated spots on the laser line"). Such a pixel is a lower bound of the
-light (`LOWER_BOUND`).
+light (`kernels.LOWER_BOUND`).
 
 Within a block neighbouring pixels then differ far less than across the blocks' edges:
 over patches along the laser line, the ratio of their mean squared differences was
@@ -19,10 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-KNOWN, LOWER_BOUND, UNKNOWN = 0, 1, 2
-"""A pixel's state for a centre of symmetry (`kernels.symmetric_centre`): its light is
-known; at least what it holds (it shares a chroma block with a saturated pixel); or unknown
-(saturated where the laser line lights it)."""
+from sds_tracker.kernels import KNOWN, LOWER_BOUND, UNKNOWN, border_median
+
 BLOCK_RATIO = 0.4
 """Mean squared difference of neighbouring lit pixels within a 2×2 block over that across
 the blocks' edges below which an image has chroma blocks: near the geometric middle of the
@@ -43,8 +41,7 @@ def block_difference_sums(window: np.ndarray, corner_px: tuple[int, int], thresh
     border: the summed squared difference and the count of the pairs within one 2×2 block
     (at even full-frame coordinates), then of those across the blocks' edges."""
     values = window.astype(np.float64)
-    border = np.concatenate([values[0], values[-1], values[:, 0], values[:, -1]])
-    lit = values - np.median(border) > threshold
+    lit = values - border_median(values) > threshold
     sums = np.zeros(4)
     for axis, start in ((1, corner_px[0]), (0, corner_px[1])):
         squares = np.diff(values, axis=axis) ** 2
@@ -78,10 +75,10 @@ def has_chroma_blocks(image: np.ndarray, origin: np.ndarray,
 
 
 def pixel_states(unknown: np.ndarray, corner_px: tuple[int, int] | None) -> np.ndarray:
-    """Each pixel's state (KNOWN, LOWER_BOUND, UNKNOWN) in a window, from its `unknown`
-    pixels: where the image has chroma blocks (`corner_px`, the window's top-left pixel in
-    full-frame px; None without blocks), the other pixels of an unknown pixel's block are
-    lower bounds, the rest known."""
+    """Each pixel's state (`kernels.KNOWN`, LOWER_BOUND, UNKNOWN) in a window, from its
+    `unknown` pixels: where the image has chroma blocks (`corner_px`, the window's top-left
+    pixel in full-frame px; None without blocks), the other pixels of an unknown pixel's
+    block are lower bounds, the rest known."""
     states = np.where(unknown, UNKNOWN, KNOWN).astype(np.uint8)
     if corner_px is None or not unknown.any():
         return states

@@ -1,5 +1,6 @@
 """Compiled (numba) inner loops of the tracker: the spot windows, the line's rows, and a
-spot the line overlaps (the line's light removed, the spot's centre of symmetry).
+spot the line overlaps (the line's light removed, the spot's centre of symmetry); and the
+window's background they and the spot windows share (`border_median`).
 
 Each frame reads only small windows, so the work is a few loops over tens of thousands of
 pixels; compiled, they cost well under a millisecond where numpy needed several (bench/).
@@ -10,8 +11,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from sds_tracker.chroma import LOWER_BOUND, UNKNOWN
-
+KNOWN, LOWER_BOUND, UNKNOWN = 0, 1, 2
+"""A pixel's state for a centre of symmetry (`symmetric_centre`): its light is known; at
+least what it holds (it shares a chroma block with a saturated pixel:
+`chroma.pixel_states`); or unknown (saturated where the laser line lights it)."""
 FIXED_APERTURE_PASSES = 8
 """Most passes of a centroid in a fixed aperture (`spot_windows`): started at a spot's
 brightest pixel, a grain of speckle up to a few px from its centre. Measured on development
@@ -86,6 +89,13 @@ def step_sigma_px(step: float, lever_px: float, total: float) -> float:
     the centre (their sum `lever_px`, averaged over the edge's direction: 2/π), in the spot's
     weight `total`. A scalar background leaves such an edge in the spot's light."""
     return step / 2 * (2 / np.pi) * lever_px / total
+
+
+def border_median(window: np.ndarray) -> float:
+    """The median of a window's border pixels (its outermost rows and columns): the local
+    background under a spot the window holds."""
+    return float(np.median(np.concatenate([window[0], window[-1], window[:, 0],
+                                           window[:, -1]])))
 
 
 @njit(cache=True)

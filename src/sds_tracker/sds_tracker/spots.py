@@ -18,6 +18,7 @@ from sds_tracker.kernels import (
     FIXED_APERTURE_SETTLED_PX,
     aperture_ring,
     background_step,
+    border_median,
     light_elongation,
     remove_line,
     ring_median,
@@ -1215,13 +1216,6 @@ def window_without_line(image: np.ndarray, origin: np.ndarray,
     if local is None:
         return None
     return replace(local, centre=local.centre + origin + (x0, y0))
-
-
-def border_median(window: np.ndarray) -> float:
-    """The median of a window's border pixels (its outermost rows and columns): the local
-    background under a spot the window holds."""
-    return float(np.median(np.concatenate([window[0], window[-1], window[:, 0],
-                                           window[:, -1]])))
 
 
 def reflection_normals(normal: np.ndarray, spread_deg: float) -> np.ndarray:
