@@ -101,8 +101,9 @@ def test_a_node_process_that_crashes_leaves_every_threads_stack_in_the_log(repo,
     output = crash_the_camera(repo, tmp_path, clip, 0)
     # faulthandler reads the other threads' frames without stopping them: one caught as its
     # frames change can end the dump where it stands (once in a whole suite's run under load,
-    # 2026-12-07: cut in the second thread's first line, no "Current thread"; ten runs of this
-    # test alone were whole). That is CPython's, not the graph's: the crash is made once more.
+    # 2026-12-07: cut in the second thread's first line, nothing after it, no "Current
+    # thread"; ten runs of this test alone were whole). The dump stopped there, not the
+    # graph's log, which forwards a process's output to its end: the crash is made once more.
     if "Current thread 0x" not in output:
         output = crash_the_camera(repo, tmp_path, clip, 1)
     assert "camera (camera) was killed by SIGSEGV" in output, output
