@@ -84,9 +84,14 @@ def subscribe(kind: str, seconds: float, with_info: bool) -> None:
                      history=HistoryPolicy.KEEP_LAST)
     counts = {"video": 0, "imu": 0, "points": 0}
     def counter(topic: str):
-        if with_info:
-            return lambda _, info: counts.__setitem__(topic, counts[topic] + 1)
-        return lambda _: counts.__setitem__(topic, counts[topic] + 1)
+        """A callback that counts `topic`'s messages; rclpy passes the message's info to a
+        callback of two parameters."""
+        def count(_message: bytes) -> None:
+            counts[topic] += 1
+
+        def count_with_info(_message: bytes, _info: object) -> None:
+            counts[topic] += 1
+        return count_with_info if with_info else count
 
     for topic, message_type in (("video", CompressedVideo), ("imu", Imu),
                                 ("points", PointCloud2)):
