@@ -83,6 +83,7 @@ def subscribe(kind: str, seconds: float, with_info: bool) -> None:
     qos = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE,
                      history=HistoryPolicy.KEEP_LAST)
     counts = {"video": 0, "imu": 0, "points": 0}
+
     def counter(topic: str):
         """A callback that counts `topic`'s messages; rclpy passes the message's info to a
         callback of two parameters."""
