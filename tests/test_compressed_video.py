@@ -8,6 +8,7 @@ frames `sds process --video` reads from the file.
 
 from __future__ import annotations
 
+import gc
 import subprocess
 import sys
 from contextlib import closing
@@ -144,6 +145,18 @@ def test_a_decoder_dropped_mid_stream_in_a_thread_does_not_hang_the_process(
     done = subprocess.run([sys.executable, "-c", DROPPED_MID_STREAM, str(h264_video)],
                           capture_output=True, text=True, timeout=60, check=False)
     assert done.returncode == 0, done.stderr
+
+
+@pytest.mark.filterwarnings("error::pytest.PytestUnraisableExceptionWarning")
+@pytest.mark.parametrize("refused", [{"packet_format": "mjpeg"}, {"channel": "infrared"}])
+def test_a_decoder_refused_at_its_start_leaves_nothing_to_drain(refused: dict) -> None:
+    """A decoder whose format or channel is refused is dropped half made: its drain at the
+    end (`PacketDecoder.__del__`) finds no codec and does nothing, instead of an error that
+    Python can only print ("Exception ignored in __del__")."""
+    arguments = {"packet_format": "h264", **refused}
+    with pytest.raises(FrameSourceError, match="is not one of"):
+        PacketDecoder(**arguments)
+    gc.collect()
 
 
 def test_a_codec_whose_packets_are_not_carried_is_said(tmp_path: Path) -> None:

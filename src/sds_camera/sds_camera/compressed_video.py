@@ -194,6 +194,7 @@ class PacketDecoder:
 
     def __init__(self, packet_format: str, region: Region | None = None,
                  channel: str = "bgr", low_delay: bool = False) -> None:
+        self._drained = True   # nothing to drain before the codec exists (`__del__`)
         if packet_format not in DECODERS:
             raise FrameSourceError(f"packet format {packet_format!r} is not one of "
                                    f"{', '.join(DECODERS)}")
