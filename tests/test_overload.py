@@ -154,14 +154,12 @@ def test_the_tracker_numbers_frames_by_their_stamps_and_says_which_never_came(re
 
 @pytest.mark.ros
 def test_a_live_viewer_behind_its_images_sheds_them_and_says_so(tmp_path):
-    """The viewer's process stopped for half a second (as a busy machine may leave it) while
-    the camera goes on at 30 fps: its reader keeps the newest 5 images (sensor-data QoS), the
+    """The viewer's process stopped for a second (as a busy machine may leave it) while the
+    camera goes on at 30 fps: its reader keeps the newest 5 images (sensor-data QoS), the
     oldest of which waited 4 frame periods (133 ms) or more, beyond its 50 ms limit; it sheds
     them and says so, and once it keeps up again it says that too. (A burst of images from
     the probe did not make it late every time: the middleware drops what a best-effort
-    reader cannot take, so the few it got had barely waited. Stopped for a second, it found
-    nothing late in 2 of 7 runs, 2026-12-07; stopped for half a second, 12 of 12 runs shed
-    and said so.)"""
+    reader cannot take, so the few it got had barely waited.)"""
     graph = SdsGraphRun("view.yaml", "--set", f"viewer.output={tmp_path / 'live.rrd'}",
                         "--set", "viewer.live=true", "--set", "viewer.live_max_lag_s=0.05")
     probe = Probe("viewer_shedding_probe")
@@ -180,14 +178,14 @@ def test_a_live_viewer_behind_its_images_sheds_them_and_says_so(tmp_path):
         publish(0, 15)
         os.kill(viewer, signal.SIGSTOP)
         try:
-            publish(15, 15)
+            publish(15, 30)
         finally:
             os.kill(viewer, signal.SIGCONT)
-        publish(30, 15)
+        publish(45, 15)
         said = graph.wait_for_line("viewer images: shedding the frames more than 50 ms late",
                                    10.0)
         assert "the recorded measurements are complete" in said
-        publish(45, 30 * int(REPORT_PERIOD_S + 2))
+        publish(60, 30 * int(REPORT_PERIOD_S + 2))
         graph.wait_for_line("viewer images: back in time", 5.0)
     finally:
         probe.close()
