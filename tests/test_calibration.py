@@ -26,6 +26,7 @@ from sds_recon.calibration.intrinsics import calibrate_scaramuzza, reprojection_
 from sds_recon.calibration.lasers import calibrate_line_plane_on_boards
 from sds_recon.calibration.report import report_content, report_text
 from sds_tracker.line import find_line
+from test_camera_models import ocamcalib_cam2world
 
 BOARD = Checkerboard(8, 6, 15.0)
 SDS = str(Path(sys.executable).with_name("sds"))
@@ -299,12 +300,8 @@ def test_a_181_degree_fisheyes_ocamcalib_file_projects_as_ocamcalib_does(shared_
     row, col = centre_row + radius * np.sin(angle), centre_col + radius * np.cos(angle)
     inside = (row >= 0) & (row <= 1599) & (col >= 0) & (col <= 1599)
     row, col = row[inside], col[inside]
-    # OCamCalib's cam2world: the affine inverted, then the ray (u, v, pol(|u, v|)).
-    determinant = c - d * e
-    u = ((row - centre_row) - d * (col - centre_col)) / determinant
-    v = (-e * (row - centre_row) + c * (col - centre_col)) / determinant
-    rays_ocam = np.column_stack([u, v, np.polynomial.polynomial.polyval(np.hypot(u, v), pol)])
-    rays_ocam /= np.linalg.norm(rays_ocam, axis=1, keepdims=True)
+    rays_ocam = ocamcalib_cam2world(np.column_stack([row, col]), list(pol), centre_row,
+                                    centre_col, c, d, e)
     rays = rays_ocam @ OCAMCALIB_TO_SDS.T
     np.testing.assert_allclose(camera.pixel_to_ray(np.column_stack([col, row])), rays,
                                atol=1e-12)
