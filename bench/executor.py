@@ -18,11 +18,11 @@ callbacks do: whether it runs them at all.
 from __future__ import annotations
 
 import argparse
-import os
-import random
 import subprocess
 import sys
 import time
+
+from sds_bringup.ros_env import graph_environment, pick_domain_id
 
 FPS = 30
 IMU_PER_FRAME = 20
@@ -106,8 +106,8 @@ def subscribe(kind: str, seconds: float, with_info: bool) -> None:
     while time.monotonic() < end:
         executor.spin_once(timeout_sec=0.1)
     frames = counts["video"] - first
-    print(f"{frames} {1e3 * (time.process_time() - cpu_start) / max(frames, 1):.2f} "
-          f"{counts['imu']} {counts['points']}", flush=True)
+    print(f"{frames} {1e3 * (time.process_time() - cpu_start) / max(frames, 1):.2f}",
+          flush=True)
     executor.shutdown(timeout_sec=1.0)
     node.destroy_node()
     rclpy.try_shutdown()
@@ -126,7 +126,7 @@ def run_pair(kind: str, seconds: float, with_info: bool, env: dict[str, str]) ->
     output, errors = subscriber.communicate(timeout=listening_s + 30)
     if subscriber.returncode != 0:
         return f"failed: {errors.strip().splitlines()[-1]}"
-    frames, cpu_ms, _, _ = output.split()
+    frames, cpu_ms = output.split()
     return f"{int(frames):7d} {float(cpu_ms):13.2f}"
 
 
@@ -144,8 +144,8 @@ def main() -> None:
     if args.role == "subscribe":
         subscribe(args.kind, args.seconds, args.with_info)
         return
-    env = {**os.environ, "ROS_DOMAIN_ID": str(random.randint(100, 200)),
-           "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    # The graph's own environment (transport, QoS profile), on a domain of its own.
+    env = graph_environment(pick_domain_id())
     print(f"{'executor':24s} {'frames':>7s} {'CPU ms/frame':>13s}")
     runs = [("single", False), ("events", False)] * args.pairs + [("single", True),
                                                                    ("events", True)]
