@@ -315,6 +315,19 @@ def played_s(stamp_s: float, origin_s: float, rate: float) -> float:
     return origin_s + (stamp_s - origin_s) / rate
 
 
+def recorded_packets(recording: Path, log: Path) -> tuple[int, int | None]:
+    """The camera's video packets a recording holds, and how many the camera published (its
+    line when the graph stopped, in the run's log; None if it never said)."""
+    import re
+
+    from sds_record.mcap_files import message_counts
+
+    said = re.findall(r"\[camera\]: (?:stopped|end of [^:]*): published .* and the (\d+) "
+                      "video packets", log.read_text())
+    return (message_counts(recording, ["/camera/video"]).get("/camera/video", 0),
+            int(said[-1]) if said else None)
+
+
 def recorded_frames(recording: Path, fps: float, topic: str = "/camera/image"
                     ) -> tuple[int, int]:
     """Frames a recording holds, and how many the camera published from its first to its last
@@ -441,7 +454,7 @@ def main() -> None:
             for load in loads:
                 load.kill()
                 load.wait()
-        packets = recorded_frames(recording, scenario.fps, "/camera/video")
+        packets = recorded_packets(recording, args.out / f"real_time_{index}.log")
         images = recorded_frames(recording, scenario.fps) if args.record_images else None
         side_images = (recorded_frames(recording, side_fps, "/lateral/image")
                        if args.record_images and args.lateral else None)
@@ -501,8 +514,8 @@ def main() -> None:
         camera_frames = round((stamps[-1] - stamps[0]) * scenario.fps) + 1
         print(f"  frames measured: {len(stamps)} of the camera's {camera_frames} in that time "
               f"({camera_frames - len(stamps)} skipped)")
-        print(f"  packets recorded: {packets[0]} of the camera's {packets[1]} from the first "
-              "recorded to the last")
+        print(f"  packets recorded: {packets[0]} of the {packets[1]} the camera published "
+              "(its line at the stop)")
         if images is not None:
             print(f"  frames recorded: {images[0]} of the camera's {images[1]} from the first "
                   "recorded to the last")

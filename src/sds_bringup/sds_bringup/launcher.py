@@ -34,6 +34,9 @@ CLEAN_STOPS = (0, -signal.SIGTERM, TEARDOWN_HUNG)
 ended by its teardown watchdog after its nodes had closed."""
 LAST_LINES = 6
 """Log lines of a failed process repeated in its failure report."""
+RECORDER_PLUGINS = frozenset({"sds_nodes.recorder:RecorderNode"})
+"""Nodes that keep what the others publish: their processes are stopped once every other
+process has ended, so that they record the others' last messages (`Launcher._shutdown`)."""
 
 
 def _prepare_child(nice: int) -> None:
@@ -69,6 +72,11 @@ class GraphProcess:
                   or line.startswith(("node host:", "Traceback"))]
         line = (errors or list(self.last_lines) or ["no output"])[-1]
         return line.split("]: ", 1)[-1]
+
+    @property
+    def records(self) -> bool:
+        """Whether this process hosts a recorder (RECORDER_PLUGINS): it is stopped last."""
+        return any(entry.plugin in RECORDER_PLUGINS for entry in self.entries)
 
     @property
     def nice(self) -> int:
@@ -216,11 +224,25 @@ class Launcher:
                 print("\n".join(report), file=self.console, flush=True)
 
     def _shutdown(self) -> None:
-        """SIGTERM to every live process; after the grace period, a process still alive writes
-        its threads' stacks to the log (STACK_DUMP_SIGNAL), then gets SIGKILL. (SIGTERM, not
+        """SIGTERM to every live process but the recorders' (`GraphProcess.records`), then,
+        once those have ended, to the recorders': what the others published up to their end
+        is recorded. In each wave, after the grace period, a process still alive writes its
+        threads' stacks to the log (STACK_DUMP_SIGNAL), then gets SIGKILL. (SIGTERM, not
         SIGINT: a process still starting Python dies of it quietly, where SIGINT would raise
         KeyboardInterrupt with a traceback; the node host handles both alike.)"""
-        live = [(p.name, p.popen) for p in self.processes if p.popen and p.popen.poll() is None]
+        live = [p for p in self.processes if p.popen and p.popen.poll() is None]
+        self._terminate([p for p in live if not p.records])
+        self._terminate([p for p in live if p.records])
+        for thread in self._log_threads:
+            thread.join(timeout=2.0)
+        for process in self.processes:
+            if process.popen:
+                self._say(process.name, _stop_status(process.popen.returncode))
+
+    def _terminate(self, processes: list[GraphProcess]) -> None:
+        """SIGTERM to each of `processes`; wait for them for the grace period, then dump the
+        stacks of and kill each one still alive."""
+        live = [(p.name, p.popen) for p in processes if p.popen]
         for _, popen in live:
             popen.send_signal(signal.SIGTERM)
         deadline = time.monotonic() + self.grace_period_s
@@ -236,11 +258,6 @@ class Launcher:
                 except subprocess.TimeoutExpired:
                     popen.kill()
                     popen.wait()
-        for thread in self._log_threads:
-            thread.join(timeout=2.0)
-        for process in self.processes:
-            if process.popen:
-                self._say(process.name, _stop_status(process.popen.returncode))
 
     def _forward_log(self, process: GraphProcess) -> None:
         assert process.popen is not None and process.popen.stdout is not None

@@ -72,6 +72,9 @@ that finds this many waiting is shed, with every packet up to the next keyframe.
 VIDEO_HISTORY = 150
 """The packet publisher's history (5 s at 30 fps): what a reliable reader that falls behind
 for a while (the recorder writing a chunk) still gets. Packets are small (a few 100 kB)."""
+STOP_ACK_S = 2.0
+"""Stopped before its end, how long the camera waits for its packets' subscribers (the
+recorder) to acknowledge the last packets it published, before its process ends [s]."""
 IMU_HISTORY = 2000
 """Camera IMU messages kept for late subscribers (about 3 s of a GoPro's 600 per second)."""
 EXIT_SOURCE_ERROR = 2
@@ -104,6 +107,7 @@ class FrameSourceNode(HostedNode):
         self.packets_published = 0
         self.shed = 0         # packets published but not decoded (shed)
         self.behind_s = 0.0   # the furthest a file played in real time fell behind [s]
+        self._said_end = False
         values = self.declare_parameter_table(PARAMETERS)
         self._stop = threading.Event()
         self._queue: queue.Queue[Frame | _EndOfStream] = queue.Queue(maxsize=3)
@@ -542,6 +546,7 @@ class FrameSourceNode(HostedNode):
             self._fail(f"{error}; the {self.published} frames published before stay valid")
             return
         self.get_logger().info(f"end of {self._p['source']}: {self._published_line()}")
+        self._said_end = True
         # The consumers' last outputs: the tracker publishes the frames its Hampel window held
         # back once the stream has been idle for 1 s, the chain behind it follows.
         self._stop.wait(self._p["linger_s"])
@@ -567,6 +572,17 @@ class FrameSourceNode(HostedNode):
                 getattr(self, name).release()
         for thread in getattr(self, "_threads", []):
             thread.join(timeout=2.0)
+        if not hasattr(self, "_threads") or self._said_end:
+            return
+        # Stopped before its end: the last packets reach the recorder before this process
+        # ends, and the console says what was published, which the recording is held against.
+        if self._packets is not None and not wait_for_acks(self._video_pub, STOP_ACK_S,
+                                                           threading.Event()):
+            self.get_logger().warning(
+                f"stopped: the last video packets were not acknowledged within {STOP_ACK_S:g} s "
+                "by every subscriber (a recorder that stopped first, or fell behind): the "
+                "recording may miss them")
+        self.get_logger().info(f"stopped: {self._published_line()}")
 
 
 def main(args: list[str] | None = None) -> None:

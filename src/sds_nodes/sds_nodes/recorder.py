@@ -146,6 +146,11 @@ class RecorderNode(HostedNode):
                 acks.publish(Header(stamp=Time(nanoseconds=header_stamp_ns(data)).to_msg()))
         return write
 
+    def messages_taken(self) -> int | None:
+        """Messages written so far: at a stop, the node host takes what was delivered before
+        the file is finished (`node_host.drain`)."""
+        return self._recorder.message_count if hasattr(self, "_recorder") else None
+
     def close(self) -> None:
         """Finish the file (summary section) when the graph stops; a file without a message
         is removed."""

@@ -26,5 +26,12 @@ class HostedNode(Node):
         return {name: self.declare_parameter(name, default).value
                 for name, default in table.items()}
 
+    def messages_taken(self) -> int | None:
+        """How many messages the node has taken so far, for a node whose last messages must
+        not be lost at a stop (a recorder): once asked to stop, the node host takes what was
+        delivered until this count stays put (`node_host.drain`). None (the default): the
+        node is not drained."""
+        return None
+
     def close(self) -> None:
         """Stop what the node runs beside its callbacks; nothing by default."""

@@ -14,6 +14,7 @@ import json
 import signal
 import sys
 import threading
+import time
 from collections.abc import Callable, Sequence
 
 import rclpy
@@ -27,6 +28,12 @@ from sds_ros.node_process import arm_teardown_watchdog
 
 NodeFactory = Callable[..., Node]
 EXIT_STARTUP_ERROR = 3
+DRAIN_QUIET_S = 0.5
+"""At a stop, how long a drained node's count of messages taken must stay put before what
+was delivered to it counts as taken [s]. Its publishers have ended by then (the launcher
+stops the recorders last): what they sent is in its readers, taken back to back."""
+DRAIN_LIMIT_S = 5.0
+"""At a stop, the longest the node host drains [s] (within the launcher's grace period)."""
 
 
 def load_plugin(plugin: str) -> NodeFactory:
@@ -77,16 +84,43 @@ def run_nodes(
         print(f"node host: {type(error).__name__}: {error}", file=sys.stderr, flush=True)
         exit_code = EXIT_STARTUP_ERROR
     finally:
-        for node in nodes:
-            if isinstance(node, HostedNode):
-                node.close()
-                exit_code = max(exit_code, node.exit_code)
+        # The nodes that are drained (a recorder) close last: stopped, the others (a camera
+        # in the same process) stop publishing first, then what was delivered is taken.
+        hosted = [node for node in nodes if isinstance(node, HostedNode)]
+        drained = [node for node in hosted if node.messages_taken() is not None]
+        for node in [node for node in hosted if node not in drained]:
+            node.close()
+            executor.remove_node(node)   # no callback of a closed node while draining
+        if stop.is_set() and drained and rclpy.ok():
+            drain(executor, drained)
+        for node in drained:
+            node.close()
+        exit_code = max([exit_code, *(node.exit_code for node in hosted)])
         arm_teardown_watchdog()
         executor.shutdown(timeout_sec=1.0)
         for node in nodes:
             node.destroy_node()
         rclpy.try_shutdown()
     return exit_code
+
+
+def drain(executor: SingleThreadedExecutor, nodes: list[HostedNode]) -> None:
+    """Spin until the count of messages taken (`HostedNode.messages_taken`) of each of
+    `nodes` stays put for DRAIN_QUIET_S: the messages already delivered to them are taken.
+    Each node says so when DRAIN_LIMIT_S runs out first."""
+    deadline = time.monotonic() + DRAIN_LIMIT_S
+    counts, quiet_since = [node.messages_taken() for node in nodes], time.monotonic()
+    while time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.05)
+        now = [node.messages_taken() for node in nodes]
+        if now != counts:
+            counts, quiet_since = now, time.monotonic()
+        elif time.monotonic() - quiet_since >= DRAIN_QUIET_S:
+            return
+    for node in nodes:
+        node.get_logger().warning(
+            f"stopped while messages were still coming {DRAIN_LIMIT_S:g} s after the stop: "
+            "the last ones may be missing")
 
 
 def _failed(node: Node) -> bool:
