@@ -236,6 +236,14 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
     origin: list[float] = []
     memory: dict[str, list[tuple[float, int]]] = {}
     cpu: dict[str, list[float]] = {}
+    # Receipts on the system clock as it read at the start, advanced by the monotonic clock:
+    # the camera's stamps (its origin on the system clock plus media time) do not move when
+    # the system clock steps during a run, so neither may the receipts. (A step of about
+    # +23 s once read as 24 s of latency for the rest of a 10-minute run.)
+    system_start_s, monotonic_start_s = time.time(), time.monotonic()
+
+    def clock_s() -> float:
+        return system_start_s + time.monotonic() - monotonic_start_s
 
     def sample_cpu() -> None:
         for process in launcher.processes:
@@ -253,11 +261,11 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
         node.create_subscription(LaserSpotArray, "/tracker/spots", lambda _: None, stream_qos())
         node.create_subscription(
             PointCloud2, "/recon/points",
-            lambda m: receipts.append((time.time(), m.header.stamp.sec
+            lambda m: receipts.append((clock_s(), m.header.stamp.sec
                                        + m.header.stamp.nanosec * 1e-9)), stream_qos(100))
         node.create_subscription(
             LaserSpotArray, "/tracker/spots_live",
-            lambda m: spots_live.append((time.time(), m.header.stamp.sec
+            lambda m: spots_live.append((clock_s(), m.header.stamp.sec
                                          + m.header.stamp.nanosec * 1e-9)), live_qos())
         node.create_subscription(
             Header, "/camera/origin",
@@ -266,7 +274,7 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
                        durability=DurabilityPolicy.TRANSIENT_LOCAL))
         node.create_subscription(
             PointCloud2, "/recon/points_live",
-            lambda m: live.append((time.time(), m.header.stamp.sec
+            lambda m: live.append((clock_s(), m.header.stamp.sec
                                    + m.header.stamp.nanosec * 1e-9)), live_qos())
         start, last_sample, count, last_change = time.monotonic(), 0.0, 0, 0.0
         while not launcher.stopping:
@@ -304,6 +312,10 @@ def run_graph(overrides: list[str], expected: int | None, minutes: float | None,
     with Path(log_file or os.devnull).open("w") as log:
         launcher = Launcher(entries, environment, output=log)
         launcher.run(on_started=threading.Thread(target=watch, daemon=True).start)
+    step_s = time.time() - clock_s()
+    if abs(step_s) > 0.05:
+        print(f"(the system clock stepped {step_s:+.2f} s during this run; receipts are on "
+              "the monotonic clock from its start)")
     per_frame = {name: 1e3 * (v[-1] - v[0]) / max(len(receipts) - 1, 1)
                  for name, v in cpu.items() if len(v) == 2}
     return receipts, live, spots_live, memory, per_frame, origin[0] if origin else np.nan
