@@ -20,7 +20,7 @@ from sds_record.mcap_files import header_stamp_ns, not_recorded, read_messages
 from sds_ros.frame_gaps import FrameGaps
 from sds_ros.image_msg import image_to_msg
 from sds_ros.qos import live_qos, stream_qos
-from sds_ros.shedding import REPORT_PERIOD_S, LiveShedding
+from sds_ros.shedding import NEW_OFFSET_MESSAGES, REPORT_PERIOD_S, LiveShedding
 from sensor_msgs.msg import Image, PointCloud2
 from std_msgs.msg import Header
 
@@ -47,6 +47,22 @@ def test_shedding_counts_late_frames_against_the_fastest_and_says_so():
     ended = shedding.report(11.0 + REPORT_PERIOD_S)
     assert ended is not None and "back in time, 10 frames shed over 10.0 s" in ended
     assert shedding.report(22.0) is None
+
+
+def test_a_step_of_the_clock_while_a_message_waits_does_not_make_the_rest_late():
+    """The system clock stepped back 5 s while one message was on its way: that one is kept,
+    and the messages after it, on time, are not shed. A publisher whose clock stays 5 s
+    behind from then on sets the new shortest wait after NEW_OFFSET_MESSAGES."""
+    shedding = LiveShedding("spots_live", max_lag_s=0.1)
+    assert all(shedding.keep(wait) for wait in (0.02, 0.01, 0.03))
+    assert shedding.keep(0.01 - 5.0)                       # the step
+    assert all(shedding.keep(wait) for wait in (0.02, 0.01, 0.05, 0.03))
+    assert not shedding.keep(0.5)                          # still sheds what is late
+    behind = [shedding.keep(0.02 - 5.0) for _ in range(NEW_OFFSET_MESSAGES)]
+    assert all(behind)
+    assert shedding.baseline_s == pytest.approx(0.02 - 5.0)
+    assert not shedding.keep(0.02 - 5.0 + 0.5)             # late against the new offset
+    assert shedding.keep(0.03 - 5.0)
 
 
 BURST = 60

@@ -19,6 +19,12 @@ REPORT_PERIOD_S = 10.0
 """While shedding goes on, how often the console hears how much was shed [s]."""
 REPORT_CHECK_S = 1.0
 """How often a node asks its LiveShedding for a console line [s]."""
+CLOCK_STEP_S = 1.0
+"""A wait this much shorter than the shortest before is taken for a step of the system clock
+while the message was on its way (`LiveShedding.keep`) [s]."""
+NEW_OFFSET_MESSAGES = 30
+"""Messages in a row that waited CLOCK_STEP_S less than the shortest wait before: the
+publisher's clock now runs that much behind (it stepped for good), the new shortest wait."""
 
 
 @dataclass
@@ -29,7 +35,10 @@ class LiveShedding:
     shortest wait seen so far (another machine's clock, a constant offset, counts as on time).
     Not its stamp: a flooding source's frames carry the video's times, hours before or after
     the clock, and a slow source lags its stamps whatever the chain does. A message later than
-    `max_lag_s` is shed.
+    `max_lag_s` is shed. A wait CLOCK_STEP_S shorter than the shortest before is a step of the
+    system clock while that message was on its way: it is kept and does not become the
+    shortest (it would make every later message late by the step, and the preview was shed
+    for the rest of the run), unless NEW_OFFSET_MESSAGES in a row are that short.
     `keep` counts; `report` gives the console's line when shedding starts, every
     REPORT_PERIOD_S while it goes on, and when it ends.
     """
@@ -44,10 +53,17 @@ class LiveShedding:
     last_report_s: float = -math.inf
     last_shed_s: float = -math.inf    # the last report call that found something shed
     episode_shed: int = 0             # since shedding started
+    stepped: int = 0                  # messages in a row CLOCK_STEP_S below the baseline
 
     def keep(self, waited_s: float) -> bool:
         """True if the preview of a message handled `waited_s` after it was published is to
         be made."""
+        if math.isfinite(self.baseline_s) and waited_s < self.baseline_s - CLOCK_STEP_S:
+            self.stepped += 1
+            if self.stepped < NEW_OFFSET_MESSAGES:
+                self.made += 1
+                return True
+        self.stepped = 0
         self.baseline_s = min(self.baseline_s, waited_s)
         late_s = waited_s - self.baseline_s
         if late_s > self.max_lag_s:
