@@ -572,6 +572,22 @@ def test_sds_run_measures_a_recorded_video_with_the_whole_graph(repo: Path,
     assert "polynomial" in models[0].ros_msg.model_yaml
 
 
+def packets_graph(drop_run: DropRun, recording: Path, rate: float, repeat: int
+                  ) -> SdsGraphRun:
+    """The drop's video played in real time at `rate` times its speed, `repeat` times (0:
+    until stopped), by a camera (red, the container's region) whose packets a recorder
+    keeps in `recording`; nothing measures."""
+    rig = load_rig(drop_run.rig_file)
+    return SdsGraphRun(("camera.yaml", "record.yaml"),
+                       "--set", f"camera.source={drop_run.output.video}",
+                       "--set", f"camera.roi={list(rig.container_region_px(rig.camera))}",
+                       "--set", "camera.channel=red", "--set", f"camera.rate={rate}",
+                       "--set", f"camera.repeat={repeat}", "--set", "camera.wait_for_subscribers=0",
+                       "--set", "camera.wait_for_packet_subscribers=1",
+                       "--set", "recorder.topics=[/camera/video]",
+                       "--set", f"recorder.output={recording}")
+
+
 def test_a_graph_stopped_while_its_camera_plays_records_every_packet_it_published(
         drop_run: DropRun) -> None:
     """Stopped while its camera plays (a live recording ended with Ctrl-C), at three moments:
@@ -579,17 +595,9 @@ def test_a_graph_stopped_while_its_camera_plays_records_every_packet_it_publishe
     process of the graph once got its SIGTERM at once, and the recorder closed its file with
     the last packets on their way: 8 of 38 and 1 of 82 were missing, unsaid, in two of four
     stops of the 4K drop.)"""
-    rig = load_rig(drop_run.rig_file)
     for stop, after_s in enumerate((0.5, 1.2, 2.1)):
         recording = drop_run.folder / f"stopped_{stop}.mcap"
-        graph = SdsGraphRun(("camera.yaml", "record.yaml"),
-                            "--set", f"camera.source={drop_run.output.video}",
-                            "--set", f"camera.roi={list(rig.container_region_px(rig.camera))}",
-                            "--set", "camera.channel=red", "--set", "camera.rate=3",
-                            "--set", "camera.repeat=0", "--set", "camera.wait_for_subscribers=0",
-                            "--set", "camera.wait_for_packet_subscribers=1",
-                            "--set", "recorder.topics=[/camera/video]",
-                            "--set", f"recorder.output={recording}")
+        graph = packets_graph(drop_run, recording, rate=3, repeat=0)
         try:
             graph.wait_for_line("recording /camera/video", 30.0)
             time.sleep(after_s)
@@ -608,15 +616,7 @@ def test_a_camera_faster_than_its_decoder_sheds_frames_and_records_every_packet(
     machine decodes 300 frames a second, so frames are shed and said; every packet is still
     published and recorded, and the console's counts add up."""
     recording = drop_run.folder / "shed.mcap"
-    rig = load_rig(drop_run.rig_file)
-    graph = SdsGraphRun(("camera.yaml", "record.yaml"),
-                        "--set", f"camera.source={drop_run.output.video}",
-                        "--set", f"camera.roi={list(rig.container_region_px(rig.camera))}",
-                        "--set", "camera.channel=red", "--set", "camera.rate=10",
-                        "--set", "camera.repeat=3", "--set", "camera.wait_for_subscribers=0",
-                        "--set", "camera.wait_for_packet_subscribers=1",
-                        "--set", "recorder.topics=[/camera/video]",
-                        "--set", f"recorder.output={recording}")
+    graph = packets_graph(drop_run, recording, rate=10, repeat=3)
     try:
         assert graph.wait(timeout=180) == 0, graph.output()
     finally:
