@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import signal
 import tempfile
 from fractions import Fraction
 from pathlib import Path
@@ -16,6 +17,11 @@ from sds_bringup.ros_env import graph_environment, pick_domain_id
 DOMAIN_ID = int(os.environ.get("SDS_TEST_DOMAIN_ID", pick_domain_id()))
 os.environ.update(graph_environment(DOMAIN_ID))
 os.environ.setdefault("ROS_HOME", tempfile.mkdtemp(prefix="sds-test-ros-home-"))
+# A test run started in the background (a shell's `make test &`) ignores SIGINT, and every
+# `sds` a test starts then inherits that: a test's Ctrl-C before the launcher's own handler
+# was lost (the graph ran to its end). Ctrl-C's own action, as in a terminal.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED_DATA = REPO.parent / "shared" / "data"
