@@ -590,12 +590,12 @@ def packets_graph(drop_run: DropRun, recording: Path, rate: float, repeat: int
 
 def test_a_graph_stopped_while_its_camera_plays_records_every_packet_it_published(
         drop_run: DropRun) -> None:
-    """Stopped while its camera plays (a live recording ended with Ctrl-C), at three moments:
+    """Stopped while its camera plays (a live recording ended with Ctrl-C), at two moments:
     the camera says how many packets it published, and the recording holds every one. (Every
     process of the graph once got its SIGTERM at once, and the recorder closed its file with
     the last packets on their way: 8 of 38 and 1 of 82 were missing, unsaid, in two of four
     stops of the 4K drop.)"""
-    for stop, after_s in enumerate((0.5, 1.2, 2.1)):
+    for stop, after_s in enumerate((0.5, 2.1)):
         recording = drop_run.folder / f"stopped_{stop}.mcap"
         graph = packets_graph(drop_run, recording, rate=3, repeat=0)
         try:
