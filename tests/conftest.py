@@ -10,11 +10,25 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from sds_bringup.ros_env import graph_environment, pick_domain_id
+from sds_bringup.ros_env import MAX_DOMAIN_ID, graph_environment, pick_domain_id
+
+
+def domain_id_of_this_process() -> int:
+    """This process's ROS domain: SDS_TEST_DOMAIN_ID if set, else a random one, drawn once per
+    run; each pytest-xdist worker takes the next ones after it (gw0 the first), so that two
+    workers' graphs never meet (two random draws would meet in one run of about 100)."""
+    if "SDS_TEST_DOMAIN_ID" in os.environ:
+        return int(os.environ["SDS_TEST_DOMAIN_ID"])
+    run_domain_id = int(os.environ.setdefault("SDS_TEST_RUN_DOMAIN_ID", str(pick_domain_id())))
+    worker = os.environ.get("PYTEST_XDIST_WORKER")   # "gw0", "gw1", ... (set before conftest)
+    if worker is None:
+        return run_domain_id
+    return 1 + (run_domain_id + int(worker.removeprefix("gw"))) % MAX_DOMAIN_ID
+
 
 # Set before anything imports rclpy: every node of this run, in this process or started by it,
-# meets only the others of this run.
-DOMAIN_ID = int(os.environ.get("SDS_TEST_DOMAIN_ID", pick_domain_id()))
+# meets only the others of this run (of its worker, with pytest-xdist).
+DOMAIN_ID = domain_id_of_this_process()
 os.environ.update(graph_environment(DOMAIN_ID))
 os.environ.setdefault("ROS_HOME", tempfile.mkdtemp(prefix="sds-test-ros-home-"))
 # A test run started in the background (a shell's `make test &`) ignores SIGINT, and every
