@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 from mcap_ros2.reader import read_ros2_messages
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from ros_helpers import Probe, SdsGraphRun
+from ros_helpers import Probe, SdsGraphRun, wait_until
 from rosbags.highlevel import AnyReader
 from rrd_helpers import rrd_entities
 from scipy.spatial.transform import Rotation
@@ -608,6 +608,37 @@ def test_a_graph_stopped_while_its_camera_plays_records_every_packet_it_publishe
         assert said is not None, log
         recorded = sum(1 for _ in read_messages(recording, ["/camera/video"]))
         assert recorded == int(said[1]), (stop, log)
+
+
+def test_a_drop_graph_stopped_mid_run_keeps_the_last_frames_its_tracker_took(
+        drop_run: DropRun) -> None:
+    """Stopped while the drop plays in real time (Ctrl-C in a live run): every frame the
+    tracker took is in the recording with its spots, points and fit, its Hampel window's
+    last frames too. (Before, those two frames' spots and the reconstruction's frame waiting
+    for its fit were lost at the stop, unsaid.)"""
+    recording = drop_run.folder / "stopped_chain.mcap"
+    rig = load_rig(drop_run.rig_file)
+    graph = SdsGraphRun("drop.yaml", "--set", f"camera.source={drop_run.output.video}",
+                        "--set", f"camera.roi={list(rig.container_region_px(rig.camera))}",
+                        "--set", f"tracker.rig={drop_run.rig_file}",
+                        "--set", f"recon.rig={drop_run.rig_file}",
+                        "--set", "camera.pacing=realtime", "--set", "camera.repeat=0",
+                        "--set", f"recorder.output={recording}")
+    probe = Probe("stop_probe")
+    lines = probe.collect(LaserLineProfile, "/tracker/line", EVERY_FRAME)
+    try:   # stopped once the tracker has taken a few frames
+        assert wait_until(lambda: len(lines) >= 5, timeout=60), graph.output()
+    finally:
+        graph.stop()   # SIGTERM, as Ctrl-C in `sds graph`
+        probe.close()
+    log = graph.output()
+    said = re.search(r"stopped: published the last spots \((\d+) frames tracked\)", log)
+    assert said is not None, log
+    counts = {topic: sum(1 for _ in read_messages(recording, [topic]))
+              for topic in ("/tracker/spots", "/recon/points", "/recon/surface_fit")}
+    frames = {int(m.frame_index) for _, m in decoded_messages(recording, ["/tracker/spots"])}
+    assert frames == set(range(int(said[1]))), (sorted(frames)[-5:], log)
+    assert set(counts.values()) == {int(said[1])}, (counts, log)
 
 
 def test_a_camera_faster_than_its_decoder_sheds_frames_and_records_every_packet(

@@ -82,6 +82,7 @@ class ReconstructionNode(HostedNode):
             return
         self._instant: InstantFits[int] = InstantFits(self._rig)
         self._unfitted: dict[int, tuple[LaserSpotArray, SurfacePoints]] = {}
+        self._taken = 0   # spots and line messages, for the node host's drain at a stop
         self._last_spots = self.get_clock().now()
         self.create_timer(0.25, self._fit_if_idle)
         self._shedding = LiveShedding("points_live", float(p["live_max_lag_s"]))
@@ -143,6 +144,7 @@ class ReconstructionNode(HostedNode):
                                                self._sample_offsets_s(points)))
 
     def _on_spots(self, msg: LaserSpotArray) -> None:
+        self._taken += 1
         points = self._frame_points(msg)
         self._unfitted[msg.frame_index] = (msg, points)
         self._last_spots = self.get_clock().now()
@@ -164,7 +166,20 @@ class ReconstructionNode(HostedNode):
         if self._unfitted and idle_s > IDLE_FLUSH_S:
             self._publish_fitted(self._instant.flush())
 
+    def messages_taken(self) -> int | None:
+        """Spots and line messages taken so far: at a stop, the node host takes what the
+        tracker published before it stopped, its Hampel window's last frames among them
+        (`node_host.drain`), before this node closes; None if the node could not start."""
+        return getattr(self, "_taken", None)
+
+    def close(self) -> None:
+        """At a stop, the frames still waiting for the next one's fit (a rolling shutter's
+        fits hold one) are fitted and published, as after an idle second."""
+        if getattr(self, "_unfitted", None):
+            self._publish_fitted(self._instant.flush())
+
     def _on_line(self, msg: LaserLineProfile) -> None:
+        self._taken += 1
         result = reconstruct_line(self._rig, np.column_stack([msg.x_px, msg.y_px]),
                                   msg.sigma_px, self._default_sigma)
         header = msg.header

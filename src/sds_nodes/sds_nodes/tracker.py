@@ -182,10 +182,22 @@ class TrackerNode(HostedNode):
     def _flush_if_idle(self) -> None:
         idle = (self.get_clock().now() - self._last_frame_time).nanoseconds * 1e-9
         if not self._flushed and idle > IDLE_FLUSH_S:
-            self._publish_spots(self._tracker.flush())
-            self._flushed = True
-            self.get_logger().info(f"stream idle: published the last spots ({self._frame} "
-                                   "frames tracked)")
+            self._flush("stream idle")
+
+    def _flush(self, why: str) -> None:
+        """Publish the spots the Hampel window still holds (its last frames, filtered over the
+        frames before them) and say so."""
+        self._publish_spots(self._tracker.flush())
+        self._flushed = True
+        self.get_logger().info(f"{why}: published the last spots ({self._frame} frames "
+                               "tracked)")
+
+    def close(self) -> None:
+        """Stopped before the stream went idle (Ctrl-C in a live run): the frames the Hampel
+        window holds are published as at an idle stream's end, not lost; the node host then
+        lets a reconstruction in this process take them (`messages_taken`)."""
+        if not getattr(self, "_flushed", True):   # False once a frame was tracked
+            self._flush("stopped")
 
 
 def main(args: list[str] | None = None) -> None:

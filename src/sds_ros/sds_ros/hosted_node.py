@@ -28,9 +28,9 @@ class HostedNode(Node):
 
     def messages_taken(self) -> int | None:
         """How many messages the node has taken so far, for a node whose last messages must
-        not be lost at a stop (a recorder): once asked to stop, the node host takes what was
-        delivered until this count stays put (`node_host.drain`). None (the default): the
-        node is not drained."""
+        not be lost at a stop (a recorder, a reconstruction): once asked to stop, the node
+        host takes what was delivered until this count stays put (`node_host.drain`). None
+        (the default): the node is not drained."""
         return None
 
     def close(self) -> None:

@@ -84,8 +84,9 @@ def run_nodes(
         print(f"node host: {type(error).__name__}: {error}", file=sys.stderr, flush=True)
         exit_code = EXIT_STARTUP_ERROR
     finally:
-        # The nodes that are drained (a recorder) close last: stopped, the others (a camera
-        # in the same process) stop publishing first, then what was delivered is taken.
+        # The nodes that are drained (a recorder, a reconstruction) close last: stopped, the
+        # others (a camera, a tracker in the same process) stop publishing first, then what
+        # was delivered is taken.
         hosted = [node for node in nodes if isinstance(node, HostedNode)]
         drained = [node for node in hosted if node.messages_taken() is not None]
         for node in [node for node in hosted if node not in drained]:
