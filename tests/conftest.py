@@ -14,12 +14,11 @@ from sds_bringup.ros_env import MAX_DOMAIN_ID, graph_environment, pick_domain_id
 
 
 def domain_id_of_this_process() -> int:
-    """This process's ROS domain: SDS_TEST_DOMAIN_ID if set, else a random one, drawn once per
-    run; each pytest-xdist worker takes the next ones after it (gw0 the first), so that two
-    workers' graphs never meet (two random draws would meet in one run of about 100)."""
-    if "SDS_TEST_DOMAIN_ID" in os.environ:
-        return int(os.environ["SDS_TEST_DOMAIN_ID"])
-    run_domain_id = int(os.environ.setdefault("SDS_TEST_RUN_DOMAIN_ID", str(pick_domain_id())))
+    """This process's ROS domain: the run's (SDS_TEST_DOMAIN_ID if set, else a random one,
+    drawn once per run and handed on to pytest-xdist's workers), and for worker gwN the N+1-th
+    after it, so that two workers' graphs never meet (two random draws would meet in one run
+    of about 100)."""
+    run_domain_id = int(os.environ.setdefault("SDS_TEST_DOMAIN_ID", str(pick_domain_id())))
     worker = os.environ.get("PYTEST_XDIST_WORKER")   # "gw0", "gw1", ... (set before conftest)
     if worker is None:
         return run_domain_id
