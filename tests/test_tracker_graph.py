@@ -11,6 +11,7 @@ import shutil
 import subprocess
 import sys
 import time
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -635,12 +636,14 @@ def test_a_drop_graph_stopped_mid_run_keeps_the_last_frames_its_tracker_took(
     assert "[tracker]: stopped: published the last spots" in log, log
     # The frames the tracker took are those it published a line for (at once, each frame);
     # one it skipped (behind its camera) has neither.
-    frames = {topic: sorted(int(m.frame_index) for _, m in decoded_messages(recording, [topic]))
-              for topic in ("/tracker/line", "/tracker/spots")}
-    assert frames["/tracker/spots"] == frames["/tracker/line"], (frames, log)
-    counts = [sum(1 for _ in read_messages(recording, [topic]))
-              for topic in ("/recon/points", "/recon/surface_fit")]
-    assert counts == [len(frames["/tracker/spots"])] * 2, (counts, frames, log)
+    frames: dict[str, list[int]] = {"/tracker/line": [], "/tracker/spots": []}
+    for record, message in decoded_messages(recording, frames):
+        frames[record.topic].append(int(message.frame_index))
+    assert sorted(frames["/tracker/spots"]) == sorted(frames["/tracker/line"]), (frames, log)
+    counts = Counter(m.topic for m in read_messages(recording, ["/recon/points",
+                                                                "/recon/surface_fit"]))
+    assert [counts["/recon/points"], counts["/recon/surface_fit"]] == \
+        [len(frames["/tracker/spots"])] * 2, (counts, frames, log)
 
 
 def test_a_camera_faster_than_its_decoder_sheds_frames_and_records_every_packet(
