@@ -9,10 +9,10 @@ samples (sensor_msgs/Imu: the camera's 200 Hz accelerometer and 400 Hz gyroscope
 small point clouds, all reliable. A subscriber process takes them serialized (as the
 recorder does) with one executor or the other and prints its CPU time per frame. The two
 executors alternate, `--pairs` times, in one run (the machine's speed varies from day to day:
-compare within a run). Then the EventsExecutor once more with callbacks that also take the
-message's info (`rclpy.subscription.MessageInfo`: its publisher's sequence number and source
-time, which the recorder, tracker, reconstruction and viewer read), as the graph's nodes'
-callbacks do: whether it runs them at all.
+compare within a run). Then each once more with callbacks that also take the message's info
+(`rclpy.subscription.MessageInfo`: its publisher's sequence number and source time, which
+the recorder, tracker, reconstruction and viewer read), wrapped as the graph's nodes wrap
+them (`sds_ros.executor.WithMessageInfo`; the graph spins the EventsExecutor).
 """
 
 from __future__ import annotations
@@ -74,6 +74,7 @@ def subscribe(kind: str, seconds: float, with_info: bool) -> None:
     from rclpy.experimental import EventsExecutor
     from rclpy.node import Node
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+    from sds_ros.executor import WithMessageInfo
     from sensor_msgs.msg import Imu, PointCloud2
 
     from foxglove_msgs.msg import CompressedVideo
@@ -85,14 +86,13 @@ def subscribe(kind: str, seconds: float, with_info: bool) -> None:
     counts = {"video": 0, "imu": 0, "points": 0}
 
     def counter(topic: str):
-        """A callback that counts `topic`'s messages; rclpy passes the message's info to a
-        callback of two parameters."""
+        """A callback that counts `topic`'s messages, with their info if `with_info`."""
         def count(_message: bytes) -> None:
             counts[topic] += 1
 
         def count_with_info(_message: bytes, _info: object) -> None:
             counts[topic] += 1
-        return count_with_info if with_info else count
+        return WithMessageInfo(count_with_info) if with_info else count
 
     for topic, message_type in (("video", CompressedVideo), ("imu", Imu),
                                 ("points", PointCloud2)):

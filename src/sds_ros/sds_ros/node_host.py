@@ -18,11 +18,12 @@ import time
 from collections.abc import Callable, Sequence
 
 import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import Executor, ExternalShutdownException
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from sds_model.errors import InputError
 
+from sds_ros.executor import graph_executor
 from sds_ros.hosted_node import HostedNode
 from sds_ros.node_process import arm_teardown_watchdog
 
@@ -59,7 +60,7 @@ def run_nodes(
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
-    executor = SingleThreadedExecutor()
+    executor = graph_executor()
     nodes: list[Node] = []
     required: list[Node] = []
     exit_code = 0
@@ -105,7 +106,7 @@ def run_nodes(
     return exit_code
 
 
-def drain(executor: SingleThreadedExecutor, nodes: list[HostedNode]) -> None:
+def drain(executor: Executor, nodes: list[HostedNode]) -> None:
     """Spin until the count of messages taken (`HostedNode.messages_taken`) of each of
     `nodes` stays put for DRAIN_QUIET_S: the messages already delivered to them are taken.
     Each node says so when DRAIN_LIMIT_S runs out first."""
