@@ -26,6 +26,7 @@ from sds_model.errors import InputError
 from sds_ros.executor import graph_executor
 from sds_ros.hosted_node import HostedNode
 from sds_ros.node_process import arm_teardown_watchdog
+from sds_ros.qos import wait_for_acks
 
 NodeFactory = Callable[..., Node]
 EXIT_STARTUP_ERROR = 3
@@ -35,6 +36,9 @@ was delivered to it counts as taken [s]. Its publishers have ended by then (the 
 stops the recorders last): what they sent is in its readers, taken back to back."""
 DRAIN_LIMIT_S = 5.0
 """At a stop, the longest the node host drains [s] (within the launcher's grace period)."""
+STOP_ACK_S = 2.0
+"""At a stop, the longest the node host waits for its nodes' readers to acknowledge what the
+nodes published last [s] (within the launcher's grace period)."""
 
 
 def load_plugin(plugin: str) -> NodeFactory:
@@ -97,6 +101,8 @@ def run_nodes(
             drain(executor, drained)
         for node in drained:
             node.close()
+        if stop.is_set() and rclpy.ok():
+            wait_for_readers(nodes, STOP_ACK_S)
         exit_code = max([exit_code, *(node.exit_code for node in hosted)])
         arm_teardown_watchdog()
         executor.shutdown(timeout_sec=1.0)
@@ -123,6 +129,21 @@ def drain(executor: Executor, nodes: list[HostedNode]) -> None:
         node.get_logger().warning(
             f"stopped while messages were still coming {DRAIN_LIMIT_S:g} s after the stop: "
             "the last ones may be missing")
+
+
+def wait_for_readers(nodes: list[Node], timeout_s: float) -> None:
+    """Wait until the readers of every publisher of `nodes` have acknowledged what it sent,
+    for at most `timeout_s` [s] in all: what a node published as it closed (a tracker's last
+    spots, a reconstruction's last fit) reaches the recorder before this process ends. Each
+    publisher still waiting then says so."""
+    deadline = time.monotonic() + timeout_s
+    for node in nodes:
+        for publisher in node.publishers:
+            if not wait_for_acks(publisher, max(deadline - time.monotonic(), 0.0),
+                                 threading.Event()):
+                node.get_logger().warning(
+                    f"stopped before every reader of {publisher.topic_name} acknowledged its "
+                    "last messages: they may be missing there")
 
 
 def _failed(node: Node) -> bool:
