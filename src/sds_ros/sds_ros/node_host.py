@@ -37,8 +37,8 @@ stops the recorders last): what they sent is in its readers, taken back to back.
 DRAIN_LIMIT_S = 5.0
 """At a stop, the longest the node host drains [s] (within the launcher's grace period)."""
 STOP_ACK_S = 2.0
-"""At a stop, the longest the node host waits for its nodes' readers to acknowledge what the
-nodes published last [s] (within the launcher's grace period)."""
+"""As its nodes end, the longest the node host waits for their readers to acknowledge what
+the nodes published last [s] (within the launcher's grace period)."""
 
 
 def load_plugin(plugin: str) -> NodeFactory:
@@ -101,7 +101,7 @@ def run_nodes(
             drain(executor, drained)
         for node in drained:
             node.close()
-        if stop.is_set() and rclpy.ok():
+        if rclpy.ok():   # at a stop and at the end: what the nodes published last is sent
             wait_for_readers(nodes, STOP_ACK_S)
         exit_code = max([exit_code, *(node.exit_code for node in hosted)])
         arm_teardown_watchdog()
