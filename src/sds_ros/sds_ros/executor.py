@@ -3,10 +3,10 @@ info need.
 
 rclpy's EventsExecutor dispatches callbacks from C++: taking what a recorder records per 4K
 frame (a 260 kB packet, 20 IMU samples, three clouds) costs 1.5 ms of CPU with it and 7.7-8.3
-ms with the SingleThreadedExecutor (`bench/executor.py`; bench/README, "the executor's own
-cost"), on a machine where the live chain needs every core it has. In rclpy 9.1.2 (Kilted) it
-calls a callback that takes the message's info (`rclpy.subscription.MessageInfo`: its
-publisher's sequence number and source time) with one argument, the pair (message, info)
+ms with the SingleThreadedExecutor (`bench/executor.py`; bench/README, "the graph on rclpy's
+EventsExecutor"), on a machine where the live chain needs every core it has. In rclpy 9.1.2
+(Kilted) it calls a callback that takes the message's info (`rclpy.subscription.MessageInfo`:
+its publisher's sequence number and source time) with one argument, the pair (message, info)
 (`HandleSubscriptionReady` in rclpy's `events_executor.cpp`), where rclpy's own executors pass
 the two; such a callback is wrapped in `WithMessageInfo`, which takes either.
 """
