@@ -72,9 +72,6 @@ that finds this many waiting is shed, with every packet up to the next keyframe.
 VIDEO_HISTORY = 150
 """The packet publisher's history (5 s at 30 fps): what a reliable reader that falls behind
 for a while (the recorder writing a chunk) still gets. Packets are small (a few 100 kB)."""
-STOP_ACK_S = 2.0
-"""Stopped before its end, how long the camera waits for its packets' subscribers (the
-recorder) to acknowledge the last packets it published, before its process ends [s]."""
 IMU_HISTORY = 2000
 """Camera IMU messages kept for late subscribers (about 3 s of a GoPro's 600 per second)."""
 EXIT_SOURCE_ERROR = 2
@@ -574,14 +571,9 @@ class FrameSourceNode(HostedNode):
             thread.join(timeout=2.0)
         if not hasattr(self, "_threads") or self._said_end:
             return
-        # Stopped before its end: the last packets reach the recorder before this process
-        # ends, and the console says what was published, which the recording is held against.
-        if self._packets is not None and not wait_for_acks(self._video_pub, STOP_ACK_S,
-                                                           threading.Event()):
-            self.get_logger().warning(
-                f"stopped: the last video packets were not acknowledged within {STOP_ACK_S:g} s "
-                "by every subscriber (a recorder that stopped first, or fell behind): the "
-                "recording may miss them")
+        # Stopped before its end: the console says what was published, which the recording
+        # is held against (the node host then waits for the last packets to be acknowledged:
+        # `node_host.wait_for_readers`).
         self.get_logger().info(f"stopped: {self._published_line()}")
 
 

@@ -37,8 +37,9 @@ stops the recorders last): what they sent is in its readers, taken back to back.
 DRAIN_LIMIT_S = 5.0
 """At a stop, the longest the node host drains [s] (within the launcher's grace period)."""
 STOP_ACK_S = 2.0
-"""As its nodes end, the longest the node host waits for their readers to acknowledge what
-the nodes published last [s] (within the launcher's grace period)."""
+"""As its nodes end (at a stop and at the graph's end), the longest the node host waits for
+their readers to acknowledge what they published last [s], the nodes drained and the
+others each (within the launcher's grace period)."""
 
 
 def load_plugin(plugin: str) -> NodeFactory:
@@ -90,19 +91,22 @@ def run_nodes(
         exit_code = EXIT_STARTUP_ERROR
     finally:
         # The nodes that are drained (a recorder, a reconstruction) close last: stopped, the
-        # others (a camera, a tracker in the same process) stop publishing first, then what
-        # was delivered is taken.
+        # others (a camera, a tracker in the same process) stop publishing first, their last
+        # messages reach every reader (a drained node in this process too), then what was
+        # delivered is taken.
         hosted = [node for node in nodes if isinstance(node, HostedNode)]
         drained = [node for node in hosted if node.messages_taken() is not None]
         for node in [node for node in hosted if node not in drained]:
             node.close()
             executor.remove_node(node)   # no callback of a closed node while draining
+        if rclpy.ok():
+            wait_for_readers([node for node in nodes if node not in drained], STOP_ACK_S)
         if stop.is_set() and drained and rclpy.ok():
             drain(executor, drained)
         for node in drained:
             node.close()
-        if rclpy.ok():   # at a stop and at the end: what the nodes published last is sent
-            wait_for_readers(nodes, STOP_ACK_S)
+        if rclpy.ok():
+            wait_for_readers(drained, STOP_ACK_S)
         exit_code = max([exit_code, *(node.exit_code for node in hosted)])
         arm_teardown_watchdog()
         executor.shutdown(timeout_sec=1.0)
@@ -131,11 +135,11 @@ def drain(executor: Executor, nodes: list[HostedNode]) -> None:
             "the last ones may be missing")
 
 
-def wait_for_readers(nodes: list[Node], timeout_s: float) -> None:
+def wait_for_readers(nodes: Sequence[Node], timeout_s: float) -> None:
     """Wait until the readers of every publisher of `nodes` have acknowledged what it sent,
-    for at most `timeout_s` [s] in all: what a node published as it closed (a tracker's last
-    spots, a reconstruction's last fit) reaches the recorder before this process ends. Each
-    publisher still waiting then says so."""
+    for at most `timeout_s` [s] in all: what a node published as it closed (a camera's last
+    packets, a tracker's last spots, a reconstruction's last fit) reaches the recorder
+    before this process ends. Each publisher still waiting then says so."""
     deadline = time.monotonic() + timeout_s
     for node in nodes:
         for publisher in node.publishers:
