@@ -26,7 +26,7 @@ from sds_model.errors import InputError
 from sds_ros.executor import graph_executor
 from sds_ros.hosted_node import HostedNode
 from sds_ros.node_process import arm_teardown_watchdog
-from sds_ros.qos import wait_for_acks
+from sds_ros.qos import unacknowledged
 
 NodeFactory = Callable[..., Node]
 EXIT_STARTUP_ERROR = 3
@@ -140,14 +140,11 @@ def wait_for_readers(nodes: Sequence[Node], timeout_s: float) -> None:
     for at most `timeout_s` [s] in all: what a node published as it closed (a camera's last
     packets, a tracker's last spots, a reconstruction's last fit) reaches the recorder
     before this process ends. Each publisher still waiting then says so."""
-    deadline = time.monotonic() + timeout_s
-    for node in nodes:
-        for publisher in node.publishers:
-            if not wait_for_acks(publisher, max(deadline - time.monotonic(), 0.0),
-                                 threading.Event()):
-                node.get_logger().warning(
-                    f"stopped before every reader of {publisher.topic_name} acknowledged its "
-                    "last messages: they may be missing there")
+    owners = {publisher: node for node in nodes for publisher in node.publishers}
+    for publisher in unacknowledged(list(owners), timeout_s, threading.Event()):
+        owners[publisher].get_logger().warning(
+            f"stopped before every reader of {publisher.topic_name} acknowledged its "
+            "last messages: they may be missing there")
 
 
 def _failed(node: Node) -> bool:

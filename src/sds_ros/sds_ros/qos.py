@@ -52,23 +52,52 @@ def start_when_consumed(node: Node, outputs: Sequence[tuple[Publisher, int]],
 
 
 ACK_POLL_S = 0.02
-"""How often `wait_for_acks` asks whether everything is acknowledged [s]."""
+"""How often `unacknowledged` asks whether everything is acknowledged [s]."""
+
+ASK_SHARE = 0.1
+"""The largest share of a wait for acknowledgements spent asking when asking itself blocks."""
 
 
 def wait_for_acks(publisher: Publisher, timeout_s: float, stop: threading.Event) -> bool:
     """Wait until every reader has acknowledged what `publisher` sent, for at most `timeout_s`
-    [s] or until `stop` is set; True once everything is acknowledged.
+    [s] or until `stop` is set; True once everything is acknowledged."""
+    return not unacknowledged([publisher], timeout_s, stop)
+
+
+def unacknowledged(publishers: Sequence[Publisher], timeout_s: float,
+                   stop: threading.Event) -> list[Publisher]:
+    """Wait until the readers of every one of `publishers` have acknowledged what it sent, for
+    at most `timeout_s` [s] in all or until `stop` is set; the publishers still waiting then,
+    and those not asked before the time ran out ([] once everything is acknowledged).
 
     rclpy's own `wait_for_all_acked(timeout)` holds the GIL for the whole wait: with a stopped
     reader, a 10 s wait in one thread froze every other thread of the process (executor and
     signal handlers included) for 10 s (Kilted wheels). So this asks without waiting, every
-    ACK_POLL_S, and sleeps in between with the GIL free.
+    ACK_POLL_S, and sleeps in between with the GIL free. Even the question can block with
+    the GIL held: Fast DDS's shared-memory transport checks a stopped reader's port before it
+    sends again, for its 1 s health-check timeout (one question took 1.0 to 2.0 s in
+    `tests/test_qos.py` beside a running graph). After such a question this sleeps long enough
+    that asking takes at most ASK_SHARE of the time, and once the time is out it asks no more.
     """
     deadline = time.monotonic() + timeout_s
-    while not publisher.wait_for_all_acked(Duration(seconds=0)):
-        if stop.wait(ACK_POLL_S) or time.monotonic() >= deadline:
-            return False
-    return True
+    waiting = list(publishers)
+    while True:
+        round_start = time.monotonic()
+        still_waiting = []
+        for index, publisher in enumerate(waiting):
+            if index > 0 and time.monotonic() >= deadline:   # out of time: the rest not asked
+                still_waiting.extend(waiting[index:])
+                break
+            if not publisher.wait_for_all_acked(Duration(seconds=0)):
+                still_waiting.append(publisher)
+        waiting = still_waiting
+        if not waiting:
+            return []
+        asking_s = time.monotonic() - round_start
+        pause_s = max(ACK_POLL_S, asking_s * (1.0 - ASK_SHARE) / ASK_SHARE)
+        if stop.wait(min(pause_s, max(deadline - time.monotonic(), 0.0))) \
+                or time.monotonic() >= deadline:
+            return waiting
 
 
 LIVE_DEPTH = 5
