@@ -118,6 +118,30 @@ def test_the_packets_decode_to_the_files_frames_bit_for_bit(video: str, request)
     source.close()
 
 
+@pytest.mark.parametrize("video", ["h264_video", "hevc_video"])
+def test_a_decoder_catching_up_leaves_out_frames_and_invents_none(video: str, request) -> None:
+    """Skipping the frames no other frame refers to (the camera behind real time): fewer
+    frames, each the file's own frame at its time bit for bit; once the decoder stops
+    skipping, every later packet's frame comes again."""
+    path = request.getfixturevalue(video)
+    packets_of_file = VideoFilePackets(path)
+    packets = list(packets_of_file.packets())
+    packets_of_file.close()
+    reference = dict(ffmpeg_frames(path))
+    decoder = PacketDecoder(packets_of_file.format)
+    decoder.skipping_non_reference = True
+    half = FRAMES // 2
+    while_skipping = [frame for p in packets[:half] for frame in decoder.decode(p)]
+    decoder.skipping_non_reference = False
+    after = [frame for p in packets[half:] for frame in decoder.decode(p)] + decoder.flush()
+    times = [frame.time_ns for frame in while_skipping + after]
+    assert len(times) < FRAMES and len(set(times)) == len(times)
+    assert {p.time_ns for p in packets[half:]} <= {frame.time_ns for frame in after}
+    assert [frame.index for frame in while_skipping + after] == list(range(len(times)))
+    for frame in while_skipping + after:
+        np.testing.assert_array_equal(frame.image, reference[frame.time_ns])
+
+
 DROPPED_MID_STREAM = """
 import sys, threading
 from sds_camera.compressed_video import PacketDecoder, VideoFilePackets

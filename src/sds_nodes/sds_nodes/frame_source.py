@@ -4,8 +4,9 @@ video file's own compressed packets.
 A file whose stream is H.264 or H.265 is read as packets: each is published as it is
 (foxglove_msgs/CompressedVideo on `video`, for the recorder), then decoded for the measuring
 chain (sensor_msgs/Image on `image`). Played in real time, a decoder that falls behind the
-camera sheds (packets up to the next keyframe are not decoded, counted and said on the
-console); the packets themselves are published whatever the CPU, so the recording holds every
+camera sheds: first the frames no other frame refers to (a stream's non-reference B-frames),
+then, far behind, the packets up to the next keyframe; both are counted and said on the
+console. The packets themselves are published whatever the CPU, so the recording holds every
 frame and `sds process --mcap` measures them all."""
 
 from __future__ import annotations
@@ -69,6 +70,10 @@ node starts; `channel`'s are the frame source's `CHANNELS`."""
 DECODE_BACKLOG = 15
 """Packets waiting for the decoder (half a second at 30 fps): played in real time, a packet
 that finds this many waiting is shed, with every packet up to the next keyframe."""
+SKIP_BACKLOG = 5
+"""Packets waiting for the decoder at which, played in real time, it leaves out the frames no
+other frame refers to until none waits (a stream's non-reference B-frames: frames spread
+over the run, not the gap up to the next keyframe that DECODE_BACKLOG sheds)."""
 VIDEO_HISTORY = 150
 """The packet publisher's history (5 s at 30 fps): what a reliable reader that falls behind
 for a while (the recorder writing a chunk) still gets. Packets are small (a few 100 kB)."""
@@ -103,6 +108,7 @@ class FrameSourceNode(HostedNode):
         self.published = 0
         self.packets_published = 0
         self.shed = 0         # packets published but not decoded (shed)
+        self.skipped_non_reference = False   # the decoder left out frames to catch up
         self.behind_s = 0.0   # the furthest a file played in real time fell behind [s]
         self._said_end = False
         values = self.declare_parameter_table(PARAMETERS)
@@ -370,11 +376,14 @@ class FrameSourceNode(HostedNode):
         """Decode thread (a source with packets): the packets' frames to the publish thread."""
         decoder = PacketDecoder(self._packets.format, *self._selection(),  # type: ignore[union-attr]
                                 low_delay=self._p["low_delay"])
+        realtime = self._p["pacing"] == "realtime"
         while not self._stop.is_set():
             try:
                 item = self._decode_queue.get(timeout=0.1)
             except queue.Empty:
                 continue
+            if realtime:
+                self._skip_when_behind(decoder)
             try:
                 frames = decoder.flush() if isinstance(item, _EndOfStream) \
                     else decoder.decode(item)
@@ -387,6 +396,22 @@ class FrameSourceNode(HostedNode):
             if isinstance(item, _EndOfStream):
                 self._put(self._queue, item)
                 return
+
+    def _skip_when_behind(self, decoder: PacketDecoder) -> None:
+        """Leave out the non-reference frames from SKIP_BACKLOG packets waiting until none
+        waits; say so when it starts (at most once a minute: a machine short of CPU starts
+        it every few seconds, and the camera's last line counts the frames left out)."""
+        backlog = self._decode_queue.qsize()
+        if backlog >= SKIP_BACKLOG and not decoder.skipping_non_reference:
+            decoder.skipping_non_reference = True
+            self.skipped_non_reference = True
+            self.get_logger().warning(
+                f"decoding falls behind the camera ({backlog} packets waiting): the frames no "
+                "other frame refers to are not decoded until it catches up (not measured live; "
+                "their packets are published, so the recording holds them)",
+                throttle_duration_sec=60.0)
+        elif backlog == 0 and decoder.skipping_non_reference:
+            decoder.skipping_non_reference = False
 
     def _put(self, destination: queue.Queue, item: Any) -> bool:
         """Queue an item, waiting for room; False once stopping."""
@@ -554,10 +579,11 @@ class FrameSourceNode(HostedNode):
         behind = f", up to {self.behind_s:.1f} s behind real time" if self.behind_s else ""
         if self._packets is None:
             return f"published {self.published} frames{behind}"
-        # Shed: the packets not decoded, and the frames a decoder could not make without them.
+        # Shed: the packets not decoded, the frames a decoder could not make without them and
+        # those it left out to catch up.
         unmeasured = self.packets_published - self.published
         shed = (f" ({unmeasured} more shed while decoding fell behind: in the recording, not "
-                "measured live)") if self.shed else ""
+                "measured live)") if self.shed or self.skipped_non_reference else ""
         return (f"published {self.published} frames{shed} and the {self.packets_published} "
                 f"video packets they came in{behind}")
 
