@@ -52,7 +52,7 @@ from sds_ros.ack_credit import AckCredit
 from sds_ros.hosted_node import HostedNode
 from sds_ros.image_msg import image_to_msg, packet_msg
 from sds_ros.imu_msg import imu_message
-from sds_ros.qos import wait_for_acks
+from sds_ros.qos import unacknowledged, wait_for_acks
 from sensor_msgs.msg import CompressedImage, Image, Imu
 from std_msgs.msg import Header
 
@@ -561,9 +561,9 @@ class FrameSourceNode(HostedNode):
             self._packet_credit.wait(0)
         if self._stop.is_set():
             return
-        for publisher in (self._image_pub, self._imu_pub,
-                          *([self._video_pub] if self._packets is not None else [])):
-            wait_for_acks(publisher, 5.0, self._stop)
+        unacknowledged([self._image_pub, self._imu_pub,
+                        *([self._video_pub] if self._packets is not None else [])],
+                       5.0, self._stop)
         if error is not None:
             self._fail(f"{error}; the {self.published} frames published before stay valid")
             return

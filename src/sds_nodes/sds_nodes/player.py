@@ -26,7 +26,7 @@ from sds_record.mcap_files import (
 from sds_ros.ack_credit import AckCredit
 from sds_ros.hosted_node import HostedNode
 from sds_ros.image_msg import PACKET_TYPES, image_to_msg, packet_fields
-from sds_ros.qos import stream_qos, wait_for_acks
+from sds_ros.qos import stream_qos, unacknowledged
 from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import Header
 
@@ -223,8 +223,7 @@ class PlayerNode(HostedNode):
             return
         if flow_topic:
             self._credit.drain(timeout_s=10.0)
-        for publisher in self._outputs.values():
-            wait_for_acks(publisher, 5.0, self._stop)
+        unacknowledged(list(self._outputs.values()), 5.0, self._stop)
         decoded = f" and {self.decoded} frames decoded from its packets" if self._decodings else ""
         self.get_logger().info(f"played {self.published} messages from {p['input']}{decoded}")
         self._stop.wait(p["linger_s"])   # the consumers' last outputs (e.g. the Hampel window)
