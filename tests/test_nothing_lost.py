@@ -346,3 +346,33 @@ def test_a_report_that_fails_half_way_leaves_no_result(kick: SimulationOutput, t
     with pytest.raises(ValueError, match="a figure failed"):
         process_video(kick.video, load_rig(RIG), out, progress=False)
     assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_a_ctrl_c_that_compiled_code_turns_into_another_error_is_an_interruption(
+        tmp_path: Path) -> None:
+    """matplotlib's Agg renderer, drawing a report's figure when Ctrl-C came, caught the
+    KeyboardInterrupt and raised `ValueError: Invalid bounding box` with no cause: `sds
+    process` said "internal error" and exited 1 (the test above, once). A command's error
+    after a Ctrl-C is the interruption: one line, exit code 130, no crash log."""
+    script = (
+        "import argparse, os, signal\n"
+        "from sds_cli import cli\n"
+        "def draw(args):\n"
+        "    try:\n"
+        "        os.kill(os.getpid(), signal.SIGINT)\n"
+        "        signal.pause()\n"
+        "    except KeyboardInterrupt:\n"
+        "        pass\n"
+        "    raise ValueError('Invalid bounding box')\n"
+        "class Parser:\n"
+        "    def parse_args(self, argv):\n"
+        "        return argparse.Namespace(command='process', run=draw)\n"
+        "cli.build_parser = Parser\n"
+        "cli.main([])\n")
+    state = tmp_path / "state"
+    run = interruptible([sys.executable, "-c", script],
+                        env={**os.environ, "XDG_STATE_HOME": str(state)})
+    _, stderr = run.communicate(timeout=60)
+    assert run.returncode == 130, stderr
+    assert stderr.strip() == "sds: interrupted", stderr
+    assert not (state / "sds").exists()

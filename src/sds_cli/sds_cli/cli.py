@@ -49,6 +49,19 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class CtrlC:
+    """Python's own Ctrl-C (a KeyboardInterrupt), remembered: compiled code that catches the
+    KeyboardInterrupt may raise another error in its place (matplotlib's Agg renderer, a
+    figure being drawn: `ValueError: Invalid bounding box`, no cause attached)."""
+
+    def __init__(self) -> None:
+        self.pressed = False
+
+    def __call__(self, signum: int, frame: object) -> None:
+        self.pressed = True
+        raise KeyboardInterrupt
+
+
 def _is_interruption(error: BaseException | None) -> bool:
     """Ctrl-C inside compiled code: numba's functions surface it as a SystemError caused by
     the KeyboardInterrupt, or by another such SystemError (one per nested numba call)."""
@@ -94,6 +107,9 @@ def main(argv: list[str] | None = None) -> None:
     2, a fault of the program one line, its traceback in a log file and exit code 1; once
     the command is done, its process ignores Ctrl-C."""
     command = "command"
+    ctrl_c = CtrlC()
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:   # not ignored
+        signal.signal(signal.SIGINT, ctrl_c)
     try:
         args = build_parser().parse_args(argv)
         command = args.command
@@ -108,7 +124,7 @@ def main(argv: list[str] | None = None) -> None:
         print(f"sds {command}: {error}", file=sys.stderr)
         code = 2
     except Exception as error:
-        code = interrupted() if _is_interruption(error) else \
+        code = interrupted() if ctrl_c.pressed or _is_interruption(error) else \
             fault(command, error, sys.argv[1:] if argv is None else argv)
     finally:
         # Done, or refused: a Ctrl-C from now on has nothing to stop. Python exits with
