@@ -20,7 +20,6 @@ from sds_recon.reconstruction import (
     frame_points,
     reconstruct_line,
 )
-from sds_ros.executor import WithMessageInfo
 from sds_ros.hosted_node import HostedNode
 from sds_ros.point_cloud import points_to_cloud, stamp_s
 from sds_ros.qos import live_qos, start_when_consumed, stream_qos
@@ -113,8 +112,8 @@ class ReconstructionNode(HostedNode):
         self.get_logger().info(f"rig {p['rig']}: {len(self._rig.diodes)} diodes")
 
     def _subscribe_inputs(self) -> None:
-        self.create_subscription(LaserSpotArray, "spots_live",
-                                 WithMessageInfo(self._on_live_spots), live_qos())
+        self.create_subscription(LaserSpotArray, "spots_live", self._on_live_spots,
+                                 live_qos())
         self.create_subscription(LaserSpotArray, "spots", self._on_spots, stream_qos())
         self.create_subscription(LaserLineProfile, "line", self._on_line, stream_qos())
 

@@ -11,7 +11,6 @@ from rclpy.subscription import MessageInfo
 from rclpy.time import Time
 from sds_record.mcap_files import McapRecorder, header_stamp_ns
 from sds_record.schemas import SchemaError
-from sds_ros.executor import WithMessageInfo
 from sds_ros.frame_gaps import PublisherGaps
 from sds_ros.hosted_node import HostedNode
 from std_msgs.msg import Header
@@ -108,7 +107,7 @@ class RecorderNode(HostedNode):
                 self._failed.add(topic)
                 continue
             self._recorded[topic] = self.create_subscription(
-                msg_type, topic, WithMessageInfo(self._writer_for(topic)), qos, raw=True)
+                msg_type, topic, self._writer_for(topic), qos, raw=True)
             self.get_logger().info(f"recording {topic} ({type_name})")
 
     def _qos_for(self, topic: str, type_name: str) -> QoSProfile | None:

@@ -11,7 +11,6 @@ from collections import deque
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.subscription import MessageInfo
 from sds_model.rig import Rig, load_rig
-from sds_ros.executor import WithMessageInfo
 from sds_ros.frame_gaps import FrameGaps
 from sds_ros.hosted_node import HostedNode
 from sds_ros.image_msg import msg_to_image
@@ -101,7 +100,7 @@ class TrackerNode(HostedNode):
         # The newest frames only: a tracker behind its camera skips the older ones (counted
         # from the gaps in the stamps) instead of falling further behind. A flooding source
         # waits for each frame's ack, so it never has more frames waiting than this.
-        self.create_subscription(Image, "image", WithMessageInfo(self._on_image), QoSProfile(
+        self.create_subscription(Image, "image", self._on_image, QoSProfile(
             depth=int(self._p["image_depth"]), reliability=ReliabilityPolicy.RELIABLE))
 
     def _report_lost(self, frame: int, spots) -> None:

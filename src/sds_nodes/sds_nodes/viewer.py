@@ -8,7 +8,6 @@ import rerun as rr
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.subscription import MessageInfo
 from sds_model.rig import RigError, load_rig
-from sds_ros.executor import WithMessageInfo
 from sds_ros.hosted_node import HostedNode
 from sds_ros.shedding import LiveShedding, report_on_console, waited_s
 from sds_viz.messages import log_message
@@ -78,15 +77,14 @@ class ViewerNode(HostedNode):
         self._lock = threading.Lock()
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.create_subscription(CameraModel, "camera_model", WithMessageInfo(self._logger_for(
-            "sds_msgs/msg/CameraModel")), latched)
+        self.create_subscription(CameraModel, "camera_model",
+                                 self._logger_for("sds_msgs/msg/CameraModel"), latched)
         for topic, msg_type, type_name in (*SUBSCRIPTIONS,
                                            (SIDE_IMAGES, Image, "sensor_msgs/msg/Image")):
             stream = topic
             if p["live"]:
                 topic = LIVE_TOPICS.get(topic, topic)
-            self.create_subscription(msg_type, topic,
-                                     WithMessageInfo(self._logger_for(type_name, stream)),
+            self.create_subscription(msg_type, topic, self._logger_for(type_name, stream),
                                      qos_profile_sensor_data)
         if self._shedding is not None:
             report_on_console(self, self._shedding)

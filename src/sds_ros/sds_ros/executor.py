@@ -8,7 +8,9 @@ EventsExecutor"), on a machine where the live chain needs every core it has. In 
 (Kilted) it calls a callback that takes the message's info (`rclpy.subscription.MessageInfo`:
 its publisher's sequence number and source time) with one argument, the pair (message, info)
 (`HandleSubscriptionReady` in rclpy's `events_executor.cpp`), where rclpy's own executors pass
-the two; such a callback is wrapped in `WithMessageInfo`, which takes either.
+the two; such a callback is wrapped in `WithMessageInfo`, which takes either. Every SDS node
+subscribes through `HostedNode.create_subscription`, which wraps it (`taking_either`), so a
+node's callback is written as for rclpy's own executors.
 """
 
 from __future__ import annotations
@@ -39,6 +41,26 @@ class WithMessageInfo:
     def __call__(self, *arguments: Any) -> None:
         message, info = arguments[0] if len(arguments) == 1 else arguments
         self.callback(message, info)
+
+
+def _callable_with(callback: Callable[..., None], arguments: int) -> bool:
+    """Whether `callback` can be called with `arguments` positional arguments."""
+    try:
+        inspect.signature(callback).bind(*[object()] * arguments)
+    except TypeError:
+        return False
+    return True
+
+
+def taking_either(callback: Callable[..., None]) -> Callable[..., None]:
+    """`callback` as every executor calls it: wrapped in `WithMessageInfo` where rclpy would
+    give it the message's info (it cannot be called with the message alone but can with the
+    message and its info, as rclpy's `Subscription.callback` decides), else itself (a callback
+    that takes neither is left for rclpy to refuse)."""
+    if (isinstance(callback, WithMessageInfo) or _callable_with(callback, 1)
+            or not _callable_with(callback, 2)):
+        return callback
+    return WithMessageInfo(callback)
 
 
 def graph_executor() -> Executor:

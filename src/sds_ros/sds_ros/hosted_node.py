@@ -3,10 +3,14 @@
 from __future__ import annotations
 
 import threading
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from rclpy.subscription import Subscription
+
+from sds_ros.executor import taking_either
 
 
 class HostedNode(Node):
@@ -25,6 +29,13 @@ class HostedNode(Node):
         parameters and defaults are written) and return their values."""
         return {name: self.declare_parameter(name, default).value
                 for name, default in table.items()}
+
+    def create_subscription(self, msg_type: Any, topic: str, callback: Callable[..., None],
+                            qos_profile: QoSProfile | int, **kwargs: Any) -> Subscription:
+        """rclpy's `Node.create_subscription`, with a callback that takes its message's info
+        given it by every executor, the graph's EventsExecutor included (`taking_either`)."""
+        return super().create_subscription(msg_type, topic, taking_either(callback),
+                                           qos_profile, **kwargs)
 
     def messages_taken(self) -> int | None:
         """How many messages the node has taken so far, for a node whose last messages must
