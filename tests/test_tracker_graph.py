@@ -321,6 +321,46 @@ def test_a_replay_whose_camera_model_comes_after_the_first_frames_finishes(
     assert topic_data(replayed)["/tracker/spots"] == spots
 
 
+def test_a_player_that_cannot_keep_the_recorded_pace_plays_late_and_says_so(
+        drop_run: DropRun) -> None:
+    """The drop's packets recorded six times over (180 frames in 6 s), played at 100 times
+    the recorded pace with their frames decoded: decoding 4K frames cannot keep 1800 fps, so
+    the player falls behind; it plays every packet and frame all the same, and its console
+    and its last line say how far behind."""
+    messages = list(read_messages(drop_run.recording, ["/camera/video", "/camera/camera_model"]))
+    (model,) = [m for m in messages if m.topic == "/camera/camera_model"]
+    packets = [m for m in messages if m.topic == "/camera/video"]
+    span_ns = packets[-1].log_time_ns - packets[0].log_time_ns + 33_000_000
+    repeated = drop_run.folder / "repeated.mcap"
+    recorder = McapRecorder(repeated)
+    recorder.add_topic("/camera/video", "foxglove_msgs/msg/CompressedVideo")
+    recorder.add_topic("/camera/camera_model", "sds_msgs/msg/CameraModel", latched=True)
+    recorder.write(model.topic, model.data, packets[0].log_time_ns - 1, model.publish_time_ns)
+    repeats = 6
+    for repeat in range(repeats):   # the stream starts with a keyframe: it decodes again
+        for packet in packets:
+            recorder.write(packet.topic, packet.data, packet.log_time_ns + repeat * span_ns,
+                           packet.publish_time_ns + repeat * span_ns)
+    recorder.close()
+    graph = SdsGraphRun("play.yaml", "--set", f"player.input={repeated}",
+                        "--set", "player.rate=100.0", "--set", "player.wait_for_subscribers=0",
+                        "--set", "player.decode=[/camera/video:=/camera/image]",
+                        "--set", "player.linger_s=0.0")
+    try:
+        assert graph.wait(timeout=180) == 0, graph.output()
+    finally:
+        graph.stop()
+    output = graph.output()
+    assert "s behind real time (decoding the camera's packets and the graph need more CPU" \
+        in output, output
+    played = re.search(r"played (\d+) messages .* and (\d+) frames decoded from its packets, "
+                       r"up to (\d+\.\d) s behind real time", output)
+    assert played is not None, output
+    assert int(played[1]) == 1 + repeats * len(packets)
+    assert int(played[2]) == repeats * len(packets)
+    assert float(played[3]) > 0.5
+
+
 def sds(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([str(Path(sys.executable).with_name("sds")), *args],
                           capture_output=True, text=True, timeout=600)

@@ -53,14 +53,13 @@ from sds_ros.hosted_node import HostedNode
 from sds_ros.image_msg import image_to_msg, packet_msg
 from sds_ros.imu_msg import imu_message
 from sds_ros.qos import unacknowledged, wait_for_acks
+from sds_ros.real_time import RealTimePace
 from sensor_msgs.msg import CompressedImage, Image, Imu
 from std_msgs.msg import Header
 
 from foxglove_msgs.msg import CompressedVideo
 from sds_msgs.msg import CameraModel, SyncEvent
 
-BEHIND_REPORT_S = 0.5
-"""A file played in real time this far behind its frames' times is said on the console [s]."""
 PARAMETER_CHOICES = {"channel": ("bgr", "red", "green", "blue", "gray"),
                      "pacing": ("realtime", "flood"), "stamp": ("clock", "media"),
                      "input_format": ("", "h264", "mjpeg")}
@@ -109,15 +108,17 @@ class FrameSourceNode(HostedNode):
         self.packets_published = 0
         self.shed = 0         # packets published but not decoded (shed)
         self.skipped_non_reference = False   # the decoder left out frames to catch up
-        self.behind_s = 0.0   # the furthest a file played in real time fell behind [s]
         self._said_end = False
         values = self.declare_parameter_table(PARAMETERS)
+        self._pace = RealTimePace(values["rate"], self.get_logger().warning,
+                                  "reading and the graph need more CPU than there is: frames "
+                                  "come late, none is skipped")
         self._stop = threading.Event()
         self._queue: queue.Queue[Frame | _EndOfStream] = queue.Queue(maxsize=3)
         self._decode_queue: queue.Queue[VideoPacket | _EndOfStream] = queue.Queue(
             maxsize=DECODE_BACKLOG)
         self._clock_started = threading.Event()
-        self._origin_ns, self._start_s = 0, 0.0
+        self._origin_ns = 0
         self._packets: VideoFilePackets | LivePackets | None = None
         self._source: FrameSource
         try:
@@ -479,7 +480,8 @@ class FrameSourceNode(HostedNode):
         origin = self._origin()
         if origin is None:
             return False
-        self._origin_ns, self._start_s = origin
+        self._origin_ns, start_s = origin
+        self._pace.start(start_s)
         self._origin_pub.publish(Header(stamp=Time(nanoseconds=self._origin_ns).to_msg(),
                                         frame_id=self._p["frame_id"]))
         self._clock_started.set()
@@ -488,17 +490,8 @@ class FrameSourceNode(HostedNode):
     def _wait_until(self, time_ns: int) -> None:
         """Sleep until media time `time_ns` is due in real time (a file; a live source's
         frames come when they come); say so when it is long past."""
-        if self._source.is_live:
-            return
-        delay = self._start_s + time_ns * 1e-9 / self._p["rate"] - time.monotonic()
-        if delay > 0:
-            time.sleep(delay)
-        elif -delay > BEHIND_REPORT_S:
-            self.behind_s = max(self.behind_s, -delay)
-            self.get_logger().warning(
-                f"playing {-delay:.1f} s behind real time (reading and the graph need more CPU "
-                "than there is): frames come late, none is skipped",
-                throttle_duration_sec=10.0)
+        if not self._source.is_live:
+            self._pace.wait_until(time_ns * 1e-9)
 
     def _publish_frames(self) -> None:
         """Publish thread: pace (without packets), stamp and publish frames until the stream
@@ -576,7 +569,7 @@ class FrameSourceNode(HostedNode):
 
     def _published_line(self) -> str:
         """What was published: packets, frames, frames shed, how far behind real time."""
-        behind = f", up to {self.behind_s:.1f} s behind real time" if self.behind_s else ""
+        behind = self._pace.behind_clause()
         if self._packets is None:
             return f"published {self.published} frames{behind}"
         # Shed: the packets not decoded, the frames a decoder could not make without them and

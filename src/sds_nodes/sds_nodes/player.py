@@ -27,6 +27,7 @@ from sds_ros.ack_credit import AckCredit
 from sds_ros.hosted_node import HostedNode
 from sds_ros.image_msg import PACKET_TYPES, image_to_msg, packet_fields
 from sds_ros.qos import stream_qos, unacknowledged
+from sds_ros.real_time import RealTimePace
 from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import Header
 
@@ -87,6 +88,9 @@ class PlayerNode(HostedNode):
         self.published = 0
         self.decoded = 0     # frames decoded from recorded packets and published
         self._p = self.declare_parameter_table(PARAMETERS)
+        self._pace = RealTimePace(self._p["rate"], self.get_logger().warning,
+                                  "decoding the camera's packets and the graph need more CPU "
+                                  "than there is: messages come late, none is skipped")
         self._stop = threading.Event()
         self._credit = AckCredit(self._p["ack_consumers"], self.resolve_topic_name("frame_ack"),
                                  self.get_logger().warning)
@@ -184,7 +188,7 @@ class PlayerNode(HostedNode):
         topics = [t for t in p["topics"] if t] or None
         flow_topic = p["ack_topic_for"] if p["pacing"] == "flood" else ""
         first_ns = None
-        wall_start = 0.0
+        started = False
         try:
             for message in read_messages(p["input"], topics):
                 if self._stop.is_set():
@@ -197,14 +201,13 @@ class PlayerNode(HostedNode):
                 if p["stop_s"] > 0 and offset_s > p["stop_s"]:
                     break
                 publisher = self._outputs[message.topic]
-                if not wall_start:
+                if not started:
                     if not self._wait_for_subscribers():
                         return
-                    wall_start = time.monotonic() - (offset_s - p["start_s"]) / p["rate"]
+                    self._pace.start(time.monotonic() - offset_s / p["rate"])
+                    started = True
                 if p["pacing"] == "recorded":
-                    delay = wall_start + (offset_s - p["start_s"]) / p["rate"] - time.monotonic()
-                    if delay > 0:
-                        time.sleep(delay)
+                    self._pace.wait_until(offset_s)
                 if message.topic == flow_topic:
                     self._credit.wait(p["max_in_flight"] - 1)
                     self._credit.register(header_stamp_ns(message.data))
@@ -225,7 +228,8 @@ class PlayerNode(HostedNode):
             self._credit.drain(timeout_s=10.0)
         unacknowledged(list(self._outputs.values()), 5.0, self._stop)
         decoded = f" and {self.decoded} frames decoded from its packets" if self._decodings else ""
-        self.get_logger().info(f"played {self.published} messages from {p['input']}{decoded}")
+        self.get_logger().info(f"played {self.published} messages from {p['input']}{decoded}"
+                               f"{self._pace.behind_clause()}")
         self._stop.wait(p["linger_s"])   # the consumers' last outputs (e.g. the Hampel window)
         self.finished.set()
 
