@@ -468,6 +468,8 @@ def warm_up() -> None:
     continues_line(np.arange(3.0), np.zeros(3), 2, 0, 1, 8.0, 2.0)
     speckle_sigmas_px(image, np.full((1, 2), 32.0), np.full(1, 12.0), np.full(1, 24), 2.0,
                       250.0, 0.95, np.full(1, np.nan))
+    clipped_speckle_sigmas_px(image, np.full((1, 2), 32.0), np.full(1, 6.0), np.full(1, 30.0),
+                              2.0, 250.0, 0.95)
 
 
 @njit(cache=True, fastmath=True)
@@ -679,4 +681,152 @@ def speckle_sigmas_px(image: np.ndarray, centres: np.ndarray, radii: np.ndarray,
             sigmas[k] = speckle_sigma_px(corners[k, 0], corners[k, 1], centres[k, 0],
                                          centres[k, 1], weight_totals[k], evens[k], contrast2,
                                          correlation_px)
+    return sigmas
+
+
+@njit(cache=True, fastmath=True)
+def clipped_odd_weights(image: np.ndarray, cx: float, cy: float, radius: float,
+                        weight_floor: float, read_noise: float, saturation: float
+                        ) -> tuple[int, int, float, np.ndarray, np.ndarray, np.ndarray]:
+    """A still's clipped centroid's weights (the light above `weight_floor` within `radius`
+    of (`cx`, `cy`) [image px]) as their speckle σ reads them: the top-left corner (`x0`,
+    `y0`) of a box, W (the weights' sum), and per pixel of the box:
+
+    - odd: half the pixel's weight less the weight at the opposite point (bilinear), where
+      either weighs; saturated pixels included: laser speckle moves a saturated spot's
+      plateau's edge, and on a spot much brighter than saturation that is all it moves.
+    - white: the variance shot and read noise alone give `odd` (a saturated pixel none), 0
+      where neither weighs.
+    - ring: the pixel's 1-px ring about the centre; −1 outside the aperture, off the image
+      or where the opposite point is.
+    """
+    reach = int(np.ceil(radius)) + 1
+    x0, y0 = int(np.floor(cx)) - reach, int(np.floor(cy)) - reach
+    size = 2 * reach + 2
+    odd = np.zeros((size, size))
+    white = np.zeros((size, size))
+    ring = np.full((size, size), -1, np.int64)
+    weight_total = 0.0
+    height, width = image.shape
+    read2 = read_noise * read_noise
+    for j in range(size):
+        for i in range(size):
+            x, y = x0 + i, y0 + j
+            distance = np.sqrt((x - cx) ** 2 + (y - cy) ** 2)
+            if distance > radius or x < 0 or y < 0 or x >= width or y >= height:
+                continue
+            here = float(image[y, x])
+            weight = max(here - weight_floor, 0.0)
+            weight_total += weight
+            ox, oy = 2 * cx - x, 2 * cy - y
+            left, top = int(np.floor(ox)), int(np.floor(oy))
+            if left < 0 or top < 0 or left + 1 >= width or top + 1 >= height:
+                continue
+            ring[j, i] = int(distance)
+            tx, ty = ox - left, oy - top
+            corners = (float(image[top, left]), float(image[top, left + 1]),
+                       float(image[top + 1, left]), float(image[top + 1, left + 1]))
+            shares = ((1 - tx) * (1 - ty), tx * (1 - ty), (1 - tx) * ty, tx * ty)
+            opposite = 0.0
+            variance = max(here, 0.0) + read2 if here < saturation else 0.0
+            for k in range(4):
+                opposite += shares[k] * corners[k]
+                if corners[k] < saturation:
+                    variance += shares[k] ** 2 * (max(corners[k], 0.0) + read2)
+            opposite_weight = max(opposite - weight_floor, 0.0)
+            if weight > 0 or opposite_weight > 0:
+                odd[j, i] = (weight - opposite_weight) / 2
+                white[j, i] = variance / 4
+    return x0, y0, weight_total, odd, white, ring
+
+
+@njit(cache=True, fastmath=True)
+def clipped_speckle_sums(odd: np.ndarray, white: np.ndarray, ring: np.ndarray) -> np.ndarray:
+    """What a clipped centroid's weights (`clipped_odd_weights`) say of the correlation of
+    their noise between neighbouring pixels: [lag, variance] sums over the pixels where they
+    or their opposites weigh and those pixels' right and lower neighbours, 2·odd·odd' (the
+    mean of the two directions) and 2·(odd² − white); lag / variance estimates the
+    correlation."""
+    sums = np.zeros(2)
+    size = odd.shape[0]
+    for j in range(size):
+        for i in range(size):
+            if ring[j, i] < 0 or (white[j, i] <= 0 and odd[j, i] == 0):
+                continue
+            sums[1] += 2 * (odd[j, i] ** 2 - white[j, i])
+            if i + 1 < size and ring[j, i + 1] >= 0:
+                sums[0] += odd[j, i] * odd[j, i + 1]
+            if j + 1 < size and ring[j + 1, i] >= 0:
+                sums[0] += odd[j, i] * odd[j + 1, i]
+    return sums
+
+
+@njit(cache=True, fastmath=True)
+def clipped_speckle_sigma_px(x0: int, y0: int, cx: float, cy: float, weight_total: float,
+                             odd: np.ndarray, white: np.ndarray, ring: np.ndarray,
+                             correlation_px: float) -> float:
+    """The σ [px] per axis the noise its odd part shows (`clipped_odd_weights`) gives a
+    clipped centroid: each pixel's weight varies by the mean over its ring of
+    2·(odd² − white), at least 0 (a ring, not the pixel: one pixel's odd part is one draw),
+    correlated between pixels as a Gaussian of σ `correlation_px`: `speckle_sigma_px` with
+    the square root of that variance as the light and a squared contrast of 1."""
+    size = odd.shape[0]
+    rings = ring.max() + 1
+    total, count = np.zeros(max(rings, 1)), np.zeros(max(rings, 1))
+    for j in range(size):
+        for i in range(size):
+            if ring[j, i] >= 0:
+                total[ring[j, i]] += 2 * (odd[j, i] ** 2 - white[j, i])
+                count[ring[j, i]] += 1
+    spread = np.zeros((size, size))
+    for j in range(size):
+        for i in range(size):
+            if ring[j, i] >= 0:
+                spread[j, i] = np.sqrt(max(total[ring[j, i]] / count[ring[j, i]], 0.0))
+    return speckle_sigma_px(x0, y0, cx, cy, weight_total, spread, 1.0, correlation_px)
+
+
+@njit(cache=True)   # NaN marks a spot too near the edge: no fastmath
+def clipped_speckle_sigmas_px(image: np.ndarray, centres: np.ndarray, radii: np.ndarray,
+                              weight_floors: np.ndarray, read_noise: float, saturation: float,
+                              max_correlation: float) -> np.ndarray:
+    """Per spot measured by a still's clipped centroid (`centres` N×2 image px, `radii` its
+    aperture px, `weight_floors` the level its weights start at), the σ [px] laser speckle
+    gives it (`clipped_speckle_sigma_px`), from the noise the odd part of its own weights
+    shows beyond shot and read noise, saturated pixels included: a spot brighter than
+    saturation shows its speckle only as a ragged plateau edge, and its wings are mostly
+    its bloom, which shows none. The noise's correlation between neighbouring pixels is the
+    optics': the median over the spots of what each one's weights say
+    (`clipped_speckle_sums`), at most `max_correlation`. NaN for a spot too near the
+    image's edge."""
+    count = centres.shape[0]
+    height, width = image.shape
+    sigmas = np.full(count, np.nan)
+    ratios = np.full(count, np.nan)
+    for k in range(count):
+        reach = int(np.ceil(radii[k])) + 1
+        x, y = int(np.floor(centres[k, 0])), int(np.floor(centres[k, 1]))
+        if x - reach < 0 or y - reach < 0 or x + reach + 1 >= width or \
+                y + reach + 1 >= height:
+            continue
+        sigmas[k] = 0.0
+        sums = clipped_speckle_sums(*clipped_odd_weights(
+            image, centres[k, 0], centres[k, 1], radii[k], weight_floors[k], read_noise,
+            saturation)[3:])
+        if sums[1] > 0:
+            ratios[k] = sums[0] / sums[1]
+    measured = np.isfinite(ratios)
+    if not measured.any():
+        return sigmas
+    neighbours = min(max(np.median(ratios[measured]), 0.0), max_correlation)
+    correlation_px = np.sqrt(-0.5 / np.log(neighbours)) if neighbours > 0 else 0.0
+    for k in range(count):
+        if np.isfinite(sigmas[k]):
+            x0, y0, weight_total, odd, white, ring = clipped_odd_weights(
+                image, centres[k, 0], centres[k, 1], radii[k], weight_floors[k], read_noise,
+                saturation)
+            if weight_total > 0:
+                sigmas[k] = clipped_speckle_sigma_px(x0, y0, centres[k, 0], centres[k, 1],
+                                                     weight_total, odd, white, ring,
+                                                     correlation_px)
     return sigmas

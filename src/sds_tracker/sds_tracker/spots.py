@@ -19,6 +19,7 @@ from sds_tracker.kernels import (
     aperture_ring,
     background_step,
     border_median,
+    clipped_speckle_sigmas_px,
     light_elongation,
     remove_line,
     ring_median,
@@ -671,7 +672,11 @@ class SpotTracker:
         """The frame's estimates with the σ that multiplicative noise (laser speckle, which
         the photons' σ does not hold) gives each spot whose light shows it, added in
         quadrature (`kernels.speckle_sigmas_px`): measured in a fixed aperture
-        (`measures_own_speckle`), or by a still's clipped centroid, clear of the line."""
+        (`measures_own_speckle`), or by a still's clipped centroid, clear of the line. A
+        clipped centroid's is the larger of that and what the odd part of its own weights
+        shows (`kernels.clipped_speckle_sigmas_px`): each reads its speckle short in its own
+        regime (the contrast a saturated spot's wings show is mostly its bloom's, none; a
+        small spot's centre takes in much of its own odd part)."""
         s = self.settings
         apertures = {i: self._own_light_aperture_px(e) for i, e in estimates.items()}
         ids = [i for i, radius in apertures.items() if radius > 0]
@@ -680,9 +685,14 @@ class SpotTracker:
         centres = np.array([[estimates[i].x_px, estimates[i].y_px] for i in ids]) - origin
         radii = np.array([apertures[i] for i in ids])
         rings = np.array([aperture_ring(radius, s.window_px) for radius in radii])
+        floors = np.array([estimates[i].clipped_floor for i in ids])
         speckle = speckle_sigmas_px(image, centres, radii, rings, s.read_noise,
-                                    s.saturation_level, MAX_SPECKLE_CORRELATION,
-                                    np.array([estimates[i].clipped_floor for i in ids]))
+                                    s.saturation_level, MAX_SPECKLE_CORRELATION, floors)
+        clipped = np.isfinite(floors)
+        if clipped.any():
+            speckle[clipped] = np.fmax(speckle[clipped], clipped_speckle_sigmas_px(
+                image, centres[clipped], radii[clipped], floors[clipped], s.read_noise,
+                s.saturation_level, MAX_SPECKLE_CORRELATION))
         for laser_id, sigma in zip(ids, speckle, strict=True):
             if np.isfinite(sigma):
                 estimates[laser_id] = replace(estimates[laser_id], sigma_px=float(
