@@ -473,6 +473,36 @@ def warm_up() -> None:
 
 
 @njit(cache=True, fastmath=True)
+def opposite_light(image: np.ndarray, cx: float, cy: float, x: int, y: int, read2: float,
+                   saturation: float) -> tuple[bool, float, float, bool]:
+    """The light at the point opposite image pixel (`x`, `y`) about (`cx`, `cy`), bilinear
+    between its four pixels (as differences, so that four equal pixels give their light
+    exactly: a saturated plateau is symmetric to the last bit): whether they lie in the
+    image, the light, the variance shot and read noise (`read2`, squared) give it (one grey
+    level per electron, none from a pixel at or above `saturation`), and whether one of them
+    is saturated."""
+    height, width = image.shape
+    ox, oy = 2 * cx - x, 2 * cy - y
+    left, top = int(np.floor(ox)), int(np.floor(oy))
+    if left < 0 or top < 0 or left + 1 >= width or top + 1 >= height:
+        return False, 0.0, 0.0, False
+    tx, ty = ox - left, oy - top
+    corners = (float(image[top, left]), float(image[top, left + 1]),
+               float(image[top + 1, left]), float(image[top + 1, left + 1]))
+    upper = corners[0] + tx * (corners[1] - corners[0])
+    lower = corners[2] + tx * (corners[3] - corners[2])
+    light = upper + ty * (lower - upper)
+    shares = ((1 - tx) * (1 - ty), tx * (1 - ty), (1 - tx) * ty, tx * ty)
+    variance, saturated = 0.0, False
+    for k in range(4):
+        if corners[k] < saturation:
+            variance += shares[k] ** 2 * (max(corners[k], 0.0) + read2)
+        else:
+            saturated = True
+    return True, light, variance, saturated
+
+
+@njit(cache=True, fastmath=True)
 def speckle_light(image: np.ndarray, cx: float, cy: float, radius: float, floor: float,
                   read_noise: float, saturation: float, weight_floor: float
                   ) -> tuple[int, int, float, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
@@ -520,25 +550,17 @@ def speckle_light(image: np.ndarray, cx: float, cy: float, radius: float, floor:
             if distance > radius:
                 continue
             ring = int(distance)
-            ox, oy = 2 * cx - x, 2 * cy - y
-            left, top = int(np.floor(ox)), int(np.floor(oy))
-            if x < 0 or y < 0 or x >= width or y >= height or left < 0 or top < 0 or \
-                    left + 1 >= width or top + 1 >= height:
+            inside, opposite, variance, saturated = opposite_light(image, cx, cy, x, y, read2,
+                                                                  saturation)
+            if not inside or x < 0 or y < 0 or x >= width or y >= height:
                 tainted[ring] = True
                 continue
             here = float(image[y, x])
             weight_total += max(here - weight_floor, 0.0)
-            tx, ty = ox - left, oy - top
-            corners = (float(image[top, left]), float(image[top, left + 1]),
-                       float(image[top + 1, left]), float(image[top + 1, left + 1]))
-            weights = ((1 - tx) * (1 - ty), tx * (1 - ty), (1 - tx) * ty, tx * ty)
-            if here >= saturation or max(corners) >= saturation:
+            if here >= saturation or saturated:
                 tainted[ring] = True
                 continue
-            opposite, variance = 0.0, max(here, 0.0) + read2
-            for k in range(4):
-                opposite += weights[k] * corners[k]
-                variance += weights[k] ** 2 * (max(corners[k], 0.0) + read2)
+            variance += max(here, 0.0) + read2
             seen[j, i] = True
             odd[j, i] = (here - opposite) / 2
             even[j, i] = max((here + opposite) / 2 - floor, 0.0)
@@ -718,21 +740,13 @@ def clipped_odd_weights(image: np.ndarray, cx: float, cy: float, radius: float,
             here = float(image[y, x])
             weight = max(here - weight_floor, 0.0)
             weight_total += weight
-            ox, oy = 2 * cx - x, 2 * cy - y
-            left, top = int(np.floor(ox)), int(np.floor(oy))
-            if left < 0 or top < 0 or left + 1 >= width or top + 1 >= height:
+            inside, opposite, variance, _ = opposite_light(image, cx, cy, x, y, read2,
+                                                           saturation)
+            if not inside:
                 continue
             ring[j, i] = int(distance)
-            tx, ty = ox - left, oy - top
-            corners = (float(image[top, left]), float(image[top, left + 1]),
-                       float(image[top + 1, left]), float(image[top + 1, left + 1]))
-            shares = ((1 - tx) * (1 - ty), tx * (1 - ty), (1 - tx) * ty, tx * ty)
-            opposite = 0.0
-            variance = max(here, 0.0) + read2 if here < saturation else 0.0
-            for k in range(4):
-                opposite += shares[k] * corners[k]
-                if corners[k] < saturation:
-                    variance += shares[k] ** 2 * (max(corners[k], 0.0) + read2)
+            if here < saturation:
+                variance += max(here, 0.0) + read2
             opposite_weight = max(opposite - weight_floor, 0.0)
             if weight > 0 or opposite_weight > 0:
                 odd[j, i] = (weight - opposite_weight) / 2
@@ -803,6 +817,12 @@ def clipped_speckle_sigmas_px(image: np.ndarray, centres: np.ndarray, radii: np.
     height, width = image.shape
     sigmas = np.full(count, np.nan)
     ratios = np.full(count, np.nan)
+    size = 2 * (int(np.ceil(radii.max())) + 1) + 2 if count else 0
+    corners = np.zeros((count, 2), np.int64)
+    sizes = np.zeros(count, np.int64)
+    weight_totals = np.zeros(count)
+    odds, whites = np.zeros((count, size, size)), np.zeros((count, size, size))
+    rings = np.full((count, size, size), -1, np.int64)
     for k in range(count):
         reach = int(np.ceil(radii[k])) + 1
         x, y = int(np.floor(centres[k, 0])), int(np.floor(centres[k, 1]))
@@ -810,14 +830,29 @@ def clipped_speckle_sigmas_px(image: np.ndarray, centres: np.ndarray, radii: np.
                 y + reach + 1 >= height:
             continue
         sigmas[k] = 0.0
-        sums = clipped_speckle_sums(*clipped_odd_weights(
-            image, centres[k, 0], centres[k, 1], radii[k], weight_floors[k], read_noise,
-            saturation)[3:])
+        corners[k, 0], corners[k, 1], weight_totals[k], odd, white, ring = \
+            clipped_odd_weights(image, centres[k, 0], centres[k, 1], radii[k],
+                                weight_floors[k], read_noise, saturation)
+        sizes[k] = odd.shape[0]
+        odds[k, :sizes[k], :sizes[k]] = odd
+        whites[k, :sizes[k], :sizes[k]] = white
+        rings[k, :sizes[k], :sizes[k]] = ring
+        sums = clipped_speckle_sums(odd, white, ring)
         if sums[1] > 0:
             ratios[k] = sums[0] / sums[1]
     measured = np.isfinite(ratios)
     if not measured.any():
         return sigmas
+    neighbours = min(max(np.median(ratios[measured]), 0.0), max_correlation)
+    correlation_px = np.sqrt(-0.5 / np.log(neighbours)) if neighbours > 0 else 0.0
+    for k in range(count):
+        if np.isfinite(sigmas[k]) and weight_totals[k] > 0:
+            box = sizes[k]
+            sigmas[k] = clipped_speckle_sigma_px(
+                corners[k, 0], corners[k, 1], centres[k, 0], centres[k, 1], weight_totals[k],
+                odds[k, :box, :box], whites[k, :box, :box], rings[k, :box, :box],
+                correlation_px)
+    return sigmas
     neighbours = min(max(np.median(ratios[measured]), 0.0), max_correlation)
     correlation_px = np.sqrt(-0.5 / np.log(neighbours)) if neighbours > 0 else 0.0
     for k in range(count):
