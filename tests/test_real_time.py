@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
 
 import pytest
 from sds_ros.real_time import BEHIND_REPORT_S, REPORT_PERIOD_S, RealTimePace
@@ -26,16 +27,17 @@ class FakeClock:
         self.now_s += seconds
 
 
-def pace_on(clock: FakeClock, rate: float, said: list[str]) -> RealTimePace:
-    pace = RealTimePace(rate, said.append, "the decoder is slow: frames come late",
-                        clock=clock, sleep=clock.sleep)
+def pace_on(clock: FakeClock, rate: float, warn: Callable[[str], object]) -> RealTimePace:
+    """A pace on `clock`, started now, that tells `warn`."""
+    pace = RealTimePace(rate, warn, "the decoder is slow: frames come late", clock=clock,
+                        sleep=clock.sleep)
     pace.start(clock())
     return pace
 
 
 def test_a_player_that_keeps_up_sleeps_until_each_moment_and_says_nothing() -> None:
     clock, said = FakeClock(), []
-    pace = pace_on(clock, rate=2.0, said=said)
+    pace = pace_on(clock, rate=2.0, warn=said.append)
     for media_s in (0.1, 0.5, 1.0, 3.0):
         clock.work(0.03)
         pace.wait_until(media_s)
@@ -54,9 +56,7 @@ def test_a_player_behind_plays_at_once_and_says_so_at_most_every_period() -> Non
         said.append(line)
         said_at_s.append(clock())
 
-    pace = RealTimePace(1.0, warn, "the decoder is slow: frames come late", clock=clock,
-                        sleep=clock.sleep)
-    pace.start(clock())
+    pace = pace_on(clock, rate=1.0, warn=warn)
     work_s, moments = 0.23, 400
     for index in range(moments):
         pace.wait_until(index * 0.1)
@@ -74,7 +74,7 @@ def test_a_player_behind_plays_at_once_and_says_so_at_most_every_period() -> Non
 
 def test_lateness_within_the_bound_is_not_kept() -> None:
     clock, said = FakeClock(), []
-    pace = pace_on(clock, rate=1.0, said=said)
+    pace = pace_on(clock, rate=1.0, warn=said.append)
     clock.work(BEHIND_REPORT_S * 0.9)
     pace.wait_until(0.0)
     assert said == [] and pace.behind_s == 0.0
